@@ -1,0 +1,18 @@
+//! # gridscada-config: the plant configuration
+//!
+//! **Owns:** the TOML schema of `gridscada.toml` and the tag files ([`model`]),
+//! loading them from disk or from embedded text, and validation that reports
+//! every problem with file, line and column ([`Diagnostic`]).
+//!
+//! **Must not touch:** anything live. It reads text and returns a checked
+//! [`Plant`]; it opens no sockets, starts no tasks and knows nothing of how the
+//! other crates use the configuration beyond the rules they need checked.
+
+mod diag;
+mod load;
+pub mod model;
+mod validate;
+
+pub use diag::{Diagnostic, SourceFile};
+pub use load::{load_path, load_with, Plant};
+pub use model::*;

@@ -1,0 +1,259 @@
+//! Reading the configuration files.
+//!
+//! Each top-level section, and each `[[device]]`, `[[tag]]` and `[[panel]]`
+//! entry, is deserialized on its own, so one bad entry does not hide the
+//! problems of the others: `gridscada check` reports them all.
+
+use std::io;
+use std::path::{Path, PathBuf};
+
+use serde::de::DeserializeOwned;
+use serde_spanned::Spanned;
+use toml::de::{DeTable, DeValue, ValueDeserializer};
+
+use crate::diag::{Diagnostic, SourceFile};
+use crate::model::*;
+use crate::validate;
+
+/// A checked plant configuration.
+#[derive(Debug, Clone)]
+pub struct Plant {
+    /// The main file.
+    pub main_path: PathBuf,
+    pub server: ServerConfig,
+    pub storage: StorageConfig,
+    pub devices: Vec<DeviceConfig>,
+    pub tags: Vec<TagConfig>,
+    pub panels: Vec<PanelConfig>,
+    pub microgrid: Option<MicrogridConfig>,
+}
+
+impl Plant {
+    pub fn device(&self, name: &str) -> Option<&DeviceConfig> {
+        self.devices.iter().find(|d| d.name.get_ref() == name)
+    }
+    pub fn tag(&self, name: &str) -> Option<&TagConfig> {
+        self.tags.iter().find(|t| t.name.get_ref() == name)
+    }
+}
+
+/// Loads and checks the configuration at `path`: a main file, or a folder
+/// holding `gridscada.toml`.
+pub fn load_path(path: &Path) -> Result<Plant, Vec<Diagnostic>> {
+    let main = if path.is_dir() {
+        path.join("gridscada.toml")
+    } else {
+        path.to_path_buf()
+    };
+    load_with(&main, &|p: &Path| std::fs::read_to_string(p))
+}
+
+/// Loads and checks the configuration whose main file is `main`, reading
+/// files through `read` (the binary passes embedded text for the demo plant).
+pub fn load_with(
+    main: &Path,
+    read: &dyn Fn(&Path) -> io::Result<String>,
+) -> Result<Plant, Vec<Diagnostic>> {
+    let mut diags = Vec::new();
+    let main_text = read(main).map_err(|e| {
+        vec![Diagnostic {
+            file: main.to_path_buf(),
+            line: 0,
+            column: 0,
+            message: format!("cannot read the main configuration file: {}", io_reason(&e)),
+        }]
+    })?;
+    let main_file = SourceFile::new(main, main_text);
+    let parsed_main = parse_main(&main_file, &mut diags);
+
+    let base = main.parent().unwrap_or(Path::new(""));
+    let mut files = vec![];
+    let mut devices = vec![];
+    let mut tags = vec![];
+    if let Some(main_cfg) = &parsed_main {
+        for tf in &main_cfg.tag_files {
+            let path = base.join(tf.get_ref());
+            match read(&path) {
+                Ok(text) => {
+                    let file = SourceFile::new(&path, text);
+                    let idx = files.len() + 1; // 0 is the main file
+                    let tf = parse_tag_file(&file, &mut diags);
+                    devices.extend(tf.devices.into_iter().map(|d| (idx, d)));
+                    tags.extend(tf.tags.into_iter().map(|t| (idx, t)));
+                    files.push(file);
+                }
+                Err(e) => diags.push(main_file.error_at(
+                    tf.span(),
+                    format!(
+                        "cannot read tag file '{}': {}",
+                        path.display(),
+                        io_reason(&e)
+                    ),
+                )),
+            }
+        }
+    }
+    let mut all_files = vec![main_file];
+    all_files.extend(files);
+
+    let Some(main_cfg) = parsed_main else {
+        return Err(diags);
+    };
+    validate::check(&all_files, &main_cfg, &devices, &tags, &mut diags);
+    if !diags.is_empty() {
+        diags.sort_by(|a, b| (&a.file, a.line, a.column).cmp(&(&b.file, b.line, b.column)));
+        diags.dedup();
+        return Err(diags);
+    }
+    Ok(Plant {
+        main_path: main.to_path_buf(),
+        server: main_cfg.server,
+        storage: main_cfg.storage,
+        devices: devices.into_iter().map(|(_, d)| d).collect(),
+        tags: tags.into_iter().map(|(_, t)| t).collect(),
+        panels: main_cfg.panels,
+        microgrid: main_cfg.microgrid,
+    })
+}
+
+fn io_reason(e: &io::Error) -> String {
+    match e.kind() {
+        io::ErrorKind::NotFound => "no such file".into(),
+        io::ErrorKind::PermissionDenied => "permission denied".into(),
+        _ => e.to_string(),
+    }
+}
+
+/// Parses a file into its top-level table, reporting syntax errors.
+fn parse_root<'a>(file: &'a SourceFile, diags: &mut Vec<Diagnostic>) -> Option<DeTable<'a>> {
+    let (root, errors) = DeTable::parse_recoverable(&file.text);
+    if !errors.is_empty() {
+        for e in errors {
+            diags.push(locate(file, &e, "TOML syntax error: "));
+        }
+        return None;
+    }
+    Some(root.into_inner())
+}
+
+fn locate(file: &SourceFile, e: &toml::de::Error, prefix: &str) -> Diagnostic {
+    let message = format!("{prefix}{}", e.message().trim());
+    match e.span() {
+        Some(span) => file.error_at(span, message),
+        None => file.error(message),
+    }
+}
+
+fn de<T: DeserializeOwned>(
+    file: &SourceFile,
+    value: &Spanned<DeValue<'_>>,
+    what: &str,
+    diags: &mut Vec<Diagnostic>,
+) -> Option<T> {
+    match T::deserialize(ValueDeserializer::from(value.clone())) {
+        Ok(v) => Some(v),
+        Err(e) => {
+            let mut d = locate(file, &e, &format!("{what}: "));
+            if e.span().is_none() {
+                let (line, column) = file.line_col(value.span().start);
+                d.line = line;
+                d.column = column;
+            }
+            diags.push(d);
+            None
+        }
+    }
+}
+
+/// Deserializes every table of an array of tables (`[[tag]]`) on its own.
+fn de_each<T: DeserializeOwned>(
+    file: &SourceFile,
+    value: &Spanned<DeValue<'_>>,
+    section: &str,
+    diags: &mut Vec<Diagnostic>,
+) -> Vec<T> {
+    let Some(array) = value.get_ref().as_array() else {
+        diags.push(file.error_at(
+            value.span(),
+            format!("'{section}' must be an array of tables ([[{section}]])"),
+        ));
+        return vec![];
+    };
+    array
+        .iter()
+        .enumerate()
+        .filter_map(|(i, entry)| {
+            let label = entry_label(entry)
+                .map(|n| format!("{section} '{n}'"))
+                .unwrap_or_else(|| format!("{section} #{}", i + 1));
+            de(file, entry, &label, diags)
+        })
+        .collect()
+}
+
+/// The `name` or `id` of an entry, to say which one an error is in.
+fn entry_label(entry: &Spanned<DeValue<'_>>) -> Option<String> {
+    let table = entry.get_ref().as_table()?;
+    ["name", "id"].iter().find_map(|key| {
+        table
+            .iter()
+            .find(|(k, _)| k.get_ref().as_ref() == *key)
+            .and_then(|(_, v)| v.get_ref().as_str().map(str::to_owned))
+    })
+}
+
+fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile> {
+    let root = parse_root(file, diags)?;
+    let mut tag_files = None;
+    let mut server = ServerConfig::default();
+    let mut storage = StorageConfig::default();
+    let mut panels = vec![];
+    let mut microgrid = None;
+    let before = diags.len();
+    for (key, value) in root.iter() {
+        match key.get_ref().as_ref() {
+            "tag_files" => tag_files = de::<Vec<Spanned<String>>>(file, value, "tag_files", diags),
+            "server" => server = de(file, value, "[server]", diags).unwrap_or_default(),
+            "storage" => storage = de(file, value, "[storage]", diags).unwrap_or_default(),
+            "panel" => panels = de_each(file, value, "panel", diags),
+            "microgrid" => microgrid = de(file, value, "[microgrid]", diags),
+            other => diags.push(file.error_at(
+                key.span(),
+                format!(
+                    "unknown key '{other}' in the main file; expected one of tag_files, server, storage, panel, microgrid"
+                ),
+            )),
+        }
+    }
+    let Some(tag_files) = tag_files else {
+        if diags.len() == before {
+            diags.push(file.error_at(0..0, "missing 'tag_files': list the tag files of the plant"));
+        }
+        return None;
+    };
+    Some(MainFile {
+        tag_files,
+        server,
+        storage,
+        panels,
+        microgrid,
+    })
+}
+
+fn parse_tag_file(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> TagFile {
+    let Some(root) = parse_root(file, diags) else {
+        return TagFile::default();
+    };
+    let mut out = TagFile::default();
+    for (key, value) in root.iter() {
+        match key.get_ref().as_ref() {
+            "device" => out.devices = de_each(file, value, "device", diags),
+            "tag" => out.tags = de_each(file, value, "tag", diags),
+            other => diags.push(file.error_at(
+                key.span(),
+                format!("unknown key '{other}' in a tag file; expected [[device]] or [[tag]]"),
+            )),
+        }
+    }
+    out
+}

@@ -1,0 +1,429 @@
+//! The in-memory tag database and change subscription.
+//!
+//! The set of tags is fixed when the database is built (the plant configuration
+//! plus the derived status tags); only samples change afterwards. That keeps
+//! lookups by id a plain index and by name one hash probe, and lets 100,000 tags
+//! live in two flat vectors.
+//!
+//! Updates arrive in batches (one poll cycle is one batch). Each batch that
+//! changes anything gets the next sequence number and goes out on a bounded
+//! broadcast ring. A subscriber that falls behind the ring is never waited for:
+//! its next receive returns a fresh snapshot instead, and batches older than the
+//! snapshot are skipped, so it never rolls a value back.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use parking_lot::RwLock;
+use serde::Serialize;
+use tokio::sync::broadcast;
+
+use crate::{Quality, Sample, Timestamp, Value, ValueKind};
+
+/// Dense index of a tag in its [`TagDb`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
+#[serde(transparent)]
+pub struct TagId(pub u32);
+
+impl TagId {
+    pub fn index(self) -> usize {
+        self.0 as usize
+    }
+}
+
+/// What the database knows about a tag besides its sample.
+#[derive(Debug, Clone, Serialize)]
+pub struct TagMeta {
+    pub name: Arc<str>,
+    pub description: String,
+    pub kind: ValueKind,
+    pub units: String,
+    /// Whether commands may write it (the role check is the web layer's).
+    pub writable: bool,
+}
+
+impl TagMeta {
+    pub fn new(name: impl Into<Arc<str>>, kind: ValueKind) -> Self {
+        TagMeta {
+            name: name.into(),
+            description: String::new(),
+            kind,
+            units: String::new(),
+            writable: false,
+        }
+    }
+    pub fn describe(mut self, description: impl Into<String>) -> Self {
+        self.description = description.into();
+        self
+    }
+    pub fn units(mut self, units: impl Into<String>) -> Self {
+        self.units = units.into();
+        self
+    }
+    pub fn writable(mut self, writable: bool) -> Self {
+        self.writable = writable;
+        self
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TagDbError {
+    #[error("duplicate tag name '{0}'")]
+    Duplicate(String),
+    #[error("tag name must not be empty")]
+    EmptyName,
+    #[error("too many tags (at most {} are supported)", u32::MAX)]
+    TooMany,
+}
+
+/// A batch of changes (or a snapshot), in increasing sequence order.
+#[derive(Debug, Clone)]
+pub struct ChangeBatch {
+    /// The database sequence number after this batch.
+    pub seq: u64,
+    pub changes: Vec<(TagId, Sample)>,
+}
+
+/// What a subscriber receives.
+#[derive(Debug, Clone)]
+pub enum Update {
+    /// The tags that changed since the subscriber's last update.
+    Changes(Arc<ChangeBatch>),
+    /// The subscriber fell behind: here is the current sample of every tag it
+    /// watches. Apply it in place of everything missed.
+    Snapshot(Arc<ChangeBatch>),
+}
+
+impl Update {
+    pub fn batch(&self) -> &ChangeBatch {
+        match self {
+            Update::Changes(b) | Update::Snapshot(b) => b,
+        }
+    }
+    pub fn is_snapshot(&self) -> bool {
+        matches!(self, Update::Snapshot(_))
+    }
+}
+
+struct Live {
+    samples: Vec<Sample>,
+    seq: u64,
+}
+
+/// The tag database. Cheap to share behind an `Arc`.
+pub struct TagDb {
+    meta: Vec<TagMeta>,
+    by_name: HashMap<Arc<str>, TagId>,
+    live: RwLock<Live>,
+    tx: broadcast::Sender<Arc<ChangeBatch>>,
+}
+
+/// How many change batches a subscriber may fall behind before it is snapshotted.
+const RING_BATCHES: usize = 256;
+
+impl TagDb {
+    /// Builds a database holding `tags`; every tag starts Bad ("no value yet").
+    pub fn new(tags: impl IntoIterator<Item = TagMeta>) -> Result<TagDb, TagDbError> {
+        let mut meta = Vec::new();
+        let mut by_name = HashMap::new();
+        for tag in tags {
+            if tag.name.is_empty() {
+                return Err(TagDbError::EmptyName);
+            }
+            let id = TagId(u32::try_from(meta.len()).map_err(|_| TagDbError::TooMany)?);
+            if by_name.insert(tag.name.clone(), id).is_some() {
+                return Err(TagDbError::Duplicate(tag.name.to_string()));
+            }
+            meta.push(tag);
+        }
+        let never_read = Quality::bad("no value yet");
+        let samples = meta
+            .iter()
+            .map(|m| Sample {
+                value: default_value(m.kind),
+                quality: never_read.clone(),
+                timestamp: Timestamp::from_millis(0),
+            })
+            .collect();
+        let (tx, _) = broadcast::channel(RING_BATCHES);
+        Ok(TagDb {
+            meta,
+            by_name,
+            live: RwLock::new(Live { samples, seq: 0 }),
+            tx,
+        })
+    }
+
+    pub fn len(&self) -> usize {
+        self.meta.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.meta.is_empty()
+    }
+
+    pub fn id(&self, name: &str) -> Option<TagId> {
+        self.by_name.get(name).copied()
+    }
+
+    pub fn meta(&self, id: TagId) -> Option<&TagMeta> {
+        self.meta.get(id.index())
+    }
+
+    /// Every tag, in id order.
+    pub fn all_meta(&self) -> impl Iterator<Item = (TagId, &TagMeta)> {
+        self.meta
+            .iter()
+            .enumerate()
+            .map(|(i, m)| (TagId(i as u32), m))
+    }
+
+    /// Ids of the tags whose names start with `prefix` (all for "").
+    pub fn ids_with_prefix(&self, prefix: &str) -> Vec<TagId> {
+        self.all_meta()
+            .filter(|(_, m)| m.name.starts_with(prefix))
+            .map(|(id, _)| id)
+            .collect()
+    }
+
+    pub fn get(&self, id: TagId) -> Option<Sample> {
+        self.live.read().samples.get(id.index()).cloned()
+    }
+
+    pub fn get_by_name(&self, name: &str) -> Option<Sample> {
+        self.id(name).and_then(|id| self.get(id))
+    }
+
+    /// The current sequence number: how many changing batches have been applied.
+    pub fn seq(&self) -> u64 {
+        self.live.read().seq
+    }
+
+    /// The current samples of `ids` (unknown ids are skipped), with the sequence
+    /// number they are consistent with.
+    pub fn snapshot(&self, ids: &[TagId]) -> ChangeBatch {
+        let live = self.live.read();
+        let changes = ids
+            .iter()
+            .filter_map(|id| live.samples.get(id.index()).map(|s| (*id, s.clone())))
+            .collect();
+        ChangeBatch {
+            seq: live.seq,
+            changes,
+        }
+    }
+
+    /// The current samples of every tag.
+    pub fn snapshot_all(&self) -> ChangeBatch {
+        let live = self.live.read();
+        ChangeBatch {
+            seq: live.seq,
+            changes: live
+                .samples
+                .iter()
+                .enumerate()
+                .map(|(i, s)| (TagId(i as u32), s.clone()))
+                .collect(),
+        }
+    }
+
+    /// Applies one batch of new samples (one poll cycle). Samples for unknown
+    /// ids are ignored. Returns how many tags changed; only those are published.
+    /// Never blocks on subscribers.
+    pub fn apply(&self, batch: impl IntoIterator<Item = (TagId, Sample)>) -> usize {
+        let mut live = self.live.write();
+        let mut changes = Vec::new();
+        for (id, sample) in batch {
+            let Some(slot) = live.samples.get_mut(id.index()) else {
+                continue;
+            };
+            if slot.differs_from(&sample) {
+                changes.push((id, sample.clone()));
+            }
+            *slot = sample;
+        }
+        let n = changes.len();
+        if n > 0 {
+            live.seq += 1;
+            let batch = Arc::new(ChangeBatch {
+                seq: live.seq,
+                changes,
+            });
+            // Sent under the lock so the ring holds batches in sequence order.
+            // An error only means nobody is subscribed.
+            let _ = self.tx.send(batch);
+        }
+        n
+    }
+
+    /// Sets one tag, as a batch of one. Convenience for derived tags.
+    pub fn set(&self, id: TagId, value: impl Into<Value>, quality: Quality, timestamp: Timestamp) {
+        self.apply([(
+            id,
+            Sample {
+                value: value.into(),
+                quality,
+                timestamp,
+            },
+        )]);
+    }
+
+    /// Marks `ids` with `quality`, keeping their last values, as one batch.
+    pub fn set_quality(&self, ids: &[TagId], quality: &Quality, timestamp: Timestamp) -> usize {
+        let batch: Vec<(TagId, Sample)> = {
+            let live = self.live.read();
+            ids.iter()
+                .filter_map(|id| {
+                    live.samples.get(id.index()).map(|s| {
+                        (
+                            *id,
+                            Sample {
+                                value: s.value.clone(),
+                                quality: quality.clone(),
+                                timestamp,
+                            },
+                        )
+                    })
+                })
+                .collect()
+        };
+        self.apply(batch)
+    }
+
+    /// Subscribes to changes of every tag.
+    pub fn subscribe_all(self: &Arc<Self>) -> Subscription {
+        self.subscribe_filtered(None)
+    }
+
+    /// Subscribes to changes of `ids` only.
+    pub fn subscribe(self: &Arc<Self>, ids: &[TagId]) -> Subscription {
+        let mut filter = vec![false; self.len()];
+        for id in ids {
+            if let Some(f) = filter.get_mut(id.index()) {
+                *f = true;
+            }
+        }
+        self.subscribe_filtered(Some(filter))
+    }
+
+    fn subscribe_filtered(self: &Arc<Self>, filter: Option<Vec<bool>>) -> Subscription {
+        // Subscribe under the read lock so `seen` and the ring position agree.
+        let live = self.live.read();
+        let rx = self.tx.subscribe();
+        Subscription {
+            db: Arc::clone(self),
+            rx,
+            filter,
+            seen: live.seq,
+        }
+    }
+}
+
+fn default_value(kind: ValueKind) -> Value {
+    match kind {
+        ValueKind::Bool => Value::Bool(false),
+        ValueKind::Int => Value::Int(0),
+        ValueKind::Float => Value::Float(0.0),
+        ValueKind::Str => Value::Str("".into()),
+    }
+}
+
+/// A subscriber's view of the change stream. Dropping it unsubscribes.
+pub struct Subscription {
+    db: Arc<TagDb>,
+    rx: broadcast::Receiver<Arc<ChangeBatch>>,
+    /// `None` watches every tag; otherwise one flag per tag id.
+    filter: Option<Vec<bool>>,
+    /// The last sequence number this subscriber has been brought up to.
+    seen: u64,
+}
+
+impl Subscription {
+    /// Waits for the next update. Returns `None` once the database is gone.
+    pub async fn recv(&mut self) -> Option<Update> {
+        loop {
+            match self.rx.recv().await {
+                Ok(batch) => {
+                    if let Some(update) = self.filter_batch(batch) {
+                        return Some(update);
+                    }
+                }
+                Err(broadcast::error::RecvError::Lagged(_)) => return Some(self.resync()),
+                Err(broadcast::error::RecvError::Closed) => return None,
+            }
+        }
+    }
+
+    /// Returns the next update if one is ready, without waiting.
+    pub fn try_recv(&mut self) -> Option<Update> {
+        loop {
+            match self.rx.try_recv() {
+                Ok(batch) => {
+                    if let Some(update) = self.filter_batch(batch) {
+                        return Some(update);
+                    }
+                }
+                Err(broadcast::error::TryRecvError::Lagged(_)) => return Some(self.resync()),
+                Err(_) => return None,
+            }
+        }
+    }
+
+    /// Changes what this subscription watches (e.g. a WebSocket client
+    /// subscribing to more tags) and returns a snapshot of the new set.
+    pub fn watch(&mut self, ids: Option<&[TagId]>) -> Update {
+        self.filter = ids.map(|ids| {
+            let mut f = vec![false; self.db.len()];
+            for id in ids {
+                if let Some(slot) = f.get_mut(id.index()) {
+                    *slot = true;
+                }
+            }
+            f
+        });
+        self.resync()
+    }
+
+    fn filter_batch(&mut self, batch: Arc<ChangeBatch>) -> Option<Update> {
+        if batch.seq <= self.seen {
+            return None; // already covered by a snapshot
+        }
+        self.seen = batch.seq;
+        match &self.filter {
+            None => Some(Update::Changes(batch)),
+            Some(filter) => {
+                let changes: Vec<_> = batch
+                    .changes
+                    .iter()
+                    .filter(|(id, _)| filter.get(id.index()).copied().unwrap_or(false))
+                    .cloned()
+                    .collect();
+                (!changes.is_empty()).then(|| {
+                    Update::Changes(Arc::new(ChangeBatch {
+                        seq: batch.seq,
+                        changes,
+                    }))
+                })
+            }
+        }
+    }
+
+    fn resync(&mut self) -> Update {
+        // Drop everything queued: the snapshot supersedes it.
+        self.rx = self.rx.resubscribe();
+        let snap = match &self.filter {
+            None => self.db.snapshot_all(),
+            Some(filter) => {
+                let ids: Vec<TagId> = filter
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, on)| **on)
+                    .map(|(i, _)| TagId(i as u32))
+                    .collect();
+                self.db.snapshot(&ids)
+            }
+        };
+        self.seen = snap.seq;
+        Update::Snapshot(Arc::new(snap))
+    }
+}

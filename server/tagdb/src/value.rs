@@ -1,0 +1,236 @@
+//! Tag values, quality and samples.
+
+use std::fmt;
+use std::sync::Arc;
+
+use serde::{Deserialize, Serialize};
+
+use crate::Timestamp;
+
+/// The engineering value of a tag, after decoding and scaling.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Value {
+    Bool(bool),
+    Int(i64),
+    Float(f64),
+    Str(Arc<str>),
+}
+
+impl Value {
+    pub fn kind(&self) -> ValueKind {
+        match self {
+            Value::Bool(_) => ValueKind::Bool,
+            Value::Int(_) => ValueKind::Int,
+            Value::Float(_) => ValueKind::Float,
+            Value::Str(_) => ValueKind::Str,
+        }
+    }
+
+    /// The value as a number, for alarms, trends and control loops.
+    /// Booleans read as 0/1; strings have no numeric value.
+    pub fn as_f64(&self) -> Option<f64> {
+        match self {
+            Value::Bool(b) => Some(if *b { 1.0 } else { 0.0 }),
+            Value::Int(i) => Some(*i as f64),
+            Value::Float(f) => Some(*f),
+            Value::Str(_) => None,
+        }
+    }
+
+    /// The value as a boolean: non-zero numbers are true.
+    pub fn as_bool(&self) -> Option<bool> {
+        match self {
+            Value::Bool(b) => Some(*b),
+            Value::Int(i) => Some(*i != 0),
+            Value::Float(f) => Some(*f != 0.0),
+            Value::Str(_) => None,
+        }
+    }
+
+    /// Converts a value to the given kind, as a command would need before a
+    /// write. Fails (None) where the conversion would lose meaning: a string
+    /// into a number, a fractional float into an integer, NaN anywhere.
+    pub fn coerce(&self, kind: ValueKind) -> Option<Value> {
+        match (self, kind) {
+            (v, k) if v.kind() == k => match v {
+                Value::Float(f) if !f.is_finite() => None,
+                _ => Some(v.clone()),
+            },
+            (Value::Bool(b), ValueKind::Int) => Some(Value::Int(*b as i64)),
+            (Value::Bool(b), ValueKind::Float) => Some(Value::Float(*b as i64 as f64)),
+            (Value::Int(i), ValueKind::Bool) if *i == 0 || *i == 1 => Some(Value::Bool(*i == 1)),
+            (Value::Int(i), ValueKind::Float) => Some(Value::Float(*i as f64)),
+            (Value::Float(f), ValueKind::Bool) if *f == 0.0 || *f == 1.0 => {
+                Some(Value::Bool(*f == 1.0))
+            }
+            (Value::Float(f), ValueKind::Int)
+                if f.is_finite() && f.fract() == 0.0 && f.abs() < 9.0e15 =>
+            {
+                Some(Value::Int(*f as i64))
+            }
+            (Value::Float(f), ValueKind::Float) if f.is_finite() => Some(Value::Float(*f)),
+            _ => None,
+        }
+    }
+}
+
+impl fmt::Display for Value {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Value::Bool(b) => write!(f, "{b}"),
+            Value::Int(i) => write!(f, "{i}"),
+            Value::Float(x) => write!(f, "{x}"),
+            Value::Str(s) => f.write_str(s),
+        }
+    }
+}
+
+impl From<bool> for Value {
+    fn from(b: bool) -> Self {
+        Value::Bool(b)
+    }
+}
+impl From<i64> for Value {
+    fn from(i: i64) -> Self {
+        Value::Int(i)
+    }
+}
+impl From<f64> for Value {
+    fn from(f: f64) -> Self {
+        Value::Float(f)
+    }
+}
+impl From<&str> for Value {
+    fn from(s: &str) -> Self {
+        Value::Str(s.into())
+    }
+}
+
+/// The kind of engineering value a tag holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ValueKind {
+    Bool,
+    Int,
+    Float,
+    Str,
+}
+
+/// The three OPC-style quality classes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum QualityCode {
+    Good,
+    Uncertain,
+    Bad,
+}
+
+/// Quality of a sample: Good, or Uncertain/Bad with a reason an operator can read
+/// ("device offline", "exception 0x02 illegal data address", "not yet read").
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Quality {
+    pub code: QualityCode,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reason: Option<Arc<str>>,
+}
+
+impl Quality {
+    pub const GOOD: Quality = Quality {
+        code: QualityCode::Good,
+        reason: None,
+    };
+
+    pub fn bad(reason: impl Into<Arc<str>>) -> Self {
+        Quality {
+            code: QualityCode::Bad,
+            reason: Some(reason.into()),
+        }
+    }
+
+    pub fn uncertain(reason: impl Into<Arc<str>>) -> Self {
+        Quality {
+            code: QualityCode::Uncertain,
+            reason: Some(reason.into()),
+        }
+    }
+
+    pub fn is_good(&self) -> bool {
+        self.code == QualityCode::Good
+    }
+}
+
+impl fmt::Display for Quality {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let code = match self.code {
+            QualityCode::Good => "Good",
+            QualityCode::Uncertain => "Uncertain",
+            QualityCode::Bad => "Bad",
+        };
+        match &self.reason {
+            Some(r) => write!(f, "{code} ({r})"),
+            None => f.write_str(code),
+        }
+    }
+}
+
+/// One reading of a tag: value, quality, and the source timestamp.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Sample {
+    pub value: Value,
+    pub quality: Quality,
+    pub timestamp: Timestamp,
+}
+
+impl Sample {
+    pub fn good(value: impl Into<Value>, timestamp: Timestamp) -> Self {
+        Sample {
+            value: value.into(),
+            quality: Quality::GOOD,
+            timestamp,
+        }
+    }
+
+    /// Whether `other` differs from `self` in what a subscriber sees: value or
+    /// quality. A newer timestamp alone is not a change.
+    pub fn differs_from(&self, other: &Sample) -> bool {
+        self.quality != other.quality || !same_value(&self.value, &other.value)
+    }
+}
+
+/// Value equality where NaN equals NaN, so a NaN reading is not a change on every scan.
+fn same_value(a: &Value, b: &Value) -> bool {
+    match (a, b) {
+        (Value::Float(x), Value::Float(y)) => x == y || (x.is_nan() && y.is_nan()),
+        _ => a == b,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn coerce_refuses_lossy_conversions() {
+        assert_eq!(
+            Value::Float(2.0).coerce(ValueKind::Int),
+            Some(Value::Int(2))
+        );
+        assert_eq!(Value::Float(2.5).coerce(ValueKind::Int), None);
+        assert_eq!(
+            Value::Int(1).coerce(ValueKind::Bool),
+            Some(Value::Bool(true))
+        );
+        assert_eq!(Value::Int(2).coerce(ValueKind::Bool), None);
+        assert_eq!(Value::from("x").coerce(ValueKind::Float), None);
+        assert_eq!(Value::Float(f64::NAN).coerce(ValueKind::Float), None);
+    }
+
+    #[test]
+    fn nan_is_not_a_change() {
+        let t = Timestamp::from_millis(1);
+        let a = Sample::good(f64::NAN, t);
+        let b = Sample::good(f64::NAN, Timestamp::from_millis(2));
+        assert!(!a.differs_from(&b));
+    }
+}
