@@ -1,0 +1,1 @@
+//! Microgrid dispatch (placeholder, being written).

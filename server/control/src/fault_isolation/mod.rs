@@ -1,0 +1,1 @@
+//! OLUC/OLDC fault isolation (placeholder, being written).
