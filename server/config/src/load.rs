@@ -35,6 +35,16 @@ impl Plant {
     pub fn tag(&self, name: &str) -> Option<&TagConfig> {
         self.tags.iter().find(|t| t.name.get_ref() == name)
     }
+
+    /// The configured tags as the tag database knows them.
+    pub fn tag_metas(&self) -> impl Iterator<Item = gridscada_tagdb::TagMeta> + '_ {
+        self.tags.iter().map(|t| {
+            gridscada_tagdb::TagMeta::new(t.name.get_ref().as_str(), t.value_kind())
+                .describe(t.description.clone())
+                .units(t.units.clone())
+                .writable(*t.writable.get_ref())
+        })
+    }
 }
 
 /// Loads and checks the configuration at `path`: a main file, or a folder

@@ -1,0 +1,240 @@
+//! Broken configurations, each with the located error it must produce.
+//! The messages are what an engineer reads, so they are asserted as text.
+
+use std::fs;
+
+use gridscada_config::load_path;
+
+const MAIN: &str = "tag_files = [\"tags.toml\"]\n";
+
+const DEVICE: &str = r#"[[device]]
+name = "D1"
+protocol = "tcp"
+address = "127.0.0.1:1502"
+"#;
+
+/// Writes `main` and `tags` to a temp folder, loads it, and returns the
+/// diagnostics with the folder replaced by `DIR`.
+fn problems(main: &str, tags: &str) -> Vec<String> {
+    let dir = tempfile::tempdir().unwrap();
+    fs::write(dir.path().join("gridscada.toml"), main).unwrap();
+    fs::write(dir.path().join("tags.toml"), tags).unwrap();
+    let prefix = dir.path().display().to_string();
+    match load_path(dir.path()) {
+        Ok(_) => vec![],
+        Err(diags) => diags
+            .iter()
+            .map(|d| d.to_string().replace(&prefix, "DIR"))
+            .collect(),
+    }
+}
+
+fn assert_problems(main: &str, tags: &str, expected: &[&str]) {
+    let got = problems(main, tags);
+    assert_eq!(got, expected, "\ngot:\n{}\n", got.join("\n"));
+}
+
+#[test]
+fn a_valid_plant_loads() {
+    let tags = format!(
+        "{DEVICE}\n[[tag]]\nname = \"A.Volts\"\ndevice = \"D1\"\nkind = \"input_register\"\naddress = 0\ntype = \"f32\"\n"
+    );
+    assert_eq!(problems(MAIN, &tags), Vec::<String>::new());
+}
+
+#[test]
+fn toml_syntax_error() {
+    assert_problems(
+        MAIN,
+        "[[device]]\nname = \"D1\nprotocol = \"tcp\"\n",
+        &["DIR/tags.toml:2:11: error: TOML syntax error: invalid basic string, expected `\"`"],
+    );
+}
+
+#[test]
+fn unknown_field_is_located() {
+    let tags = "[[device]]\nname = \"D1\"\nprotocol = \"tcp\"\nadress = \"127.0.0.1:502\"\n";
+    let got = problems(MAIN, tags);
+    assert_eq!(got.len(), 1, "{got:?}");
+    assert!(
+        got[0].starts_with(
+            "DIR/tags.toml:4:1: error: device 'D1': unknown field `adress`, expected one of `name`"
+        ),
+        "{got:?}"
+    );
+}
+
+#[test]
+fn unknown_key_in_main_file() {
+    let main = "tag_files = [\"tags.toml\"]\nhttp = \"0.0.0.0:80\"\n";
+    assert_problems(
+        main,
+        DEVICE,
+        &["DIR/gridscada.toml:2:1: error: unknown key 'http' in the main file; expected one of tag_files, server, storage, panel, microgrid"],
+    );
+}
+
+#[test]
+fn missing_tag_file() {
+    let main = "tag_files = [\"tags.toml\", \"nope.toml\"]\n";
+    assert_problems(
+        main,
+        DEVICE,
+        &["DIR/gridscada.toml:1:27: error: cannot read tag file 'DIR/nope.toml': no such file"],
+    );
+}
+
+#[test]
+fn duplicate_names() {
+    let tags = format!(
+        "{DEVICE}\n{DEVICE}\n[[tag]]\nname = \"A.B\"\ndevice = \"D1\"\nkind = \"coil\"\naddress = 0\n\n[[tag]]\nname = \"A.B\"\ndevice = \"D1\"\nkind = \"coil\"\naddress = 1\n"
+    );
+    assert_problems(
+        MAIN,
+        &tags,
+        &[
+            "DIR/tags.toml:7:8: error: duplicate device name 'D1' (first defined at DIR/tags.toml:2:8)",
+            "DIR/tags.toml:18:8: error: duplicate tag name 'A.B' (first defined at DIR/tags.toml:12:8)",
+        ],
+    );
+}
+
+#[test]
+fn unknown_device() {
+    let tags = format!(
+        "{DEVICE}\n[[tag]]\nname = \"A.B\"\ndevice = \"D7\"\nkind = \"coil\"\naddress = 0\n"
+    );
+    assert_problems(
+        MAIN,
+        &tags,
+        &["DIR/tags.toml:8:10: error: tag 'A.B': unknown device 'D7'"],
+    );
+}
+
+#[test]
+fn overlapping_registers() {
+    let tags = format!(
+        "{DEVICE}\n[[tag]]\nname = \"A.P\"\ndevice = \"D1\"\nkind = \"holding_register\"\naddress = 10\ntype = \"f64\"\n\n[[tag]]\nname = \"A.Q\"\ndevice = \"D1\"\nkind = \"holding_register\"\naddress = 13\n"
+    );
+    assert_problems(
+        MAIN,
+        &tags,
+        &["DIR/tags.toml:17:11: error: tag 'A.Q': holding_register 13 on device 'D1' overlaps tag 'A.P' (at DIR/tags.toml:10:11)"],
+    );
+}
+
+#[test]
+fn bits_of_one_register_do_not_overlap_but_the_same_bit_does() {
+    let tags = format!(
+        "{DEVICE}\n[[tag]]\nname = \"A.B0\"\ndevice = \"D1\"\nkind = \"input_register\"\naddress = 5\nbit = 0\n\n[[tag]]\nname = \"A.B1\"\ndevice = \"D1\"\nkind = \"input_register\"\naddress = 5\nbit = 1\n\n[[tag]]\nname = \"A.B1again\"\ndevice = \"D1\"\nkind = \"input_register\"\naddress = 5\nbit = 1\n"
+    );
+    assert_problems(
+        MAIN,
+        &tags,
+        &["DIR/tags.toml:24:11: error: tag 'A.B1again': input_register 5 on device 'D1' overlaps tag 'A.B1' (at DIR/tags.toml:17:11)"],
+    );
+}
+
+#[test]
+fn out_of_range_register() {
+    let tags = format!("{DEVICE}\n[[tag]]\nname = \"A.E\"\ndevice = \"D1\"\nkind = \"input_register\"\naddress = 65535\ntype = \"u32\"\n");
+    assert_problems(
+        MAIN,
+        &tags,
+        &["DIR/tags.toml:10:11: error: tag 'A.E': address 65535 with 2 registers runs past 65535"],
+    );
+}
+
+#[test]
+fn type_and_width_mismatches() {
+    let tags = format!(
+        "{DEVICE}\n[[tag]]\nname = \"A.C\"\ndevice = \"D1\"\nkind = \"coil\"\naddress = 0\ntype = \"f32\"\n\n[[tag]]\nname = \"A.S\"\ndevice = \"D1\"\nkind = \"holding_register\"\naddress = 10\ntype = \"string\"\n\n[[tag]]\nname = \"A.Bit\"\ndevice = \"D1\"\nkind = \"holding_register\"\naddress = 20\nbit = 16\n"
+    );
+    assert_problems(
+        MAIN,
+        &tags,
+        &[
+            "DIR/tags.toml:11:8: error: tag 'A.C': a coil holds one bit, so its type must be bool, not f32",
+            "DIR/tags.toml:14:8: error: tag 'A.S': a string tag needs length (registers, two characters each)",
+            "DIR/tags.toml:25:7: error: tag 'A.Bit': bit 16 is outside 0..=15",
+        ],
+    );
+}
+
+#[test]
+fn limit_ordering() {
+    let tags = format!(
+        "{DEVICE}\n[[tag]]\nname = \"A.V\"\ndevice = \"D1\"\nkind = \"input_register\"\naddress = 0\ntype = \"f32\"\n[tag.alarm]\nlolo = {{ limit = 190.0 }}\nlo = {{ limit = 207.0 }}\nhi = {{ limit = 200.0 }}\nhihi = {{ limit = 265.0 }}\n"
+    );
+    assert_problems(
+        MAIN,
+        &tags,
+        &["DIR/tags.toml:15:16: error: tag 'A.V': alarm limits must be ordered LoLo < Lo < Hi < HiHi, but lo = 207 is not below hi = 200"],
+    );
+}
+
+#[test]
+fn writable_without_role_and_read_only_tables() {
+    let tags = format!(
+        "{DEVICE}\n[[tag]]\nname = \"A.Cmd\"\ndevice = \"D1\"\nkind = \"coil\"\naddress = 0\nwritable = true\n\n[[tag]]\nname = \"A.Status\"\ndevice = \"D1\"\nkind = \"discrete_input\"\naddress = 0\nwritable = true\nwrite_role = \"operator\"\n"
+    );
+    assert_problems(
+        MAIN,
+        &tags,
+        &[
+            "DIR/tags.toml:11:12: error: tag 'A.Cmd': writable tags need write_role (operator, supervisor or administrator)",
+            "DIR/tags.toml:18:12: error: tag 'A.Status': a discrete_input is read-only in Modbus; only coils and holding registers can be writable",
+        ],
+    );
+}
+
+#[test]
+fn bad_enum_value_names_the_choices() {
+    let tags = format!(
+        "{DEVICE}\n[[tag]]\nname = \"A.B\"\ndevice = \"D1\"\nkind = \"register\"\naddress = 0\n"
+    );
+    let got = problems(MAIN, &tags);
+    assert_eq!(got.len(), 1, "{got:?}");
+    assert!(
+        got[0].starts_with("DIR/tags.toml:9:8: error: tag 'A.B': unknown variant `register`, expected one of `coil`, `discrete_input`, `input_register`, `holding_register`"),
+        "{got:?}"
+    );
+}
+
+#[test]
+fn every_problem_is_reported_not_just_the_first() {
+    let tags = format!(
+        "{DEVICE}\n[[tag]]\nname = \"A.B\"\ndevice = \"D9\"\nkind = \"coil\"\naddress = 0\n\n[[tag]]\nname = \"bad name\"\ndevice = \"D1\"\nkind = \"coil\"\naddress = 1\n\n[[tag]]\nname = \"A.C\"\ndevice = \"D1\"\nkind = \"coil\"\naddress = 2\nbogus = 1\n"
+    );
+    let got = problems(MAIN, &tags);
+    assert_eq!(got.len(), 3, "{got:?}");
+}
+
+#[test]
+fn panel_needs_its_io_tags() {
+    let main = "tag_files = [\"tags.toml\"]\n\n[[panel]]\nid = \"p1\"\nname = \"Panel\"\nkind = \"service\"\nprefix = \"P1\"\nzones = 1\n";
+    let got = problems(main, DEVICE);
+    assert_eq!(got.len(), 6, "{got:?}");
+    assert_eq!(got[0], "DIR/gridscada.toml:7:10: error: panel 'p1': needs tag 'P1.ELCB.Closed', which no tag file defines");
+}
+
+#[test]
+fn server_address_and_storage_url() {
+    let main = "tag_files = [\"tags.toml\"]\n[server]\nhttp = \"localhost\"\n[storage]\nurl = \"mysql://x\"\n";
+    assert_problems(
+        main,
+        DEVICE,
+        &[
+            "DIR/gridscada.toml:3:8: error: [server] http: 'localhost' is not an address like 127.0.0.1:8080",
+            "DIR/gridscada.toml:5:7: error: [storage] url: 'mysql://x' must start with sqlite:, postgres:// or postgresql://",
+        ],
+    );
+}
+
+#[test]
+fn the_demo_plant_is_valid() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tags");
+    let plant = load_path(&dir).unwrap_or_else(|d| panic!("{d:?}"));
+    assert_eq!(plant.panels.len(), 2);
+    assert!(plant.microgrid.is_some());
+}
