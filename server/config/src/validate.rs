@@ -475,12 +475,12 @@ fn check_alarms(cx: &mut Ctx<'_>, f: usize, name: &str, kind: ValueKind, a: &Ala
         }
     }
     for d in &a.discrete {
-        let ok = match (kind, d.when.get_ref()) {
-            (ValueKind::Bool, toml::Value::Boolean(_)) => true,
-            (ValueKind::Int | ValueKind::Float, toml::Value::Integer(_)) => true,
-            (ValueKind::Str, toml::Value::String(_)) => true,
-            _ => false,
-        };
+        let ok = matches!(
+            (kind, d.when.get_ref()),
+            (ValueKind::Bool, toml::Value::Boolean(_))
+                | (ValueKind::Int | ValueKind::Float, toml::Value::Integer(_))
+                | (ValueKind::Str, toml::Value::String(_))
+        );
         if !ok {
             cx.err(
                 f,
@@ -514,9 +514,9 @@ fn delays(
 /// Two tags on the same register (or bit) of the same device and table would
 /// fight over it. Bits of one register are fine as long as they differ.
 fn check_overlaps(cx: &mut Ctx<'_>, tags: &[(usize, TagConfig)]) {
-    type Key<'a> = (&'a str, RegisterKind);
-    let mut by_table: BTreeMap<Key<'_>, Vec<(u32, u32, Option<u8>, usize, &TagConfig)>> =
-        BTreeMap::new();
+    /// A tag's footprint: start, end (exclusive), bit, file, tag.
+    type Span<'a> = (u32, u32, Option<u8>, usize, &'a TagConfig);
+    let mut by_table: BTreeMap<(&str, RegisterKind), Vec<Span<'_>>> = BTreeMap::new();
     for (f, t) in tags {
         let start = *t.address.get_ref();
         let end = start + t.width().max(1) as u32;
@@ -533,7 +533,7 @@ fn check_overlaps(cx: &mut Ctx<'_>, tags: &[(usize, TagConfig)]) {
     for ((device, kind), mut list) in by_table {
         list.sort_by_key(|(s, e, b, _, _)| (*s, *e, *b));
         // Sweep: compare each tag with every earlier one still open.
-        let mut open: Vec<(u32, u32, Option<u8>, usize, &TagConfig)> = Vec::new();
+        let mut open: Vec<Span<'_>> = Vec::new();
         for cur in list {
             open.retain(|o| o.1 > cur.0);
             for o in &open {

@@ -1,1 +1,290 @@
-//! placeholder
+//! # gridscada-sim: simulated field devices
+//!
+//! **Owns:** Modbus TCP servers on loopback that behave like the plant's
+//! devices, built from the plant configuration: substation panels (ELCB,
+//! main MCCB, zone MCBs behind an I/O gateway, and a power analyzer) and
+//! microgrid units (PV, wind, storage, diesel with their inner-loop
+//! controllers, and the load meter). A [`SimHandle`] injects faults (zone
+//! faults, unit trips, communication faults) and sets plant inputs; it is
+//! the interface the HTTP admin routes and scenario replay use.
+//!
+//! **Must not touch:** the tag database, the poller or the control loops.
+//! The simulator is only reachable over Modbus and through its handle.
+//! Register maps: `docs/REGISTER_MAPS.md`.
+
+mod codec;
+mod handle;
+mod image;
+mod map;
+mod microgrid;
+mod panel;
+mod plant;
+mod profile;
+mod server;
+
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+
+use gridscada_config::Plant;
+use gridscada_tagdb::{Clock, SystemClock};
+use parking_lot::{Mutex, RwLock};
+use serde_spanned::Spanned;
+use tokio::net::TcpListener;
+use tokio::sync::watch;
+use tokio::task::JoinHandle;
+
+pub use handle::SimHandle;
+pub use microgrid::{BalanceCounters, MicrogridParams, UnitCounters, UnitState};
+pub use panel::{AnalyzerReading, FaultKind, TripRecord, ZoneLoad};
+pub use plant::{
+    BreakerSnapshot, DeviceSnapshot, MicrogridSnapshot, PanelSnapshot, SimSnapshot, UnitSnapshot,
+    ZoneSnapshot,
+};
+pub use profile::Profile;
+/// Modbus exception codes, for [`SimHandle::set_exception`].
+pub use tokio_modbus::ExceptionCode;
+
+use server::{CommFaults, Gateway, Shared};
+
+/// Errors of the simulator, each naming what and where.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// The plant configuration cannot be simulated as it is.
+    #[error("simulator configuration: {0}")]
+    Config(String),
+    /// A gateway address could not be resolved or bound.
+    #[error("simulator cannot listen on {address}: {source}")]
+    Bind {
+        address: String,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A control-interface call named a panel, zone, unit or device that the
+    /// simulator does not have.
+    #[error("{0}")]
+    NotFound(String),
+    /// A control-interface call gave a value out of range.
+    #[error("bad value: {0}")]
+    BadValue(String),
+    #[error("simulator I/O: {0}")]
+    Io(#[from] std::io::Error),
+}
+
+/// Where the gateways listen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BindMode {
+    /// The addresses in the device configuration (`gridscada sim`).
+    Configured,
+    /// `127.0.0.1:0` per gateway, so nothing collides (`gridscada demo`,
+    /// tests); see [`Simulator::addresses`].
+    Ephemeral,
+}
+
+/// Simulator settings that are not part of the plant configuration.
+#[derive(Debug, Clone)]
+pub struct SimOptions {
+    /// Plant time for a breaker contact (and its status input) to follow its
+    /// command, and for the ELCB to reclose after a reset pulse.
+    pub breaker_delay: Duration,
+    /// Plant-time period of the background step (the models are also
+    /// advanced on every request, so this only bounds integration lag).
+    pub tick: Duration,
+    /// Panels start with the MCCB and every zone MCB closed (commands on);
+    /// otherwise everything starts open. The ELCB starts closed.
+    pub panels_start_closed: bool,
+    pub microgrid: MicrogridParams,
+}
+
+impl Default for SimOptions {
+    fn default() -> Self {
+        SimOptions {
+            breaker_delay: Duration::from_millis(50),
+            tick: Duration::from_millis(200),
+            panels_start_closed: true,
+            microgrid: MicrogridParams::default(),
+        }
+    }
+}
+
+/// A running simulator. Dropping it stops the servers.
+pub struct Simulator {
+    handle: SimHandle,
+    addresses: HashMap<String, SocketAddr>,
+    shutdown: watch::Sender<bool>,
+    tasks: Vec<JoinHandle<()>>,
+}
+
+impl std::fmt::Debug for Simulator {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Simulator")
+            .field("addresses", &self.addresses)
+            .finish()
+    }
+}
+
+impl Simulator {
+    /// The control interface.
+    pub fn handle(&self) -> SimHandle {
+        self.handle.clone()
+    }
+
+    /// Configured gateway address (`host:port` as written in the device
+    /// configuration) -> the address actually listening.
+    pub fn addresses(&self) -> &HashMap<String, SocketAddr> {
+        &self.addresses
+    }
+
+    /// Points every simulated device of `plant` at the address its gateway
+    /// actually listens on (for [`BindMode::Ephemeral`]).
+    pub fn patch_plant(&self, plant: &mut Plant) {
+        for d in &mut plant.devices {
+            if let Some(addr) = &mut d.address {
+                if let Some(actual) = self.addresses.get(addr.get_ref()) {
+                    let span = addr.span();
+                    *addr = Spanned::new(span, actual.to_string());
+                }
+            }
+        }
+    }
+
+    /// Stops the servers and the plant step, and waits for them.
+    pub async fn shutdown(mut self) {
+        let _ = self.shutdown.send(true);
+        for t in self.tasks.drain(..) {
+            let _ = t.await;
+        }
+    }
+}
+
+impl Drop for Simulator {
+    fn drop(&mut self) {
+        let _ = self.shutdown.send(true);
+    }
+}
+
+/// Starts the simulator with default options.
+pub async fn start(
+    plant: &Plant,
+    clock: Arc<dyn Clock>,
+    bind: BindMode,
+) -> Result<Simulator, Error> {
+    start_with(plant, clock, bind, SimOptions::default()).await
+}
+
+/// Starts the simulator: builds the devices from `plant`, binds one listener
+/// per gateway address and starts the plant step on `clock`.
+pub async fn start_with(
+    plant: &Plant,
+    clock: Arc<dyn Clock>,
+    bind: BindMode,
+    options: SimOptions,
+) -> Result<Simulator, Error> {
+    let sim = plant::PlantSim::new(plant, &options, clock.now())?;
+    for s in &sim.unserved {
+        tracing::warn!("simulator: not simulated: {s}");
+    }
+    if !sim.unmodelled.is_empty() {
+        tracing::info!(
+            tags = %sim.unmodelled.join(", "),
+            "simulator: tags without a simulated meaning (they read 0)"
+        );
+    }
+    let gateways = sim.gateways.clone();
+    let device_count = sim.devices.len();
+    let shared = Arc::new(Shared {
+        plant: Mutex::new(sim),
+        comm: RwLock::new(vec![CommFaults::default(); device_count]),
+        clock: clock.clone(),
+    });
+
+    // Bind everything before serving anything, so a failure leaves nothing behind.
+    let mut listeners = vec![];
+    let mut addresses = HashMap::new();
+    for g in &gateways {
+        let listener = match bind {
+            BindMode::Configured => bind_configured(&g.address).await?,
+            BindMode::Ephemeral => TcpListener::bind(("127.0.0.1", 0))
+                .await
+                .map_err(|source| Error::Bind {
+                    address: "127.0.0.1:0".into(),
+                    source,
+                })?,
+        };
+        let actual = listener.local_addr()?;
+        addresses.insert(g.address.clone(), actual);
+        listeners.push((g.clone(), listener));
+    }
+
+    let (tx, rx) = watch::channel(false);
+    let mut tasks = vec![];
+    for (g, listener) in listeners {
+        let gw = Arc::new(Gateway {
+            label: g.address.clone(),
+            units: g.units.clone(),
+        });
+        tasks.push(tokio::spawn(server::serve(
+            listener,
+            shared.clone(),
+            gw,
+            rx.clone(),
+        )));
+    }
+    tasks.push(tokio::spawn(step_loop(shared.clone(), options.tick, rx)));
+
+    Ok(Simulator {
+        handle: SimHandle { shared },
+        addresses,
+        shutdown: tx,
+        tasks,
+    })
+}
+
+async fn bind_configured(address: &str) -> Result<TcpListener, Error> {
+    let bind_err = |source| Error::Bind {
+        address: address.to_string(),
+        source,
+    };
+    let mut addrs = tokio::net::lookup_host(address).await.map_err(bind_err)?;
+    let first = addrs.next().ok_or_else(|| Error::Bind {
+        address: address.to_string(),
+        source: std::io::Error::new(std::io::ErrorKind::NotFound, "address resolves to nothing"),
+    })?;
+    TcpListener::bind(first).await.map_err(bind_err)
+}
+
+/// Advances the plant on the clock even when nobody polls, so energy
+/// counters and state of charge integrate in plant time.
+async fn step_loop(shared: Arc<Shared>, tick: Duration, mut shutdown: watch::Receiver<bool>) {
+    let tick = tick.max(Duration::from_millis(10));
+    loop {
+        tokio::select! {
+            _ = shared.clock.sleep(tick) => {}
+            _ = shutdown.wait_for(|s| *s) => return,
+        }
+        shared.with_plant(|_| ());
+    }
+}
+
+/// `gridscada sim`: serves the plant's devices on their configured addresses
+/// with the system clock until Ctrl-C.
+pub async fn run_standalone(plant: &Plant) -> Result<(), Error> {
+    let sim = start(plant, Arc::new(SystemClock), BindMode::Configured).await?;
+    let snapshot = sim.handle().snapshot();
+    let mut by_address: Vec<(&String, &SocketAddr)> = sim.addresses().iter().collect();
+    by_address.sort();
+    for (configured, actual) in by_address {
+        let units: Vec<String> = snapshot
+            .devices
+            .iter()
+            .filter(|d| &d.address == configured)
+            .map(|d| format!("unit {} = {}", d.unit_id, d.name))
+            .collect();
+        tracing::info!(address = %actual, "simulator: serving {}", units.join(", "));
+    }
+    tokio::signal::ctrl_c().await?;
+    tracing::info!("simulator: stopping");
+    sim.shutdown().await;
+    Ok(())
+}

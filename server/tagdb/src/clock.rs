@@ -33,6 +33,9 @@ impl Timestamp {
         Timestamp(d.as_millis() as i64)
     }
     /// `self + d`, saturating.
+    // Named like the std method on purpose: `t.add(d)` reads naturally and
+    // needs no trait import. Saturates instead of panicking.
+    #[allow(clippy::should_implement_trait)]
     pub fn add(self, d: Duration) -> Self {
         Timestamp(self.0.saturating_add(d.as_millis() as i64))
     }

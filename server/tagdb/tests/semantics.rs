@@ -3,9 +3,7 @@
 
 use std::sync::Arc;
 
-use gridscada_tagdb::{
-    Quality, QualityCode, Sample, TagDb, TagId, TagMeta, Timestamp, Update, ValueKind,
-};
+use gridscada_tagdb::{Quality, QualityCode, Sample, TagDb, TagId, TagMeta, Timestamp, ValueKind};
 
 fn db(n: usize) -> Arc<TagDb> {
     Arc::new(
