@@ -1,0 +1,227 @@
+//! Historian benchmark: ingest rate through the writer task vs. a plain
+//! batched INSERT into the same engine, and the time of a downsampled trend
+//! query over a day of 1 s data for 10 tags (864,000 rows).
+//!
+//! cargo run --release -p gridscada-store --example bench [-- INGEST_SAMPLES]
+//! PostgreSQL runs too when GRIDSCADA_TEST_PG_URL is set (in a throwaway schema).
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use gridscada_store::{Historian, HistorianConfig, HistorySample, OpenOptions, Store};
+use gridscada_tagdb::{QualityCode, Timestamp};
+use sqlx::{Connection, QueryBuilder};
+
+const DAY_S: i64 = 86_400;
+
+fn samples(prefix: &str, n: usize, tags: usize, t0: i64) -> Vec<HistorySample> {
+    let names: Vec<Arc<str>> = (0..tags)
+        .map(|k| Arc::from(format!("{prefix}.{k}")))
+        .collect();
+    (0..n)
+        .map(|i| HistorySample {
+            tag: names[i % tags].clone(),
+            ts: Timestamp::from_millis(t0 + (i / tags) as i64 * 1000),
+            value: Some((i as f64 * 0.001).sin() * 230.0),
+            quality: QualityCode::Good,
+        })
+        .collect()
+}
+
+enum Raw {
+    Sqlite(sqlx::SqliteConnection),
+    Pg(sqlx::PgConnection),
+}
+
+/// The baseline: multi-row INSERTs of 1,000 rows, 5,000 rows per transaction,
+/// straight into the samples table with known tag ids; no buffering or tag
+/// lookup.
+async fn plain_insert(raw: &mut Raw, n: usize) -> Duration {
+    let rows: Vec<(i64, i64, f64)> = (0..n)
+        .map(|i| {
+            (
+                1_000_000 + (i % 10) as i64,
+                (i / 10) as i64 * 1000,
+                i as f64,
+            )
+        })
+        .collect();
+    let started = Instant::now();
+    macro_rules! go {
+        ($c:expr) => {
+            for tx_rows in rows.chunks(5_000) {
+                let mut tx = $c.begin().await.unwrap();
+                for chunk in tx_rows.chunks(1_000) {
+                    let mut qb =
+                        QueryBuilder::new("INSERT INTO samples (tag_id, ts, value, quality) ");
+                    qb.push_values(chunk, |mut b, r| {
+                        b.push_bind(r.0)
+                            .push_bind(r.1)
+                            .push_bind(r.2)
+                            .push_bind(0i32);
+                    });
+                    qb.build().execute(&mut *tx).await.unwrap();
+                }
+                tx.commit().await.unwrap();
+            }
+        };
+    }
+    match raw {
+        Raw::Sqlite(c) => go!(c),
+        Raw::Pg(c) => go!(c),
+    }
+    started.elapsed()
+}
+
+async fn through_writer(store: &Store, n: usize) -> Duration {
+    let data = samples("bench.w", n, 10, 0);
+    let hist = Historian::spawn(
+        store.clone(),
+        HistorianConfig {
+            capacity: 100_000,
+            ..Default::default()
+        },
+    );
+    let h = hist.handle();
+    let started = Instant::now();
+    for s in data {
+        // Producer faster than any disk: back off instead of overflowing, so
+        // the figure is the writer's throughput, not the drop rate.
+        while h.metrics().buffered >= 99_000 {
+            tokio::time::sleep(Duration::from_millis(1)).await;
+        }
+        h.push(s);
+    }
+    let m = hist.shutdown().await;
+    assert_eq!(m.dropped, 0);
+    assert_eq!(m.samples_written, n as u64);
+    started.elapsed()
+}
+
+struct Row {
+    backend: &'static str,
+    writer: f64,
+    plain: f64,
+    load: f64,
+    trend_ms: Vec<f64>,
+}
+
+async fn run(backend: &'static str, url: &str, options: OpenOptions, raw: Raw, n: usize) -> Row {
+    let store = Store::open(url, &options).await.expect("open");
+    let mut raw = raw;
+    let plain = plain_insert(&mut raw, n).await;
+    let writer = through_writer(&store, n).await;
+    // A day of 1 s data for 10 tags.
+    let day = samples("bench.day", 10 * DAY_S as usize, 10, 1_700_000_000_000);
+    let started = Instant::now();
+    for chunk in day.chunks(20_000) {
+        store.insert_samples(chunk).await.unwrap();
+    }
+    let load = started.elapsed();
+    let tags: Vec<String> = (0..10).map(|k| format!("bench.day.{k}")).collect();
+    let tag_refs: Vec<&str> = tags.iter().map(String::as_str).collect();
+    let mut trend_ms = Vec::new();
+    for _ in 0..5 {
+        let started = Instant::now();
+        let t = store
+            .trend(
+                &tag_refs,
+                Timestamp::from_millis(1_700_000_000_000),
+                Timestamp::from_millis(1_700_000_000_000 + DAY_S * 1000),
+                500,
+            )
+            .await
+            .unwrap();
+        trend_ms.push(started.elapsed().as_secs_f64() * 1000.0);
+        assert_eq!(
+            t.iter()
+                .map(|t| t.buckets.iter().map(|b| b.count).sum::<u64>())
+                .sum::<u64>(),
+            864_000
+        );
+    }
+    trend_ms.sort_by(f64::total_cmp);
+    store.close().await;
+    Row {
+        backend,
+        writer: n as f64 / writer.as_secs_f64(),
+        plain: n as f64 / plain.as_secs_f64(),
+        load: 864_000.0 / load.as_secs_f64(),
+        trend_ms,
+    }
+}
+
+#[tokio::main]
+async fn main() {
+    let n: usize = std::env::args()
+        .nth(1)
+        .and_then(|a| a.parse().ok())
+        .unwrap_or(200_000);
+    let mut rows = Vec::new();
+
+    let dir = tempfile::tempdir().unwrap();
+    let options = OpenOptions::new(dir.path());
+    // Open once so the schema exists before the raw connection is made.
+    Store::open("sqlite://bench.db", &options)
+        .await
+        .unwrap()
+        .close()
+        .await;
+    let mut raw = sqlx::SqliteConnection::connect_with(
+        &sqlx::sqlite::SqliteConnectOptions::new()
+            .filename(dir.path().join("bench.db"))
+            .journal_mode(sqlx::sqlite::SqliteJournalMode::Wal)
+            .synchronous(sqlx::sqlite::SqliteSynchronous::Normal),
+    )
+    .await
+    .unwrap();
+    sqlx::query("SELECT 1").execute(&mut raw).await.unwrap();
+    rows.push(
+        run(
+            "SQLite (WAL, sync=NORMAL)",
+            "sqlite://bench.db",
+            options,
+            Raw::Sqlite(raw),
+            n,
+        )
+        .await,
+    );
+
+    match std::env::var("GRIDSCADA_TEST_PG_URL") {
+        Ok(url) => {
+            let schema = format!("gs_bench_{}", std::process::id());
+            let mut options = OpenOptions::new(dir.path());
+            options.pg_schema = Some(schema.clone());
+            Store::open(&url, &options).await.unwrap().close().await;
+            let mut raw = sqlx::PgConnection::connect(&url).await.unwrap();
+            sqlx::query(&format!("SET search_path TO {schema}"))
+                .execute(&mut raw)
+                .await
+                .unwrap();
+            rows.push(run("PostgreSQL", &url, options, Raw::Pg(raw), n).await);
+            let mut c = sqlx::PgConnection::connect(&url).await.unwrap();
+            sqlx::query(&format!("DROP SCHEMA {schema} CASCADE"))
+                .execute(&mut c)
+                .await
+                .unwrap();
+        }
+        Err(_) => eprintln!("GRIDSCADA_TEST_PG_URL not set: PostgreSQL skipped"),
+    }
+
+    println!("\nhistorian ingest of {n} samples (10 tags), and a 500-point trend of 10 tags x 1 day of 1 s data (864,000 rows)\n");
+    println!(
+        "| backend | writer task samples/s | plain batched INSERT samples/s | day load samples/s | trend 500 pts, 10 tags: min / median ms |"
+    );
+    println!("|---|---:|---:|---:|---:|");
+    for r in rows {
+        println!(
+            "| {} | {:.0} | {:.0} | {:.0} | {:.1} / {:.1} |",
+            r.backend,
+            r.writer,
+            r.plain,
+            r.load,
+            r.trend_ms[0],
+            r.trend_ms[r.trend_ms.len() / 2]
+        );
+    }
+}

@@ -1,0 +1,105 @@
+//! CSV rows of a historian export. Pure formatting, no I/O.
+
+use std::fmt::Write;
+
+use crate::RawSample;
+
+/// Appends one CSV row: `time_utc,ts_ms,tag,value,quality`.
+pub(crate) fn row(out: &mut String, s: &RawSample) {
+    iso_utc(out, s.ts.as_millis());
+    let _ = write!(out, ",{},", s.ts.as_millis());
+    field(out, &s.tag);
+    out.push(',');
+    if let Some(v) = s.value {
+        let _ = write!(out, "{v}");
+    }
+    out.push(',');
+    out.push_str(crate::historian::label(s.quality));
+    out.push('\n');
+}
+
+/// A CSV field, quoted when it holds a separator, quote or line break. A
+/// leading `=`, `+`, `-` or `@` is prefixed with `'` so a spreadsheet does not
+/// run a tag name as a formula.
+fn field(out: &mut String, s: &str) {
+    let formula = s.starts_with(['=', '+', '-', '@']);
+    let quote = formula || s.contains([',', '"', '\n', '\r']);
+    if quote {
+        out.push('"');
+    }
+    if formula {
+        out.push('\'');
+    }
+    for c in s.chars() {
+        if c == '"' {
+            out.push('"');
+        }
+        out.push(c);
+    }
+    if quote {
+        out.push('"');
+    }
+}
+
+/// `YYYY-MM-DDTHH:MM:SS.mmmZ` for milliseconds since the epoch.
+pub(crate) fn iso_utc(out: &mut String, ms: i64) {
+    let secs = ms.div_euclid(1000);
+    let milli = ms.rem_euclid(1000);
+    let days = secs.div_euclid(86_400);
+    let sod = secs.rem_euclid(86_400);
+    // Civil date from days since 1970-01-01 (H. Hinnant's algorithm).
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    let _ = write!(
+        out,
+        "{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}.{milli:03}Z",
+        sod / 3600,
+        sod % 3600 / 60,
+        sod % 60
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use gridscada_tagdb::{QualityCode, Timestamp};
+
+    fn iso(ms: i64) -> String {
+        let mut s = String::new();
+        iso_utc(&mut s, ms);
+        s
+    }
+
+    #[test]
+    fn iso_dates() {
+        assert_eq!(iso(0), "1970-01-01T00:00:00.000Z");
+        assert_eq!(iso(951_782_400_123), "2000-02-29T00:00:00.123Z");
+        assert_eq!(iso(1_735_689_599_999), "2024-12-31T23:59:59.999Z");
+        assert_eq!(iso(-1), "1969-12-31T23:59:59.999Z");
+    }
+
+    #[test]
+    fn fields_are_quoted_and_defused() {
+        let mut s = String::new();
+        row(
+            &mut s,
+            &RawSample {
+                tag: "=cmd,\"x\"".into(),
+                ts: Timestamp::from_millis(1500),
+                value: Some(2.5),
+                quality: QualityCode::Bad,
+            },
+        );
+        assert_eq!(
+            s,
+            "1970-01-01T00:00:01.500Z,1500,\"'=cmd,\"\"x\"\"\",2.5,bad\n"
+        );
+    }
+}

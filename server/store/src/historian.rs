@@ -1,0 +1,521 @@
+//! Historian tables: sample ingest, downsampled trends, raw export, retention.
+//!
+//! **Owns:** the `tags` and `samples` tables. **Must not touch:** the logging
+//! policy (that is [`crate::Recorder`]) or buffering (that is
+//! [`crate::Historian`]); these calls write what they are given, now.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use gridscada_tagdb::{QualityCode, Timestamp};
+use serde::Serialize;
+use sqlx::QueryBuilder;
+use tokio::io::{AsyncWrite, AsyncWriteExt};
+
+use crate::error::db;
+use crate::{Result, Store, StoreError};
+
+/// The most buckets one trend query may ask for (a screen is a few thousand
+/// pixels wide; more would only load the database).
+pub const MAX_TREND_BUCKETS: u32 = 20_000;
+
+/// Rows per multi-row INSERT statement on SQLite (4 parameters each, well
+/// under SQLite's 32,766 parameter limit).
+const SQLITE_ROWS_PER_STATEMENT: usize = 1_000;
+
+/// Rows per page of a raw export.
+const EXPORT_PAGE: i64 = 5_000;
+
+/// One logged sample, as the historian stores it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct HistorySample {
+    pub tag: Arc<str>,
+    pub ts: Timestamp,
+    /// The numeric value (booleans as 0/1); `None` when the reading had no
+    /// finite number. Non-finite numbers are stored as `None`.
+    pub value: Option<f64>,
+    pub quality: QualityCode,
+}
+
+/// A sample read back from the historian.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RawSample {
+    pub tag: String,
+    pub ts: Timestamp,
+    pub value: Option<f64>,
+    pub quality: QualityCode,
+}
+
+/// One bucket of a downsampled trend. Only buckets holding samples are returned.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TrendBucket {
+    /// Bucket index, 0..buckets.
+    pub index: u32,
+    /// The bucket covers `start..end`.
+    pub start: Timestamp,
+    pub end: Timestamp,
+    /// Samples in the bucket (including those without a value).
+    pub count: u64,
+    /// Over the samples that have a value; `None` if none has.
+    pub min: Option<f64>,
+    pub max: Option<f64>,
+    pub avg: Option<f64>,
+    /// The newest sample of the bucket.
+    pub last: Option<f64>,
+    pub last_ts: Timestamp,
+    pub last_quality: QualityCode,
+}
+
+/// The downsampled trend of one tag.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TagTrend {
+    pub tag: String,
+    pub buckets: Vec<TrendBucket>,
+}
+
+/// How long samples are kept.
+#[derive(Debug, Clone, Default)]
+pub struct RetentionPolicy {
+    /// Days for tags without their own setting; `None` keeps them forever.
+    pub default_days: Option<u32>,
+    /// A tag's own retention (from its `history.retention_days`).
+    pub per_tag_days: HashMap<String, u32>,
+}
+
+/// Stored quality code: 0 good, 1 uncertain, 2 bad.
+pub fn quality_to_code(q: QualityCode) -> i32 {
+    match q {
+        QualityCode::Good => 0,
+        QualityCode::Uncertain => 1,
+        QualityCode::Bad => 2,
+    }
+}
+
+/// Reads a stored quality code; unknown codes read as bad (never as good).
+pub fn quality_from_code(c: i32) -> QualityCode {
+    match c {
+        0 => QualityCode::Good,
+        1 => QualityCode::Uncertain,
+        _ => QualityCode::Bad,
+    }
+}
+
+fn quality_label(q: QualityCode) -> &'static str {
+    match q {
+        QualityCode::Good => "good",
+        QualityCode::Uncertain => "uncertain",
+        QualityCode::Bad => "bad",
+    }
+}
+
+fn check_range(from: Timestamp, to: Timestamp) -> Result<()> {
+    if to <= from {
+        return Err(StoreError::Invalid(format!(
+            "time range {}..{} is empty or reversed",
+            from.as_millis(),
+            to.as_millis()
+        )));
+    }
+    Ok(())
+}
+
+/// bucket, count, min, max, avg, last_ts, last value, last quality.
+type BucketRow = (
+    i64,
+    i64,
+    Option<f64>,
+    Option<f64>,
+    Option<f64>,
+    i64,
+    Option<f64>,
+    i32,
+);
+
+struct Row {
+    tag_id: i64,
+    ts: i64,
+    value: Option<f64>,
+    quality: i32,
+}
+
+impl Store {
+    /// Writes samples in one transaction, as multi-row inserts (SQLite) or one
+    /// array insert (PostgreSQL). A second sample for the same tag and
+    /// millisecond replaces the first. Returns the number of rows written.
+    pub async fn insert_samples(&self, samples: &[HistorySample]) -> Result<u64> {
+        if samples.is_empty() {
+            return Ok(0);
+        }
+        let mut names: Vec<&str> = samples.iter().map(|s| &*s.tag).collect();
+        names.sort_unstable();
+        names.dedup();
+        let ids = self.tag_ids(&names, true).await?;
+        let mut rows = Vec::with_capacity(samples.len());
+        for s in samples {
+            let tag_id = *ids.get(&*s.tag).ok_or_else(|| {
+                StoreError::Invalid(format!("historian tag '{}' could not be registered", s.tag))
+            })?;
+            rows.push(Row {
+                tag_id,
+                ts: s.ts.as_millis(),
+                value: s.value.filter(|v| v.is_finite()),
+                quality: quality_to_code(s.quality),
+            });
+        }
+        // Sorted by key for B-tree locality; of duplicates keep the last given
+        // (a stable sort keeps arrival order within equal keys).
+        rows.sort_by_key(|r| (r.tag_id, r.ts));
+        let mut deduped: Vec<Row> = Vec::with_capacity(rows.len());
+        for r in rows {
+            match deduped.last_mut() {
+                Some(l) if l.tag_id == r.tag_id && l.ts == r.ts => *l = r,
+                _ => deduped.push(r),
+            }
+        }
+        let n = deduped.len() as u64;
+        match &self.inner.backend {
+            crate::store::Backend::Sqlite(s) => {
+                let mut tx = s
+                    .writer()
+                    .begin()
+                    .await
+                    .map_err(db("inserting historian samples"))?;
+                for chunk in deduped.chunks(SQLITE_ROWS_PER_STATEMENT) {
+                    let mut qb =
+                        QueryBuilder::new("INSERT INTO samples (tag_id, ts, value, quality) ");
+                    qb.push_values(chunk, |mut b, r| {
+                        b.push_bind(r.tag_id)
+                            .push_bind(r.ts)
+                            .push_bind(r.value)
+                            .push_bind(r.quality);
+                    });
+                    qb.push(
+                        " ON CONFLICT (tag_id, ts) DO UPDATE SET \
+                         value = excluded.value, quality = excluded.quality",
+                    );
+                    qb.build()
+                        .execute(&mut *tx)
+                        .await
+                        .map_err(db("inserting historian samples"))?;
+                }
+                tx.commit()
+                    .await
+                    .map_err(db("inserting historian samples"))?;
+            }
+            crate::store::Backend::Postgres(p) => {
+                let (mut t, mut ts, mut v, mut q) = (
+                    Vec::with_capacity(deduped.len()),
+                    Vec::with_capacity(deduped.len()),
+                    Vec::with_capacity(deduped.len()),
+                    Vec::with_capacity(deduped.len()),
+                );
+                for r in &deduped {
+                    t.push(r.tag_id);
+                    ts.push(r.ts);
+                    v.push(r.value);
+                    q.push(r.quality);
+                }
+                sqlx::query(
+                    "INSERT INTO samples (tag_id, ts, value, quality) \
+                     SELECT * FROM UNNEST($1::bigint[], $2::bigint[], $3::float8[], $4::int4[]) \
+                     ON CONFLICT (tag_id, ts) DO UPDATE SET \
+                     value = EXCLUDED.value, quality = EXCLUDED.quality",
+                )
+                .bind(t)
+                .bind(ts)
+                .bind(v)
+                .bind(q)
+                .execute(p)
+                .await
+                .map_err(db("inserting historian samples"))?;
+            }
+        }
+        Ok(n)
+    }
+
+    /// Downsamples `from..to` into `buckets` equal buckets, for each tag,
+    /// computed by the database: per bucket count, min, max, avg and the last
+    /// sample. Tags never logged come back with no buckets.
+    pub async fn trend(
+        &self,
+        tags: &[&str],
+        from: Timestamp,
+        to: Timestamp,
+        buckets: u32,
+    ) -> Result<Vec<TagTrend>> {
+        check_range(from, to)?;
+        if buckets == 0 || buckets > MAX_TREND_BUCKETS {
+            return Err(StoreError::Invalid(format!(
+                "trend of {buckets} buckets: ask for 1..={MAX_TREND_BUCKETS}"
+            )));
+        }
+        let ids = self.tag_ids(tags, false).await?;
+        let (f, t, n) = (from.as_millis(), to.as_millis(), buckets as i64);
+        // i128: (to - from) * buckets may not fit i64 for absurd ranges. The
+        // SQL does the same product in i64, so refuse what would overflow there.
+        if (t as i128 - f as i128) * n as i128 > i64::MAX as i128 {
+            return Err(StoreError::Invalid("trend time range too long".into()));
+        }
+        // Bucket of a sample = (ts - from) * n / (to - from), integer division
+        // on both engines. The newest sample per bucket is found by joining
+        // back on the primary key (tag_id, ts), which makes it unique.
+        const SQL: &str = "WITH b AS ( \
+               SELECT (ts - $2) * $4 / ($3 - $2) AS bucket, count(*) AS n, \
+                      min(value) AS mn, max(value) AS mx, avg(value) AS av, max(ts) AS last_ts \
+               FROM samples WHERE tag_id = $1 AND ts >= $2 AND ts < $3 \
+               GROUP BY (ts - $2) * $4 / ($3 - $2)) \
+             SELECT b.bucket, b.n, b.mn, b.mx, b.av, b.last_ts, s.value, s.quality \
+             FROM b JOIN samples s ON s.tag_id = $1 AND s.ts = b.last_ts \
+             ORDER BY b.bucket";
+        let mut out = Vec::with_capacity(tags.len());
+        for &tag in tags {
+            let Some(&id) = ids.get(tag) else {
+                out.push(TagTrend {
+                    tag: tag.to_string(),
+                    buckets: Vec::new(),
+                });
+                continue;
+            };
+            let raw: Vec<BucketRow> = on_backend!(self, reader, |p| {
+                sqlx::query_as(SQL)
+                    .bind(id)
+                    .bind(f)
+                    .bind(t)
+                    .bind(n)
+                    .fetch_all(p)
+                    .await
+                    .map_err(db("querying a historian trend"))?
+            });
+            let span = (t - f) as i128;
+            let edge =
+                |i: i64| Timestamp::from_millis((f as i128 + span * i as i128 / n as i128) as i64);
+            let buckets = raw
+                .into_iter()
+                .map(|(b, cnt, mn, mx, av, last_ts, last, q)| TrendBucket {
+                    index: b as u32,
+                    start: edge(b),
+                    end: edge(b + 1),
+                    count: cnt.max(0) as u64,
+                    min: mn,
+                    max: mx,
+                    avg: av,
+                    last,
+                    last_ts: Timestamp::from_millis(last_ts),
+                    last_quality: quality_from_code(q),
+                })
+                .collect();
+            out.push(TagTrend {
+                tag: tag.to_string(),
+                buckets,
+            });
+        }
+        Ok(out)
+    }
+
+    /// Raw samples of `tags` in `from..to`, oldest first, at most `limit` rows.
+    pub async fn raw_samples(
+        &self,
+        tags: &[&str],
+        from: Timestamp,
+        to: Timestamp,
+        limit: u32,
+    ) -> Result<Vec<RawSample>> {
+        check_range(from, to)?;
+        let ids = self.tag_ids(tags, false).await?;
+        let by_id: HashMap<i64, &str> = ids.iter().map(|(k, &v)| (v, &**k)).collect();
+        let mut out = Vec::new();
+        let mut cursor = (f_start(from), i64::MIN);
+        while out.len() < limit as usize {
+            let want = (limit as usize - out.len()).min(EXPORT_PAGE as usize) as i64;
+            let page = self.page(&by_id, cursor, to, want).await?;
+            let done = (page.len() as i64) < want;
+            if let Some(l) = page.last() {
+                cursor = (l.1.ts.as_millis(), l.0);
+            }
+            out.extend(page.into_iter().map(|(_, s)| s));
+            if done {
+                break;
+            }
+        }
+        Ok(out)
+    }
+
+    /// Writes the raw samples of `tags` in `from..to` as CSV to `out`, oldest
+    /// first, in pages (constant memory, any length). Columns:
+    /// `time_utc,ts_ms,tag,value,quality`. Returns the number of data rows.
+    pub async fn export_csv<W: AsyncWrite + Unpin>(
+        &self,
+        tags: &[&str],
+        from: Timestamp,
+        to: Timestamp,
+        out: &mut W,
+    ) -> Result<u64> {
+        check_range(from, to)?;
+        let io = |source| StoreError::Io {
+            what: "a historian CSV export",
+            source,
+        };
+        out.write_all(b"time_utc,ts_ms,tag,value,quality\n")
+            .await
+            .map_err(io)?;
+        let ids = self.tag_ids(tags, false).await?;
+        let by_id: HashMap<i64, &str> = ids.iter().map(|(k, &v)| (v, &**k)).collect();
+        let mut cursor = (f_start(from), i64::MIN);
+        let mut rows = 0u64;
+        loop {
+            let page = self.page(&by_id, cursor, to, EXPORT_PAGE).await?;
+            let mut text = String::with_capacity(page.len() * 64);
+            for (_, s) in &page {
+                crate::csv::row(&mut text, s);
+            }
+            out.write_all(text.as_bytes()).await.map_err(io)?;
+            rows += page.len() as u64;
+            if (page.len() as i64) < EXPORT_PAGE {
+                break;
+            }
+            if let Some(l) = page.last() {
+                cursor = (l.1.ts.as_millis(), l.0);
+            }
+        }
+        out.flush().await.map_err(io)?;
+        Ok(rows)
+    }
+
+    /// One page of raw samples after `(ts, tag_id)` (keyset pagination: no
+    /// OFFSET, so a long export stays linear).
+    async fn page(
+        &self,
+        by_id: &HashMap<i64, &str>,
+        after: (i64, i64),
+        to: Timestamp,
+        limit: i64,
+    ) -> Result<Vec<(i64, RawSample)>> {
+        if by_id.is_empty() {
+            return Ok(Vec::new());
+        }
+        let rows: Vec<(i64, i64, Option<f64>, i32)> = on_backend!(self, reader, |p| {
+            let mut qb = QueryBuilder::new(
+                "SELECT tag_id, ts, value, quality FROM samples WHERE tag_id IN (",
+            );
+            let mut sep = qb.separated(", ");
+            for id in by_id.keys() {
+                sep.push_bind(*id);
+            }
+            qb.push(") AND ts < ")
+                .push_bind(to.as_millis())
+                .push(" AND (ts > ")
+                .push_bind(after.0)
+                .push(" OR (ts = ")
+                .push_bind(after.0)
+                .push(" AND tag_id > ")
+                .push_bind(after.1)
+                .push(")) ORDER BY ts, tag_id LIMIT ")
+                .push_bind(limit);
+            qb.build_query_as()
+                .fetch_all(p)
+                .await
+                .map_err(db("reading raw historian samples"))?
+        });
+        Ok(rows
+            .into_iter()
+            .map(|(id, ts, value, q)| {
+                (
+                    id,
+                    RawSample {
+                        tag: by_id.get(&id).copied().unwrap_or_default().to_string(),
+                        ts: Timestamp::from_millis(ts),
+                        value,
+                        quality: quality_from_code(q),
+                    },
+                )
+            })
+            .collect())
+    }
+
+    /// Deletes samples older than `before`: of one tag, or of all tags.
+    /// Returns the number of rows deleted.
+    pub async fn delete_samples_before(&self, tag: Option<&str>, before: Timestamp) -> Result<u64> {
+        let ids: Vec<i64> = match tag {
+            Some(t) => self.tag_ids(&[t], false).await?.into_values().collect(),
+            None => self.all_tag_ids().await?,
+        };
+        let mut deleted = 0;
+        // Per tag, so each delete is a range scan of the primary key (no extra
+        // index on ts to slow ingest down), and each transaction stays short
+        // so the writer is not held for minutes.
+        for id in ids {
+            deleted += on_backend!(self, writer, |p| {
+                sqlx::query("DELETE FROM samples WHERE tag_id = $1 AND ts < $2")
+                    .bind(id)
+                    .bind(before.as_millis())
+                    .execute(p)
+                    .await
+                    .map_err(db("deleting old historian samples"))?
+                    .rows_affected()
+            });
+        }
+        Ok(deleted)
+    }
+
+    /// Applies a retention policy at `now`. Returns the number of rows deleted.
+    pub async fn apply_retention(&self, policy: &RetentionPolicy, now: Timestamp) -> Result<u64> {
+        const DAY_MS: i64 = 86_400_000;
+        let all: Vec<(i64, String)> = on_backend!(self, reader, |p| {
+            sqlx::query_as("SELECT id, name FROM tags")
+                .fetch_all(p)
+                .await
+                .map_err(db("listing historian tags"))?
+        });
+        let mut deleted = 0;
+        for (id, name) in all {
+            let days = policy
+                .per_tag_days
+                .get(&name)
+                .copied()
+                .or(policy.default_days);
+            let Some(days) = days else { continue };
+            let cutoff = now.as_millis().saturating_sub(days as i64 * DAY_MS);
+            deleted += on_backend!(self, writer, |p| {
+                sqlx::query("DELETE FROM samples WHERE tag_id = $1 AND ts < $2")
+                    .bind(id)
+                    .bind(cutoff)
+                    .execute(p)
+                    .await
+                    .map_err(db("applying historian retention"))?
+                    .rows_affected()
+            });
+        }
+        if deleted > 0 {
+            tracing::info!(deleted, "historian retention applied");
+        }
+        Ok(deleted)
+    }
+
+    async fn all_tag_ids(&self) -> Result<Vec<i64>> {
+        Ok(on_backend!(self, reader, |p| {
+            sqlx::query_scalar("SELECT id FROM tags")
+                .fetch_all(p)
+                .await
+                .map_err(db("listing historian tags"))?
+        }))
+    }
+
+    /// Names of every tag the historian has logged.
+    pub async fn historian_tags(&self) -> Result<Vec<String>> {
+        Ok(on_backend!(self, reader, |p| {
+            sqlx::query_scalar("SELECT name FROM tags ORDER BY name")
+                .fetch_all(p)
+                .await
+                .map_err(db("listing historian tags"))?
+        }))
+    }
+}
+
+/// The keyset cursor that starts at `from` inclusive.
+fn f_start(from: Timestamp) -> i64 {
+    from.as_millis().saturating_sub(1)
+}
+
+pub(crate) fn label(q: QualityCode) -> &'static str {
+    quality_label(q)
+}

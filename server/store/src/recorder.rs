@@ -1,0 +1,328 @@
+//! The historian's logging policy: which samples are worth writing. Pure, no
+//! I/O: the app feeds it tag changes and a periodic tick, and hands what it
+//! returns to the [`crate::Historian`] writer.
+//!
+//! A tag's sample is logged when
+//! - it is the first seen for the tag;
+//! - its quality class changes (good / uncertain / bad);
+//! - its value moved more than the tag's deadband from the last *logged* value
+//!   (absolute; a deadband of 0 logs every change);
+//! - and, from [`Recorder::tick`], when nothing was logged for the tag's max
+//!   interval: the last seen value is logged again, stamped with the tick time,
+//!   so a flat trend still has points and "no data" means "no data".
+//!
+//! String tags have no numeric value and are not logged.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::time::Duration;
+
+use gridscada_config::HistoryConfig;
+use gridscada_tagdb::{QualityCode, Sample, TagId, Timestamp, Value};
+
+use crate::HistorySample;
+
+/// The logging settings of one tag.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordPolicy {
+    pub enabled: bool,
+    /// Absolute change from the last logged value that is worth a row.
+    pub deadband: f64,
+    /// Log at least this often; `None` = only on change.
+    pub max_interval: Option<Duration>,
+}
+
+impl Default for RecordPolicy {
+    fn default() -> Self {
+        RecordPolicy::from_config(&HistoryConfig::default())
+    }
+}
+
+impl RecordPolicy {
+    /// From a tag's `history` settings. Nonsense values (negative or NaN
+    /// deadband, non-positive interval) fall back to "log every change" and
+    /// "no periodic re-log" rather than failing.
+    pub fn from_config(c: &HistoryConfig) -> Self {
+        let deadband = *c.deadband.get_ref();
+        let interval = *c.max_interval_s.get_ref();
+        RecordPolicy {
+            enabled: c.enabled,
+            deadband: if deadband.is_finite() && deadband > 0.0 {
+                deadband
+            } else {
+                0.0
+            },
+            max_interval: (interval.is_finite() && interval > 0.0)
+                .then(|| Duration::from_secs_f64(interval.min(1.0e9))),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Seen {
+    value: Option<f64>,
+    quality: QualityCode,
+    ts: Timestamp,
+}
+
+#[derive(Debug)]
+struct TagState {
+    name: Arc<str>,
+    policy: RecordPolicy,
+    last_logged: Option<Seen>,
+    last_seen: Option<Seen>,
+}
+
+/// Per-tag logging policy and the memory it needs (last logged, last seen).
+#[derive(Debug, Default)]
+pub struct Recorder {
+    tags: HashMap<TagId, TagState>,
+}
+
+/// Whether `a` and `b` differ by more than `deadband`; NaN/None count as a
+/// value of their own (a change to or from them is always logged).
+fn moved(a: Option<f64>, b: Option<f64>, deadband: f64) -> bool {
+    match (a.filter(|v| v.is_finite()), b.filter(|v| v.is_finite())) {
+        (Some(x), Some(y)) => {
+            if deadband == 0.0 {
+                x != y
+            } else {
+                (x - y).abs() > deadband
+            }
+        }
+        (None, None) => false,
+        _ => true,
+    }
+}
+
+impl Recorder {
+    pub fn new() -> Self {
+        Recorder::default()
+    }
+
+    /// Registers a tag (or replaces its policy, keeping what was logged).
+    pub fn set_policy(&mut self, id: TagId, name: impl Into<Arc<str>>, policy: RecordPolicy) {
+        let name = name.into();
+        self.tags
+            .entry(id)
+            .and_modify(|t| {
+                t.policy = policy.clone();
+                t.name = name.clone();
+            })
+            .or_insert(TagState {
+                name,
+                policy,
+                last_logged: None,
+                last_seen: None,
+            });
+    }
+
+    /// Tags registered.
+    pub fn len(&self) -> usize {
+        self.tags.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.tags.is_empty()
+    }
+
+    /// Offers a new sample of a tag; returns the row to log, if any. Unknown
+    /// tags, disabled tags, string values and samples older than the last
+    /// logged one are not logged.
+    pub fn offer(&mut self, id: TagId, sample: &Sample) -> Option<HistorySample> {
+        let t = self.tags.get_mut(&id)?;
+        if !t.policy.enabled || matches!(sample.value, Value::Str(_)) {
+            return None;
+        }
+        let now = Seen {
+            value: sample.value.as_f64().filter(|v| v.is_finite()),
+            quality: sample.quality.code,
+            ts: sample.timestamp,
+        };
+        if let Some(l) = t.last_logged {
+            if now.ts < l.ts {
+                return None;
+            }
+        }
+        t.last_seen = Some(now);
+        let log = match t.last_logged {
+            None => true,
+            Some(l) => l.quality != now.quality || moved(l.value, now.value, t.policy.deadband),
+        };
+        if !log {
+            return None;
+        }
+        t.last_logged = Some(now);
+        Some(HistorySample {
+            tag: t.name.clone(),
+            ts: now.ts,
+            value: now.value,
+            quality: now.quality,
+        })
+    }
+
+    /// The periodic re-logs due at `now`: for each tag whose last logged row is
+    /// at least its max interval old, the last seen value stamped `now`.
+    pub fn tick(&mut self, now: Timestamp) -> Vec<HistorySample> {
+        let mut out = Vec::new();
+        for t in self.tags.values_mut() {
+            let (Some(interval), true) = (t.policy.max_interval, t.policy.enabled) else {
+                continue;
+            };
+            let (Some(logged), Some(seen)) = (t.last_logged, t.last_seen) else {
+                continue;
+            };
+            if now.since(logged.ts) < interval {
+                continue;
+            }
+            let row = Seen { ts: now, ..seen };
+            t.last_logged = Some(row);
+            t.last_seen = Some(row);
+            out.push(HistorySample {
+                tag: t.name.clone(),
+                ts: now,
+                value: row.value,
+                quality: row.quality,
+            });
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use gridscada_tagdb::Quality;
+
+    fn at(ms: i64, v: f64) -> Sample {
+        Sample::good(v, Timestamp::from_millis(ms))
+    }
+
+    fn rec(deadband: f64, interval_s: Option<u64>) -> Recorder {
+        let mut r = Recorder::new();
+        r.set_policy(
+            TagId(0),
+            "SS1.Zone1.V",
+            RecordPolicy {
+                enabled: true,
+                deadband,
+                max_interval: interval_s.map(Duration::from_secs),
+            },
+        );
+        r
+    }
+
+    #[test]
+    fn deadband_is_measured_from_the_last_logged_value() {
+        let mut r = rec(1.0, None);
+        let id = TagId(0);
+        assert!(r.offer(id, &at(0, 230.0)).is_some());
+        // Creeping by 0.6 twice: neither step alone passes, the sum does.
+        assert!(r.offer(id, &at(1, 230.6)).is_none());
+        let logged = r
+            .offer(id, &at(2, 231.2))
+            .expect("1.2 from the last logged");
+        assert_eq!(logged.value, Some(231.2));
+        // Exactly the deadband is not "more than" it.
+        assert!(r.offer(id, &at(3, 232.2)).is_none());
+        assert!(r.offer(id, &at(4, 229.0)).is_some());
+    }
+
+    #[test]
+    fn zero_deadband_logs_every_change_and_only_changes() {
+        let mut r = rec(0.0, None);
+        let id = TagId(0);
+        assert!(r.offer(id, &at(0, 1.0)).is_some());
+        assert!(r.offer(id, &at(1, 1.0)).is_none());
+        assert!(r.offer(id, &at(2, 1.0000001)).is_some());
+    }
+
+    #[test]
+    fn quality_change_is_logged_even_inside_the_deadband() {
+        let mut r = rec(10.0, None);
+        let id = TagId(0);
+        r.offer(id, &at(0, 5.0));
+        let bad = Sample {
+            value: Value::Float(5.0),
+            quality: Quality::bad("device offline"),
+            timestamp: Timestamp::from_millis(1),
+        };
+        let row = r.offer(id, &bad).expect("quality change");
+        assert_eq!(row.quality, QualityCode::Bad);
+        // Another reason, same class: no new row.
+        let bad2 = Sample {
+            quality: Quality::bad("timeout"),
+            timestamp: Timestamp::from_millis(2),
+            ..bad
+        };
+        assert!(r.offer(id, &bad2).is_none());
+        assert!(r.offer(id, &at(3, 5.0)).is_some());
+    }
+
+    #[test]
+    fn tick_relogs_the_last_seen_value_when_due() {
+        let mut r = rec(5.0, Some(60));
+        let id = TagId(0);
+        r.offer(id, &at(0, 100.0));
+        r.offer(id, &at(10_000, 102.0)); // inside deadband: seen, not logged
+        assert!(r.tick(Timestamp::from_millis(59_999)).is_empty());
+        let due = r.tick(Timestamp::from_millis(60_000));
+        assert_eq!(due.len(), 1);
+        assert_eq!(due[0].value, Some(102.0));
+        assert_eq!(due[0].ts, Timestamp::from_millis(60_000));
+        // The re-log restarts the interval and becomes the deadband reference.
+        assert!(r.tick(Timestamp::from_millis(100_000)).is_empty());
+        assert!(r.offer(id, &at(100_001, 106.0)).is_none());
+        assert!(r.offer(id, &at(100_002, 107.5)).is_some());
+    }
+
+    #[test]
+    fn disabled_unknown_string_and_stale_samples_are_skipped() {
+        let mut r = rec(0.0, Some(1));
+        let id = TagId(0);
+        assert!(r.offer(TagId(9), &at(0, 1.0)).is_none());
+        assert!(r
+            .offer(id, &Sample::good("text", Timestamp::from_millis(0)))
+            .is_none());
+        assert!(r.offer(id, &at(100, 1.0)).is_some());
+        assert!(
+            r.offer(id, &at(50, 2.0)).is_none(),
+            "older than last logged"
+        );
+        r.set_policy(
+            id,
+            "SS1.Zone1.V",
+            RecordPolicy {
+                enabled: false,
+                ..RecordPolicy::default()
+            },
+        );
+        assert!(r.offer(id, &at(200, 3.0)).is_none());
+        assert!(r.tick(Timestamp::from_millis(10_000)).is_empty());
+    }
+
+    #[test]
+    fn bools_log_as_numbers_and_nan_is_a_value_of_its_own() {
+        let mut r = rec(0.5, None);
+        let id = TagId(0);
+        let b = |ms, v: bool| Sample::good(v, Timestamp::from_millis(ms));
+        assert_eq!(r.offer(id, &b(0, true)).unwrap().value, Some(1.0));
+        assert_eq!(r.offer(id, &b(1, false)).unwrap().value, Some(0.0));
+        assert_eq!(r.offer(id, &at(2, f64::NAN)).unwrap().value, None);
+        assert!(r.offer(id, &at(3, f64::NAN)).is_none());
+        assert!(r.offer(id, &at(4, 0.0)).is_some());
+    }
+
+    #[test]
+    fn policy_from_config_sanitises() {
+        let mut c = HistoryConfig::default();
+        let p = RecordPolicy::from_config(&c);
+        assert_eq!(p.max_interval, Some(Duration::from_secs(900)));
+        assert_eq!(p.deadband, 0.0);
+        c.deadband = serde_spanned::Spanned::new(0..0, -3.0);
+        c.max_interval_s = serde_spanned::Spanned::new(0..0, 0.0);
+        let p = RecordPolicy::from_config(&c);
+        assert_eq!(p.deadband, 0.0);
+        assert_eq!(p.max_interval, None);
+    }
+}

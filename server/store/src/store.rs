@@ -1,0 +1,487 @@
+//! Opening the database: the storage URL, the two backends, migrations, and the
+//! historian's tag-name cache.
+//!
+//! **Owns:** connection pools and their settings (WAL, synchronous, busy
+//! timeout, search_path). **Must not touch:** table contents; queries live in the
+//! module of each table family.
+
+use std::borrow::Cow;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+use std::sync::Arc;
+use std::time::Duration;
+
+use parking_lot::Mutex;
+use sqlx::migrate::{Migration, MigrationType, Migrator};
+use sqlx::postgres::{PgConnectOptions, PgPool, PgPoolOptions};
+use sqlx::sqlite::{
+    SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous,
+};
+
+use crate::error::db;
+use crate::{Result, StoreError};
+
+/// Which engine a [`Store`] runs on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BackendKind {
+    Sqlite,
+    Postgres,
+}
+
+/// SQLite's `synchronous` setting (WAL mode). See the crate docs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SqliteSync {
+    /// Durable across process crashes; the last commits may be lost on power
+    /// loss (never corrupted). The default.
+    #[default]
+    Normal,
+    /// Every commit is fsynced: durable across power loss, slower commits.
+    Full,
+}
+
+/// How to open a store.
+#[derive(Debug, Clone)]
+pub struct OpenOptions {
+    /// Folder that relative `sqlite://` paths are resolved in.
+    pub data_dir: PathBuf,
+    /// SQLite durability; ignored for PostgreSQL.
+    pub sqlite_sync: SqliteSync,
+    /// Connections of the SQLite read pool, or of the PostgreSQL pool.
+    pub max_connections: u32,
+    /// PostgreSQL only: work in this schema (created if missing) instead of
+    /// `public`, e.g. several sites in one database, or one schema per test.
+    /// Lowercase letters, digits and `_` only.
+    pub pg_schema: Option<String>,
+    /// How long to wait for a connection or a lock before failing a call.
+    pub acquire_timeout: Duration,
+}
+
+impl OpenOptions {
+    pub fn new(data_dir: impl Into<PathBuf>) -> Self {
+        OpenOptions {
+            data_dir: data_dir.into(),
+            sqlite_sync: SqliteSync::Normal,
+            max_connections: 4,
+            pg_schema: None,
+            acquire_timeout: Duration::from_secs(30),
+        }
+    }
+}
+
+/// The SQLite backend: one writer connection (SQLite allows one writer at a
+/// time; queuing on our side beats `SQLITE_BUSY` retries) and a read pool that
+/// WAL lets run beside it.
+pub(crate) struct SqliteBackend {
+    write: SqlitePool,
+    read: SqlitePool,
+}
+
+impl SqliteBackend {
+    pub(crate) fn writer(&self) -> &SqlitePool {
+        &self.write
+    }
+    pub(crate) fn reader(&self) -> &SqlitePool {
+        &self.read
+    }
+}
+
+pub(crate) enum Backend {
+    Sqlite(SqliteBackend),
+    Postgres(PgPool),
+}
+
+pub(crate) struct Inner {
+    pub(crate) backend: Backend,
+    /// Historian tag name -> id. Ids never change once given, so the cache
+    /// never goes stale, even with several servers on one PostgreSQL database.
+    pub(crate) tag_ids: Mutex<HashMap<Arc<str>, i64>>,
+    description: String,
+}
+
+/// The database. Cheap to clone (shared pools).
+#[derive(Clone)]
+pub struct Store {
+    pub(crate) inner: Arc<Inner>,
+}
+
+impl std::fmt::Debug for Store {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Store({})", self.inner.description)
+    }
+}
+
+const SQLITE_MIGRATIONS: &[(i64, &str, &str)] = &[(
+    1,
+    "initial",
+    include_str!("../migrations/sqlite/0001_initial.sql"),
+)];
+const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[(
+    1,
+    "initial",
+    include_str!("../migrations/postgres/0001_initial.sql"),
+)];
+
+fn migrator(list: &[(i64, &'static str, &'static str)]) -> Migrator {
+    let migrations = list
+        .iter()
+        .map(|&(version, description, sql)| {
+            Migration::new(
+                version,
+                Cow::Borrowed(description),
+                MigrationType::Simple,
+                Cow::Borrowed(sql),
+                false,
+            )
+        })
+        .collect::<Vec<_>>();
+    Migrator {
+        migrations: Cow::Owned(migrations),
+        ..Migrator::DEFAULT
+    }
+}
+
+fn open_err(what: impl Into<String>) -> impl FnOnce(sqlx::Error) -> StoreError {
+    let what = what.into();
+    move |e| StoreError::Open {
+        what,
+        source: Box::new(e),
+    }
+}
+
+/// Where a `sqlite://` URL points, relative paths inside `data_dir`.
+fn sqlite_path(url: &str, rest: &str, data_dir: &Path) -> Result<PathBuf> {
+    // Drop URL query parameters: options are ours to set.
+    let path = rest.split('?').next().unwrap_or_default();
+    if path.is_empty() || path == ":memory:" || path.starts_with(":memory:") {
+        return Err(StoreError::Url {
+            url: url.into(),
+            reason: "needs a file path (an in-memory database would lose everything on restart)"
+                .into(),
+        });
+    }
+    let p = Path::new(path);
+    Ok(if p.is_absolute() {
+        p.to_path_buf()
+    } else {
+        data_dir.join(p)
+    })
+}
+
+fn valid_schema(s: &str) -> bool {
+    !s.is_empty()
+        && s.len() <= 63
+        && s.bytes()
+            .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'_')
+        && !s.as_bytes()[0].is_ascii_digit()
+}
+
+/// Hides the password of a URL for logs and errors.
+fn redact(url: &str) -> String {
+    match (url.find("://"), url.rfind('@')) {
+        (Some(s), Some(at)) if at > s => {
+            let cred = &url[s + 3..at];
+            match cred.find(':') {
+                Some(c) => format!("{}{}:***{}", &url[..s + 3], &cred[..c], &url[at..]),
+                None => url.into(),
+            }
+        }
+        _ => url.into(),
+    }
+}
+
+impl Store {
+    /// Opens (creating if needed) the database named by `url` and applies the
+    /// migrations of its backend:
+    /// - `sqlite://PATH`: a file, relative paths inside `options.data_dir`
+    ///   (created if missing);
+    /// - `postgres://user:pass@host:port/db` (or `postgresql://`).
+    pub async fn open(url: &str, options: &OpenOptions) -> Result<Store> {
+        let shown = redact(url);
+        if let Some(rest) = url.strip_prefix("sqlite://") {
+            let path = sqlite_path(&shown, rest, &options.data_dir)?;
+            Self::open_sqlite(&path, options).await
+        } else if url.starts_with("postgres://") || url.starts_with("postgresql://") {
+            Self::open_postgres(url, &shown, options).await
+        } else {
+            Err(StoreError::Url {
+                url: shown,
+                reason: "expected sqlite://PATH or postgres://...".into(),
+            })
+        }
+    }
+
+    async fn open_sqlite(path: &Path, options: &OpenOptions) -> Result<Store> {
+        let shown = path.display().to_string();
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).map_err(|e| StoreError::Open {
+                what: format!("data folder {}", dir.display()),
+                source: Box::new(e),
+            })?;
+        }
+        let sync = match options.sqlite_sync {
+            SqliteSync::Normal => SqliteSynchronous::Normal,
+            SqliteSync::Full => SqliteSynchronous::Full,
+        };
+        let base = SqliteConnectOptions::new()
+            .filename(path)
+            .journal_mode(SqliteJournalMode::Wal)
+            .synchronous(sync)
+            .busy_timeout(options.acquire_timeout)
+            .foreign_keys(true);
+        let write = SqlitePoolOptions::new()
+            .max_connections(1)
+            .min_connections(1)
+            .acquire_timeout(options.acquire_timeout)
+            .connect_with(base.clone().create_if_missing(true))
+            .await
+            .map_err(open_err(format!("SQLite database {shown}")))?;
+        migrator(SQLITE_MIGRATIONS)
+            .run(&write)
+            .await
+            .map_err(|e| StoreError::Open {
+                what: format!("migrations of SQLite database {shown}"),
+                source: Box::new(e),
+            })?;
+        let read = SqlitePoolOptions::new()
+            .max_connections(options.max_connections.max(1))
+            .acquire_timeout(options.acquire_timeout)
+            .connect_with(base.read_only(true))
+            .await
+            .map_err(open_err(format!("SQLite database {shown} (readers)")))?;
+        tracing::info!(path = %shown, sync = ?options.sqlite_sync, "opened SQLite store");
+        Ok(Store {
+            inner: Arc::new(Inner {
+                backend: Backend::Sqlite(SqliteBackend { write, read }),
+                tag_ids: Mutex::new(HashMap::new()),
+                description: format!("sqlite {shown}"),
+            }),
+        })
+    }
+
+    async fn open_postgres(url: &str, shown: &str, options: &OpenOptions) -> Result<Store> {
+        let mut connect = PgConnectOptions::from_str(url).map_err(|e| StoreError::Url {
+            url: shown.into(),
+            reason: e.to_string(),
+        })?;
+        if let Some(schema) = &options.pg_schema {
+            if !valid_schema(schema) {
+                return Err(StoreError::Invalid(format!(
+                    "PostgreSQL schema name '{schema}': use lowercase letters, digits and _"
+                )));
+            }
+            // Create it over a plain connection first: search_path must name an
+            // existing schema for the migrations to land in it.
+            let pool = PgPoolOptions::new()
+                .max_connections(1)
+                .acquire_timeout(options.acquire_timeout)
+                .connect_with(connect.clone())
+                .await
+                .map_err(open_err(format!("PostgreSQL database {shown}")))?;
+            sqlx::query(&format!("CREATE SCHEMA IF NOT EXISTS {schema}"))
+                .execute(&pool)
+                .await
+                .map_err(open_err(format!("schema {schema} in {shown}")))?;
+            pool.close().await;
+            connect = connect.options([("search_path", schema.as_str())]);
+        }
+        let pool = PgPoolOptions::new()
+            .max_connections(options.max_connections.max(2))
+            .acquire_timeout(options.acquire_timeout)
+            .connect_with(connect)
+            .await
+            .map_err(open_err(format!("PostgreSQL database {shown}")))?;
+        // The migrator takes an advisory lock, so several servers starting at
+        // once on one database do not race.
+        migrator(POSTGRES_MIGRATIONS)
+            .run(&pool)
+            .await
+            .map_err(|e| StoreError::Open {
+                what: format!("migrations of PostgreSQL database {shown}"),
+                source: Box::new(e),
+            })?;
+        tracing::info!(url = %shown, schema = ?options.pg_schema, "opened PostgreSQL store");
+        Ok(Store {
+            inner: Arc::new(Inner {
+                backend: Backend::Postgres(pool),
+                tag_ids: Mutex::new(HashMap::new()),
+                description: format!(
+                    "postgres {shown}{}",
+                    options
+                        .pg_schema
+                        .as_deref()
+                        .map(|s| format!(" schema {s}"))
+                        .unwrap_or_default()
+                ),
+            }),
+        })
+    }
+
+    pub fn backend(&self) -> BackendKind {
+        match self.inner.backend {
+            Backend::Sqlite(_) => BackendKind::Sqlite,
+            Backend::Postgres(_) => BackendKind::Postgres,
+        }
+    }
+
+    /// Applies any migrations not yet applied (idempotent; `open` already did).
+    pub async fn migrate(&self) -> Result<()> {
+        let res = match &self.inner.backend {
+            Backend::Sqlite(s) => migrator(SQLITE_MIGRATIONS).run(s.writer()).await,
+            Backend::Postgres(p) => migrator(POSTGRES_MIGRATIONS).run(p).await,
+        };
+        res.map_err(|e| StoreError::Open {
+            what: format!("migrations of {}", self.inner.description),
+            source: Box::new(e),
+        })
+    }
+
+    /// Checks the database answers (for a health endpoint).
+    pub async fn ping(&self) -> Result<()> {
+        on_backend!(self, reader, |p| {
+            sqlx::query("SELECT 1")
+                .execute(p)
+                .await
+                .map_err(db("pinging the database"))?;
+        });
+        Ok(())
+    }
+
+    /// Closes the pools, waiting for queries in flight. In SQLite this also
+    /// checkpoints the WAL into the main file.
+    pub async fn close(&self) {
+        match &self.inner.backend {
+            Backend::Sqlite(s) => {
+                s.read.close().await;
+                s.write.close().await;
+            }
+            Backend::Postgres(p) => p.close().await,
+        }
+    }
+
+    /// The ids of historian tags, creating the missing ones when `create`.
+    /// Tags not found (and not created) are absent from the map.
+    pub(crate) async fn tag_ids(
+        &self,
+        names: &[&str],
+        create: bool,
+    ) -> Result<HashMap<Arc<str>, i64>> {
+        let mut found = HashMap::with_capacity(names.len());
+        let mut missing: Vec<&str> = Vec::new();
+        {
+            let cache = self.inner.tag_ids.lock();
+            for &n in names {
+                match cache.get_key_value(n) {
+                    Some((k, &id)) => {
+                        found.insert(k.clone(), id);
+                    }
+                    None => {
+                        if !missing.contains(&n) {
+                            missing.push(n)
+                        }
+                    }
+                }
+            }
+        }
+        if missing.is_empty() {
+            return Ok(found);
+        }
+        for n in &missing {
+            validate_tag_name(n)?;
+        }
+        let resolved: Vec<(String, i64)> = if create {
+            on_backend!(self, writer, |p| {
+                let mut tx = p.begin().await.map_err(db("registering historian tags"))?;
+                let mut out = Vec::with_capacity(missing.len());
+                for n in &missing {
+                    sqlx::query(
+                        "INSERT INTO tags (name) VALUES ($1) ON CONFLICT (name) DO NOTHING",
+                    )
+                    .bind(*n)
+                    .execute(&mut *tx)
+                    .await
+                    .map_err(db("registering historian tags"))?;
+                    let id: i64 = sqlx::query_scalar("SELECT id FROM tags WHERE name = $1")
+                        .bind(*n)
+                        .fetch_one(&mut *tx)
+                        .await
+                        .map_err(db("registering historian tags"))?;
+                    out.push((n.to_string(), id));
+                }
+                tx.commit()
+                    .await
+                    .map_err(db("registering historian tags"))?;
+                out
+            })
+        } else {
+            on_backend!(self, reader, |p| {
+                let mut out = Vec::new();
+                for n in &missing {
+                    let id: Option<i64> = sqlx::query_scalar("SELECT id FROM tags WHERE name = $1")
+                        .bind(*n)
+                        .fetch_optional(p)
+                        .await
+                        .map_err(db("looking up historian tags"))?;
+                    if let Some(id) = id {
+                        out.push((n.to_string(), id));
+                    }
+                }
+                out
+            })
+        };
+        let mut cache = self.inner.tag_ids.lock();
+        for (n, id) in resolved {
+            let k: Arc<str> = n.into();
+            cache.insert(k.clone(), id);
+            found.insert(k, id);
+        }
+        Ok(found)
+    }
+}
+
+pub(crate) fn validate_tag_name(n: &str) -> Result<()> {
+    if n.is_empty() || n.len() > 256 || n.chars().any(char::is_control) {
+        return Err(StoreError::Invalid(format!(
+            "historian tag name '{}' must be 1..256 printable characters",
+            n.escape_debug()
+        )));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sqlite_paths_resolve_in_the_data_dir() {
+        let d = Path::new("/var/lib/gs");
+        assert_eq!(
+            sqlite_path("u", "gridscada.db", d).unwrap(),
+            PathBuf::from("/var/lib/gs/gridscada.db")
+        );
+        assert_eq!(
+            sqlite_path("u", "/abs/x.db?mode=rwc", d).unwrap(),
+            PathBuf::from("/abs/x.db")
+        );
+        assert!(sqlite_path("u", ":memory:", d).is_err());
+        assert!(sqlite_path("u", "", d).is_err());
+    }
+
+    #[test]
+    fn passwords_are_hidden() {
+        assert_eq!(
+            redact("postgres://scada:secret@db:5432/gs"),
+            "postgres://scada:***@db:5432/gs"
+        );
+        assert_eq!(redact("postgres://db/gs"), "postgres://db/gs");
+    }
+
+    #[test]
+    fn schema_names_are_checked() {
+        assert!(valid_schema("site_1"));
+        assert!(!valid_schema("Site"));
+        assert!(!valid_schema("a;drop"));
+        assert!(!valid_schema("1a"));
+    }
+}

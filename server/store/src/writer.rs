@@ -1,0 +1,327 @@
+//! The historian writer task: a bounded buffer in front of the database.
+//!
+//! Producers [`HistorianHandle::push`] without waiting. One task drains the
+//! buffer in batches into [`Store::insert_samples`]. When the database is slow
+//! the buffer absorbs it; when the buffer is full, new samples are dropped,
+//! counted, and the overflow flag goes up (for a system alarm) until the buffer
+//! is back under half full. A batch that fails to write is retried with
+//! backoff, never discarded, except at shutdown, where it is counted as dropped.
+//!
+//! **Owns:** buffering, batching, retry and the historian metrics. **Must not
+//! touch:** which samples to log (that is [`crate::Recorder`]).
+//!
+//! Waiting here (linger, retry backoff) is wall time on purpose: it paces I/O
+//! with the database, not plant behaviour, so a compressed replay clock must
+//! not speed it up.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+use tokio::sync::{mpsc, watch};
+use tokio::task::JoinHandle;
+
+use crate::{HistorySample, Store};
+
+/// Sizes and pacing of the writer.
+#[derive(Debug, Clone)]
+pub struct HistorianConfig {
+    /// Samples the buffer holds before dropping.
+    pub capacity: usize,
+    /// Most samples per database transaction.
+    pub batch_max: usize,
+    /// After the first sample of a batch arrives, wait this long for more
+    /// (fewer, bigger transactions at low rates).
+    pub linger: Duration,
+    /// Longest wait between retries of a failed batch.
+    pub max_backoff: Duration,
+}
+
+impl Default for HistorianConfig {
+    fn default() -> Self {
+        HistorianConfig {
+            capacity: 100_000,
+            batch_max: 5_000,
+            linger: Duration::from_millis(200),
+            max_backoff: Duration::from_secs(5),
+        }
+    }
+}
+
+/// A snapshot of the writer's health.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct HistorianMetrics {
+    /// Samples waiting in the buffer (not counting a batch being written).
+    pub buffered: usize,
+    pub capacity: usize,
+    /// Samples dropped because the buffer was full (or the writer stopped).
+    pub dropped: u64,
+    pub samples_written: u64,
+    pub batches_written: u64,
+    /// Failed write attempts (each retried).
+    pub write_errors: u64,
+    pub last_write_ms: f64,
+    pub max_write_ms: f64,
+    /// Whether the buffer overflowed and has not drained below half since.
+    pub overflow: bool,
+}
+
+#[derive(Default)]
+struct Counters {
+    dropped: AtomicU64,
+    written: AtomicU64,
+    batches: AtomicU64,
+    errors: AtomicU64,
+    last_us: AtomicU64,
+    max_us: AtomicU64,
+}
+
+struct Shared {
+    counters: Counters,
+    overflow: watch::Sender<bool>,
+    capacity: usize,
+}
+
+/// Pushes samples into the historian buffer. Cheap to clone.
+#[derive(Clone)]
+pub struct HistorianHandle {
+    tx: mpsc::Sender<HistorySample>,
+    shared: Arc<Shared>,
+}
+
+/// The writer task. Dropping it stops the writer like [`Historian::shutdown`]
+/// (final flush of the buffer) but without waiting for it; prefer shutdown.
+pub struct Historian {
+    handle: HistorianHandle,
+    stop: watch::Sender<bool>,
+    pause: watch::Sender<bool>,
+    task: JoinHandle<()>,
+}
+
+impl HistorianHandle {
+    /// Queues a sample without waiting. Returns false if it was dropped
+    /// (buffer full or writer stopped); the drop is counted either way.
+    pub fn push(&self, sample: HistorySample) -> bool {
+        match self.tx.try_send(sample) {
+            Ok(()) => true,
+            Err(e) => {
+                let dropped = self.shared.counters.dropped.fetch_add(1, Ordering::Relaxed) + 1;
+                let raised = self
+                    .shared
+                    .overflow
+                    .send_if_modified(|o| !std::mem::replace(o, true));
+                if raised {
+                    let why = match e {
+                        mpsc::error::TrySendError::Full(_) => "buffer full",
+                        mpsc::error::TrySendError::Closed(_) => "writer stopped",
+                    };
+                    tracing::error!(
+                        dropped,
+                        why,
+                        "historian overflow: samples are being dropped"
+                    );
+                }
+                false
+            }
+        }
+    }
+
+    /// Queues many samples; returns how many were accepted.
+    pub fn push_all(&self, samples: impl IntoIterator<Item = HistorySample>) -> usize {
+        samples.into_iter().filter(|s| self.push(s.clone())).count()
+    }
+
+    pub fn metrics(&self) -> HistorianMetrics {
+        let c = &self.shared.counters;
+        HistorianMetrics {
+            buffered: self.tx.max_capacity() - self.tx.capacity(),
+            capacity: self.shared.capacity,
+            dropped: c.dropped.load(Ordering::Relaxed),
+            samples_written: c.written.load(Ordering::Relaxed),
+            batches_written: c.batches.load(Ordering::Relaxed),
+            write_errors: c.errors.load(Ordering::Relaxed),
+            last_write_ms: c.last_us.load(Ordering::Relaxed) as f64 / 1000.0,
+            max_write_ms: c.max_us.load(Ordering::Relaxed) as f64 / 1000.0,
+            overflow: *self.shared.overflow.borrow(),
+        }
+    }
+
+    /// Follows the overflow flag: true while samples are being (or were
+    /// recently) dropped. Raise a system alarm on it.
+    pub fn overflow(&self) -> watch::Receiver<bool> {
+        self.shared.overflow.subscribe()
+    }
+}
+
+impl Historian {
+    /// Starts the writer task on the current tokio runtime.
+    pub fn spawn(store: Store, config: HistorianConfig) -> Historian {
+        let capacity = config.capacity.max(1);
+        let (tx, rx) = mpsc::channel(capacity);
+        let shared = Arc::new(Shared {
+            counters: Counters::default(),
+            overflow: watch::channel(false).0,
+            capacity,
+        });
+        let (stop, stop_rx) = watch::channel(false);
+        let (pause, pause_rx) = watch::channel(false);
+        let task = tokio::spawn(run(store, config, rx, shared.clone(), stop_rx, pause_rx));
+        Historian {
+            handle: HistorianHandle { tx, shared },
+            stop,
+            pause,
+            task,
+        }
+    }
+
+    pub fn handle(&self) -> HistorianHandle {
+        self.handle.clone()
+    }
+
+    pub fn metrics(&self) -> HistorianMetrics {
+        self.handle.metrics()
+    }
+
+    /// Holds writes (e.g. during a backup or maintenance): samples collect in
+    /// the buffer, and overflow as usual if it fills.
+    pub fn pause(&self, paused: bool) {
+        self.pause.send_replace(paused);
+    }
+
+    /// Writes everything buffered (one attempt per remaining batch), then
+    /// stops. Returns the final metrics.
+    pub async fn shutdown(self) -> HistorianMetrics {
+        self.stop.send_replace(true);
+        if let Err(e) = self.task.await {
+            tracing::error!(error = %e, "historian writer task failed");
+        }
+        self.handle.metrics()
+    }
+}
+
+async fn run(
+    store: Store,
+    config: HistorianConfig,
+    mut rx: mpsc::Receiver<HistorySample>,
+    shared: Arc<Shared>,
+    mut stop: watch::Receiver<bool>,
+    mut pause: watch::Receiver<bool>,
+) {
+    let batch_max = config.batch_max.max(1);
+    let mut batch: Vec<HistorySample> = Vec::with_capacity(batch_max);
+    loop {
+        // Paused: leave samples in the buffer until resumed or stopped.
+        while *pause.borrow() && !stopping(&stop) {
+            tokio::select! {
+                r = pause.changed() => if r.is_err() { break },
+                _ = stop.changed() => {}
+            }
+        }
+        if stopping(&stop) || pause.has_changed().is_err() {
+            break;
+        }
+        if batch.is_empty() {
+            // Biased: a pause or stop that is already signalled wins over
+            // samples waiting, so a pause takes effect before the next batch.
+            tokio::select! {
+                biased;
+                _ = stop.changed() => continue,
+                _ = pause.changed() => continue,
+                n = rx.recv_many(&mut batch, batch_max) => {
+                    if n == 0 { break; } // every handle dropped
+                }
+            }
+            if batch.len() < batch_max && !config.linger.is_zero() {
+                tokio::select! {
+                    _ = tokio::time::sleep(config.linger) => {}
+                    _ = stop.changed() => {}
+                }
+                while batch.len() < batch_max {
+                    match rx.try_recv() {
+                        Ok(s) => batch.push(s),
+                        Err(_) => break,
+                    }
+                }
+            }
+        }
+        if write_with_retry(&store, &config, &batch, &shared, &mut stop).await {
+            batch.clear();
+        } else {
+            break; // stopping; the batch is handled below
+        }
+        // Clear the overflow flag once the buffer is back under half full.
+        let buffered = rx.max_capacity() - rx.capacity();
+        if buffered <= shared.capacity / 2 {
+            shared
+                .overflow
+                .send_if_modified(|o| std::mem::replace(o, false));
+        }
+    }
+    // Shutdown: one attempt at everything still here.
+    rx.close();
+    while let Ok(s) = rx.try_recv() {
+        batch.push(s);
+    }
+    for chunk in batch.chunks(batch_max) {
+        if let Err(e) = write_once(&store, chunk, &shared).await {
+            let n = chunk.len() as u64;
+            shared.counters.dropped.fetch_add(n, Ordering::Relaxed);
+            tracing::error!(error = %e, lost = n, "historian could not write at shutdown");
+        }
+    }
+}
+
+/// Told to stop, or the [`Historian`] owning the stop signal was dropped.
+fn stopping(stop: &watch::Receiver<bool>) -> bool {
+    *stop.borrow() || stop.has_changed().is_err()
+}
+
+async fn write_once(store: &Store, batch: &[HistorySample], shared: &Shared) -> crate::Result<()> {
+    let started = Instant::now();
+    let res = store.insert_samples(batch).await;
+    let us = started.elapsed().as_micros().min(u64::MAX as u128) as u64;
+    let c = &shared.counters;
+    match res {
+        Ok(_) => {
+            c.written.fetch_add(batch.len() as u64, Ordering::Relaxed);
+            c.batches.fetch_add(1, Ordering::Relaxed);
+            c.last_us.store(us, Ordering::Relaxed);
+            c.max_us.fetch_max(us, Ordering::Relaxed);
+            Ok(())
+        }
+        Err(e) => {
+            c.errors.fetch_add(1, Ordering::Relaxed);
+            Err(e)
+        }
+    }
+}
+
+/// Writes a batch, retrying with backoff until it is written (true) or the
+/// writer is told to stop (false, batch not written).
+async fn write_with_retry(
+    store: &Store,
+    config: &HistorianConfig,
+    batch: &[HistorySample],
+    shared: &Shared,
+    stop: &mut watch::Receiver<bool>,
+) -> bool {
+    let mut backoff = Duration::from_millis(100);
+    loop {
+        match write_once(store, batch, shared).await {
+            Ok(()) => return true,
+            Err(e) => {
+                tracing::warn!(error = %e, samples = batch.len(), retry_in = ?backoff,
+                    "historian write failed; keeping the batch and retrying");
+            }
+        }
+        if stopping(stop) {
+            return false;
+        }
+        tokio::select! {
+            _ = tokio::time::sleep(backoff) => {}
+            _ = stop.changed() => return false,
+        }
+        backoff = (backoff * 2).min(config.max_backoff.max(Duration::from_millis(100)));
+    }
+}
