@@ -1,1 +1,549 @@
-//! placeholder
+//! # gridscada-modbus: field I/O
+//!
+//! **Owns:** polling the plant's Modbus TCP and RTU devices into the tag
+//! database, the devices' communication status tags, and writes to the field
+//! (confirmed by read-back) through [`gridscada_tagdb::TagWriter`].
+//!
+//! **Must not touch:** configuration parsing (it takes a checked [`Plant`]),
+//! alarms, history, control logic. Everything it learns goes into the
+//! [`TagDb`] in batches.
+//!
+//! Layout: [`decode`] (wire ⇄ engineering values) and [`plan`] (block
+//! planning) are pure; `frame` holds the byte framing (pure); `transport`
+//! one TCP connection or serial port; `link` the task that owns a transport
+//! and every device (unit id) behind it.
+//!
+//! Devices are grouped by transport: all devices with the same TCP address
+//! (a gateway and its unit ids) share one connection and one task; all devices
+//! on one serial port share one task. A unit that stops answering is backed
+//! off and probed so it cannot stall the others.
+
+pub mod decode;
+mod frame;
+mod link;
+pub mod plan;
+mod transport;
+
+use std::collections::HashMap;
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+use std::time::Duration;
+
+use gridscada_config::{DeviceConfig, Plant, Protocol};
+use gridscada_tagdb::{
+    Clock, TagDb, TagMeta, TagWriter, Value, ValueKind, WriteError, WriteFuture,
+};
+use parking_lot::Mutex;
+use tokio::sync::{mpsc, oneshot, watch};
+use tokio::task::JoinHandle;
+
+pub use frame::exception_text;
+pub use transport::inter_frame_silence;
+
+use link::{ClassRt, Counters, DeviceRt, Link, LinkCounters, LinkTag, StatusIds, WriteCmd};
+use transport::{RtuLine, TcpLine, Transport};
+
+/// Names of a device's communication status tags.
+pub fn status_tag_names(device: &str) -> [(String, ValueKind, &'static str, &'static str); 7] {
+    [
+        (
+            format!("{device}.Comm.Connected"),
+            ValueKind::Bool,
+            "",
+            "Device answers its requests",
+        ),
+        (
+            format!("{device}.Comm.LastError"),
+            ValueKind::Str,
+            "",
+            "Last communication error",
+        ),
+        (
+            format!("{device}.Comm.ResponseMs"),
+            ValueKind::Float,
+            "ms",
+            "Response time of the last answered request",
+        ),
+        (
+            format!("{device}.Comm.Requests"),
+            ValueKind::Int,
+            "",
+            "Requests sent",
+        ),
+        (
+            format!("{device}.Comm.Errors"),
+            ValueKind::Int,
+            "",
+            "Requests without a good answer (timeouts, exceptions, bad replies)",
+        ),
+        (
+            format!("{device}.Comm.Timeouts"),
+            ValueKind::Int,
+            "",
+            "Requests that timed out",
+        ),
+        (
+            format!("{device}.Comm.Overruns"),
+            ValueKind::Int,
+            "",
+            "Scan periods missed because the previous scan ran over",
+        ),
+    ]
+}
+
+/// The communication status tags of every device, for the app to register
+/// before it builds the [`TagDb`].
+pub fn device_status_tags(plant: &Plant) -> Vec<TagMeta> {
+    plant
+        .devices
+        .iter()
+        .flat_map(|d| {
+            status_tag_names(d.name.get_ref())
+                .into_iter()
+                .map(|(name, kind, units, desc)| {
+                    TagMeta::new(name, kind)
+                        .units(units)
+                        .describe(format!("{}: {desc}", d.name.get_ref()))
+                })
+        })
+        .collect()
+}
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum Error {
+    #[error("tag '{0}' is in the configuration but not in the tag database")]
+    MissingTag(String),
+    #[error("device '{device}': {reason}")]
+    Device { device: String, reason: String },
+    #[error("device '{device}': block planning failed: {reason}")]
+    Plan { device: String, reason: String },
+}
+
+/// Request and scan counters of one device.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct DeviceStats {
+    pub device: String,
+    /// The connection or port the device is on.
+    pub link: String,
+    pub connected: bool,
+    pub requests: u64,
+    /// Requests without a good answer (timeouts and exceptions included).
+    pub errors: u64,
+    pub timeouts: u64,
+    pub exceptions: u64,
+    pub writes: u64,
+    pub scans: u64,
+    /// Scans that started more than 10 % of their period after they were due.
+    pub late_scans: u64,
+    /// Scan periods skipped because a scan ran over.
+    pub overruns: u64,
+    /// Round trip of the last answered request, wall time.
+    pub last_response_ms: f64,
+}
+
+/// Counters of one connection or serial port.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LinkStats {
+    pub link: String,
+    pub connects: u64,
+    pub disconnects: u64,
+    /// Replies discarded because their request had already timed out.
+    pub late_replies: u64,
+    /// RTU bytes skipped as noise.
+    pub garbage_bytes: u64,
+    pub last_error: String,
+}
+
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PollStats {
+    pub devices: Vec<DeviceStats>,
+    pub links: Vec<LinkStats>,
+}
+
+impl PollStats {
+    /// Sums over every device.
+    pub fn total(&self) -> DeviceStats {
+        let mut t = DeviceStats {
+            device: "total".into(),
+            ..Default::default()
+        };
+        for d in &self.devices {
+            t.requests += d.requests;
+            t.errors += d.errors;
+            t.timeouts += d.timeouts;
+            t.exceptions += d.exceptions;
+            t.writes += d.writes;
+            t.scans += d.scans;
+            t.late_scans += d.late_scans;
+            t.overruns += d.overruns;
+        }
+        t.connected = self.devices.iter().all(|d| d.connected);
+        t
+    }
+
+    pub fn device(&self, name: &str) -> Option<&DeviceStats> {
+        self.devices.iter().find(|d| d.device == name)
+    }
+}
+
+struct WriteTarget {
+    link: usize,
+    tag: usize,
+    codec: decode::Codec,
+    writable: bool,
+}
+
+struct Shared {
+    links: Vec<mpsc::Sender<WriteCmd>>,
+    targets: HashMap<Arc<str>, WriteTarget>,
+}
+
+struct StatsSource {
+    device: String,
+    link: String,
+    counters: Arc<Counters>,
+}
+
+struct LinkStatsSource {
+    link: String,
+    counters: Arc<LinkCounters>,
+    last_error: Arc<Mutex<String>>,
+}
+
+/// The running field I/O: one task per connection or serial port.
+pub struct FieldIo {
+    shared: Arc<Shared>,
+    stats: Vec<StatsSource>,
+    link_stats: Vec<LinkStatsSource>,
+    shutdown: watch::Sender<bool>,
+    tasks: Vec<JoinHandle<()>>,
+}
+
+/// The key that groups devices onto one task.
+fn transport_key(d: &DeviceConfig) -> Result<String, Error> {
+    let err = |reason: &str| Error::Device {
+        device: d.name.get_ref().clone(),
+        reason: reason.into(),
+    };
+    match d.protocol {
+        Protocol::Tcp => d
+            .address
+            .as_ref()
+            .map(|a| format!("tcp://{}", a.get_ref()))
+            .ok_or_else(|| err("a tcp device needs an address")),
+        Protocol::Rtu => d
+            .serial
+            .as_ref()
+            .map(|s| format!("rtu://{}", s.port.get_ref()))
+            .ok_or_else(|| err("an rtu device needs a serial port")),
+    }
+}
+
+impl FieldIo {
+    /// Plans every device's blocks and starts one task per connection or
+    /// serial port. Must be called inside a Tokio runtime. The plant's tags
+    /// and [`device_status_tags`] must already be in `db`.
+    pub fn start(plant: &Plant, db: Arc<TagDb>, clock: Arc<dyn Clock>) -> Result<FieldIo, Error> {
+        let (shutdown, shutdown_rx) = watch::channel(false);
+        // Group devices by transport, keeping configuration order.
+        let mut keys: Vec<String> = Vec::new();
+        let mut groups: HashMap<String, Vec<&DeviceConfig>> = HashMap::new();
+        for d in &plant.devices {
+            let key = transport_key(d)?;
+            if !groups.contains_key(&key) {
+                keys.push(key.clone());
+            }
+            groups.entry(key).or_default().push(d);
+        }
+        let mut device_link: HashMap<&str, (usize, usize)> = HashMap::new();
+        for (li, key) in keys.iter().enumerate() {
+            for (di, d) in groups[key].iter().enumerate() {
+                device_link.insert(d.name.get_ref().as_str(), (li, di));
+            }
+        }
+        // Tags per link.
+        let mut link_tags: Vec<Vec<LinkTag>> = keys.iter().map(|_| Vec::new()).collect();
+        let mut points: Vec<Vec<Vec<plan::Point>>> = keys
+            .iter()
+            .map(|k| groups[k].iter().map(|_| Vec::new()).collect())
+            .collect();
+        let mut targets = HashMap::new();
+        for t in &plant.tags {
+            let name = t.name.get_ref();
+            let Some(&(li, di)) = device_link.get(t.device.get_ref().as_str()) else {
+                return Err(Error::Device {
+                    device: t.device.get_ref().clone(),
+                    reason: format!("unknown device of tag '{name}'"),
+                });
+            };
+            let id = db.id(name).ok_or_else(|| Error::MissingTag(name.clone()))?;
+            let device = groups[&keys[li]][di];
+            let codec = decode::Codec::from_tag(t);
+            let address = u16::try_from(*t.address.get_ref()).map_err(|_| Error::Device {
+                device: device.name.get_ref().clone(),
+                reason: format!(
+                    "tag '{name}': address {} is past 65535",
+                    t.address.get_ref()
+                ),
+            })?;
+            let index = link_tags[li].len();
+            points[li][di].push(plan::Point {
+                tag: index,
+                table: codec.table,
+                address,
+                width: codec.width,
+                scan_ms: t.scan_ms(device).max(10),
+            });
+            let arc: Arc<str> = Arc::from(name.as_str());
+            targets.insert(
+                arc.clone(),
+                WriteTarget {
+                    link: li,
+                    tag: index,
+                    codec: codec.clone(),
+                    writable: *t.writable.get_ref() && codec.table.is_writable(),
+                },
+            );
+            link_tags[li].push(LinkTag {
+                name: arc,
+                id,
+                device: di,
+                address,
+                codec,
+            });
+        }
+        let now = clock.now();
+        let mut senders = Vec::new();
+        let mut stats = Vec::new();
+        let mut link_stats = Vec::new();
+        let mut links = Vec::new();
+        for (li, key) in keys.iter().enumerate() {
+            let devs = &groups[key];
+            let mut devices = Vec::new();
+            for (di, d) in devs.iter().enumerate() {
+                let dname = d.name.get_ref().clone();
+                let limits = plan::Limits {
+                    max_registers: *d.max_read_registers.get_ref(),
+                    max_bits: *d.max_read_bits.get_ref(),
+                    max_gap: d.max_gap,
+                };
+                let classes =
+                    plan::plan_device(&points[li][di], limits).map_err(|e| Error::Plan {
+                        device: dname.clone(),
+                        reason: e.to_string(),
+                    })?;
+                let status_id = |n: &str| db.id(n).ok_or_else(|| Error::MissingTag(n.to_string()));
+                let names = status_tag_names(&dname);
+                let status = StatusIds {
+                    connected: status_id(&names[0].0)?,
+                    last_error: status_id(&names[1].0)?,
+                    response_ms: status_id(&names[2].0)?,
+                    requests: status_id(&names[3].0)?,
+                    errors: status_id(&names[4].0)?,
+                    timeouts: status_id(&names[5].0)?,
+                    overruns: status_id(&names[6].0)?,
+                };
+                let counters = Arc::new(Counters::default());
+                stats.push(StatsSource {
+                    device: dname.clone(),
+                    link: key.clone(),
+                    counters: Arc::clone(&counters),
+                });
+                devices.push(DeviceRt {
+                    name: dname,
+                    unit: *d.unit_id.get_ref(),
+                    timeout: Duration::from_millis((*d.timeout_ms.get_ref()).max(1)),
+                    retries: d.retries,
+                    max_write_registers: *d.max_write_registers.get_ref(),
+                    classes: classes
+                        .into_iter()
+                        .map(|c| ClassRt {
+                            period: Duration::from_millis(c.period_ms),
+                            tags: c.blocks.iter().flat_map(|b| b.tags.clone()).collect(),
+                            blocks: c.blocks,
+                            next_due: now,
+                            last_answer: now,
+                            stale: false,
+                        })
+                        .collect(),
+                    status,
+                    counters,
+                    answering: false,
+                    failures: 0,
+                    failing: false,
+                    probe_wait: Duration::ZERO,
+                    next_probe: now,
+                    last_error: String::new(),
+                    response_ms: 0.0,
+                });
+            }
+            let first = devs[0];
+            let transport = match first.protocol {
+                Protocol::Tcp => Transport::Tcp(TcpLine::new(
+                    first
+                        .address
+                        .as_ref()
+                        .map(|a| a.get_ref().clone())
+                        .unwrap_or_default(),
+                )),
+                Protocol::Rtu => {
+                    let serial = first.serial.clone().ok_or_else(|| Error::Device {
+                        device: first.name.get_ref().clone(),
+                        reason: "an rtu device needs a serial port".into(),
+                    })?;
+                    // Devices on one port must agree on the line settings.
+                    for d in devs.iter().skip(1) {
+                        let s = d.serial.as_ref();
+                        let same = s.is_some_and(|s| {
+                            s.baud == serial.baud
+                                && s.parity == serial.parity
+                                && s.data_bits.get_ref() == serial.data_bits.get_ref()
+                                && s.stop_bits.get_ref() == serial.stop_bits.get_ref()
+                        });
+                        if !same {
+                            return Err(Error::Device {
+                                device: d.name.get_ref().clone(),
+                                reason: format!(
+                                    "serial settings differ from device '{}' on the same port {}",
+                                    first.name.get_ref(),
+                                    serial.port.get_ref()
+                                ),
+                            });
+                        }
+                    }
+                    Transport::Rtu(RtuLine::new(serial))
+                }
+            };
+            let (tx, rx) = mpsc::channel(64);
+            senders.push(tx);
+            let lc = Arc::new(LinkCounters::default());
+            let last_error = Arc::new(Mutex::new(String::new()));
+            link_stats.push(LinkStatsSource {
+                link: key.clone(),
+                counters: Arc::clone(&lc),
+                last_error: Arc::clone(&last_error),
+            });
+            links.push(Link {
+                name: key.clone(),
+                transport,
+                devices,
+                tags: std::mem::take(&mut link_tags[li]),
+                db: Arc::clone(&db),
+                clock: Arc::clone(&clock),
+                writes: rx,
+                counters: lc,
+                reconnect_wait: Duration::from_millis(250),
+                next_connect: now,
+                silent_timeouts: 0,
+                last_link_error: last_error,
+            });
+        }
+        let tasks = links
+            .into_iter()
+            .map(|l| tokio::spawn(l.run(shutdown_rx.clone())))
+            .collect();
+        Ok(FieldIo {
+            shared: Arc::new(Shared {
+                links: senders,
+                targets,
+            }),
+            stats,
+            link_stats,
+            shutdown,
+            tasks,
+        })
+    }
+
+    /// The command path into the field, for control loops and the web API.
+    pub fn writer(&self) -> Arc<dyn TagWriter> {
+        Arc::new(FieldWriter {
+            shared: Arc::clone(&self.shared),
+        })
+    }
+
+    /// Counters of every device and link, for `/metrics` and benchmarks.
+    pub fn stats(&self) -> PollStats {
+        let get = |a: &std::sync::atomic::AtomicU64| a.load(Ordering::Relaxed);
+        PollStats {
+            devices: self
+                .stats
+                .iter()
+                .map(|s| {
+                    let c = &s.counters;
+                    DeviceStats {
+                        device: s.device.clone(),
+                        link: s.link.clone(),
+                        connected: c.connected.load(Ordering::Relaxed),
+                        requests: get(&c.requests),
+                        errors: get(&c.errors),
+                        timeouts: get(&c.timeouts),
+                        exceptions: get(&c.exceptions),
+                        writes: get(&c.writes),
+                        scans: get(&c.scans),
+                        late_scans: get(&c.late_scans),
+                        overruns: get(&c.overruns),
+                        last_response_ms: get(&c.response_us) as f64 / 1000.0,
+                    }
+                })
+                .collect(),
+            links: self
+                .link_stats
+                .iter()
+                .map(|s| LinkStats {
+                    link: s.link.clone(),
+                    connects: get(&s.counters.connects),
+                    disconnects: get(&s.counters.disconnects),
+                    late_replies: get(&s.counters.late_replies),
+                    garbage_bytes: get(&s.counters.garbage_bytes),
+                    last_error: s.last_error.lock().clone(),
+                })
+                .collect(),
+        }
+    }
+
+    /// Stops every task and waits for them. Writes still in flight answer
+    /// [`WriteError::Closed`].
+    pub async fn shutdown(self) {
+        let _ = self.shutdown.send(true);
+        for t in self.tasks {
+            let _ = t.await;
+        }
+    }
+}
+
+struct FieldWriter {
+    shared: Arc<Shared>,
+}
+
+impl TagWriter for FieldWriter {
+    fn write<'a>(&'a self, name: &'a str, value: Value) -> WriteFuture<'a> {
+        Box::pin(async move {
+            let target = self
+                .shared
+                .targets
+                .get(name)
+                .ok_or_else(|| WriteError::UnknownTag(name.to_string()))?;
+            if !target.writable {
+                return Err(WriteError::ReadOnly(name.to_string()));
+            }
+            let encoded =
+                decode::encode(&target.codec, &value).map_err(|reason| WriteError::BadValue {
+                    tag: name.to_string(),
+                    value: value.to_string(),
+                    reason,
+                })?;
+            let (reply, rx) = oneshot::channel();
+            let cmd = WriteCmd {
+                tag: target.tag,
+                value,
+                encoded,
+                reply,
+            };
+            self.shared.links[target.link]
+                .send(cmd)
+                .await
+                .map_err(|_| WriteError::Closed)?;
+            rx.await.map_err(|_| WriteError::Closed)?
+        })
+    }
+}

@@ -1,0 +1,423 @@
+//! The two transports: a Modbus TCP connection and a Modbus RTU serial line.
+//!
+//! **Owns:** one socket or serial port, its receive buffer, transaction ids,
+//! the RTU inter-frame silence and draining the line after trouble. One
+//! request at a time, always with a deadline.
+//!
+//! **Must not touch:** tags, scheduling, device health (the link task's).
+//!
+//! A reply that is late (after its request timed out) is never taken as the
+//! answer to a later request: on TCP it carries an old transaction id and is
+//! dropped; on RTU the line is drained until quiet before the next request and
+//! the reply is searched for by slave id, function code, length and CRC.
+
+use std::time::Duration;
+
+use gridscada_config::{Parity, SerialConfig};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpStream;
+use tokio::time::{timeout_at, Instant};
+use tokio_modbus::Request;
+use tokio_serial::SerialPortBuilderExt;
+
+use crate::frame::{self, Answer, Mbap};
+
+/// Why a transaction got no usable answer.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum LinkError {
+    /// No answer within the request's timeout.
+    Timeout,
+    /// Not connected (or the port is not open).
+    NotConnected(String),
+    /// The connection or port failed; it has been closed.
+    Io(String),
+    /// Bytes that are not Modbus; on TCP the connection has been closed.
+    Garbage(String),
+    /// A well-framed answer that does not answer the request.
+    Protocol(String),
+}
+
+impl std::fmt::Display for LinkError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LinkError::Timeout => f.write_str("no answer (timeout)"),
+            LinkError::NotConnected(s) => write!(f, "not connected: {s}"),
+            LinkError::Io(s) => write!(f, "connection failed: {s}"),
+            LinkError::Garbage(s) => write!(f, "garbled reply: {s}"),
+            LinkError::Protocol(s) => write!(f, "bad reply: {s}"),
+        }
+    }
+}
+
+/// Counters a transport keeps about its line.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct LineCounters {
+    /// Replies discarded because they answered an earlier, timed-out request.
+    pub late_replies: u64,
+    /// Bytes skipped on an RTU line while looking for a reply.
+    pub garbage_bytes: u64,
+}
+
+pub enum Transport {
+    Tcp(TcpLine),
+    Rtu(RtuLine),
+}
+
+impl Transport {
+    pub fn is_connected(&self) -> bool {
+        match self {
+            Transport::Tcp(t) => t.stream.is_some(),
+            Transport::Rtu(r) => r.stream.is_some(),
+        }
+    }
+
+    pub fn counters(&self) -> LineCounters {
+        match self {
+            Transport::Tcp(t) => t.counters,
+            Transport::Rtu(r) => r.counters,
+        }
+    }
+
+    /// Opens the connection or port. `timeout` is wall time.
+    pub async fn connect(&mut self, timeout: Duration) -> Result<(), String> {
+        match self {
+            Transport::Tcp(t) => t.connect(timeout).await,
+            Transport::Rtu(r) => r.open(),
+        }
+    }
+
+    pub fn disconnect(&mut self) {
+        match self {
+            Transport::Tcp(t) => {
+                t.stream = None;
+                t.buf.clear();
+            }
+            Transport::Rtu(r) => r.stream = None,
+        }
+    }
+
+    /// One request and its answer. `timeout` is wall time.
+    pub async fn transact(
+        &mut self,
+        unit: u8,
+        req: &Request<'_>,
+        timeout: Duration,
+    ) -> Result<Answer, LinkError> {
+        match self {
+            Transport::Tcp(t) => t.transact(unit, req, timeout).await,
+            Transport::Rtu(r) => r.transact(unit, req, timeout).await,
+        }
+    }
+}
+
+/// A Modbus TCP connection, possibly to a gateway serving several unit ids.
+pub struct TcpLine {
+    address: String,
+    stream: Option<TcpStream>,
+    buf: Vec<u8>,
+    transaction: u16,
+    counters: LineCounters,
+}
+
+impl TcpLine {
+    pub fn new(address: String) -> Self {
+        TcpLine {
+            address,
+            stream: None,
+            buf: Vec::with_capacity(512),
+            transaction: 0,
+            counters: LineCounters::default(),
+        }
+    }
+
+    async fn connect(&mut self, timeout: Duration) -> Result<(), String> {
+        self.stream = None;
+        self.buf.clear();
+        let stream = tokio::time::timeout(timeout, TcpStream::connect(&self.address))
+            .await
+            .map_err(|_| format!("connecting to {} timed out", self.address))?
+            .map_err(|e| format!("cannot connect to {}: {e}", self.address))?;
+        // Requests are small and answered one at a time: send at once.
+        let _ = stream.set_nodelay(true);
+        self.stream = Some(stream);
+        Ok(())
+    }
+
+    fn fail(&mut self, e: LinkError) -> LinkError {
+        self.stream = None;
+        self.buf.clear();
+        e
+    }
+
+    async fn transact(
+        &mut self,
+        unit: u8,
+        req: &Request<'_>,
+        timeout: Duration,
+    ) -> Result<Answer, LinkError> {
+        let pdu = frame::encode_request(req).map_err(LinkError::Protocol)?;
+        let deadline = Instant::now() + timeout;
+        self.transaction = self.transaction.wrapping_add(1);
+        let tid = self.transaction;
+        let adu = frame::tcp_adu(tid, unit, &pdu);
+        let Some(stream) = self.stream.as_mut() else {
+            return Err(LinkError::NotConnected(self.address.clone()));
+        };
+        match timeout_at(deadline, stream.write_all(&adu)).await {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => return Err(self.fail(LinkError::Io(e.to_string()))),
+            // Part of the frame may be out: the stream can no longer be trusted.
+            Err(_) => return Err(self.fail(LinkError::Io("send timed out".into()))),
+        }
+        let mut chunk = [0u8; 512];
+        loop {
+            match frame::take_mbap(&mut self.buf) {
+                Mbap::Frame {
+                    transaction,
+                    unit: u,
+                    pdu,
+                } => {
+                    if transaction == tid && u == unit {
+                        return frame::parse_response(req, &pdu).map_err(LinkError::Protocol);
+                    }
+                    // The answer to an earlier request that timed out.
+                    self.counters.late_replies += 1;
+                    continue;
+                }
+                Mbap::Garbage(why) => return Err(self.fail(LinkError::Garbage(why))),
+                Mbap::NeedMore => {}
+            }
+            let Some(stream) = self.stream.as_mut() else {
+                return Err(LinkError::NotConnected(self.address.clone()));
+            };
+            match timeout_at(deadline, stream.read(&mut chunk)).await {
+                Err(_) => return Err(LinkError::Timeout),
+                Ok(Ok(0)) => {
+                    return Err(self.fail(LinkError::Io("connection closed by the device".into())))
+                }
+                Ok(Ok(n)) => self.buf.extend_from_slice(&chunk[..n]),
+                Ok(Err(e)) => return Err(self.fail(LinkError::Io(e.to_string()))),
+            }
+        }
+    }
+}
+
+/// A Modbus RTU serial line shared by the slaves on it.
+pub struct RtuLine {
+    config: SerialConfig,
+    stream: Option<tokio_serial::SerialStream>,
+    /// Inter-frame silence: 3.5 character times (1.75 ms above 19200 baud).
+    silence: Duration,
+    /// When the line last carried a frame (ours or a reply).
+    last_traffic: Instant,
+    /// The last transaction went wrong: wait for a quiet line before sending.
+    dirty: bool,
+    buf: Vec<u8>,
+    counters: LineCounters,
+}
+
+/// The inter-frame silence of the line (3.5 character times; 1.75 ms fixed
+/// above 19200 baud, as the serial-line specification says).
+pub fn inter_frame_silence(cfg: &SerialConfig) -> Duration {
+    if cfg.baud > 19_200 {
+        return Duration::from_micros(1750);
+    }
+    let parity = u32::from(cfg.parity != Parity::None);
+    let bits =
+        1 + u32::from(*cfg.data_bits.get_ref()) + parity + u32::from(*cfg.stop_bits.get_ref());
+    let char_s = f64::from(bits) / f64::from(cfg.baud.max(1));
+    Duration::from_secs_f64(3.5 * char_s)
+}
+
+impl RtuLine {
+    pub fn new(config: SerialConfig) -> Self {
+        RtuLine {
+            silence: inter_frame_silence(&config),
+            config,
+            stream: None,
+            last_traffic: Instant::now(),
+            dirty: true,
+            buf: Vec::with_capacity(512),
+            counters: LineCounters::default(),
+        }
+    }
+
+    fn open(&mut self) -> Result<(), String> {
+        self.stream = None;
+        let c = &self.config;
+        let port = c.port.get_ref();
+        let builder = tokio_serial::new(port, c.baud)
+            .parity(match c.parity {
+                Parity::None => tokio_serial::Parity::None,
+                Parity::Even => tokio_serial::Parity::Even,
+                Parity::Odd => tokio_serial::Parity::Odd,
+            })
+            .data_bits(match c.data_bits.get_ref() {
+                5 => tokio_serial::DataBits::Five,
+                6 => tokio_serial::DataBits::Six,
+                7 => tokio_serial::DataBits::Seven,
+                _ => tokio_serial::DataBits::Eight,
+            })
+            .stop_bits(if *c.stop_bits.get_ref() == 2 {
+                tokio_serial::StopBits::Two
+            } else {
+                tokio_serial::StopBits::One
+            });
+        let stream = builder
+            .open_native_async()
+            .map_err(|e| format!("cannot open serial port {port}: {e}"))?;
+        self.stream = Some(stream);
+        self.dirty = true;
+        Ok(())
+    }
+
+    /// Discards whatever is waiting on the line. After trouble, keeps reading
+    /// until the line has been quiet for the inter-frame silence (at most
+    /// `limit`), so a late reply still arriving cannot answer the next request.
+    async fn drain(&mut self, limit: Duration) -> Result<(), LinkError> {
+        let quiet = self.silence.max(Duration::from_millis(2));
+        let until = Instant::now() + limit;
+        let wait_for_quiet = self.dirty;
+        let Some(stream) = self.stream.as_mut() else {
+            return Err(LinkError::NotConnected(self.config.port.get_ref().clone()));
+        };
+        let mut chunk = [0u8; 256];
+        loop {
+            match stream.try_read(&mut chunk) {
+                Ok(0) => break,
+                Ok(n) => {
+                    self.counters.garbage_bytes += n as u64;
+                    self.last_traffic = Instant::now();
+                    continue;
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {}
+                Err(e) => {
+                    self.stream = None;
+                    return Err(LinkError::Io(e.to_string()));
+                }
+            }
+            if !wait_for_quiet || Instant::now() >= until {
+                break;
+            }
+            match timeout_at(until.min(Instant::now() + quiet), stream.read(&mut chunk)).await {
+                Err(_) => break, // quiet
+                Ok(Ok(n)) => {
+                    self.counters.garbage_bytes += n as u64;
+                    self.last_traffic = Instant::now();
+                }
+                Ok(Err(e)) => {
+                    self.stream = None;
+                    return Err(LinkError::Io(e.to_string()));
+                }
+            }
+        }
+        self.dirty = false;
+        Ok(())
+    }
+
+    async fn transact(
+        &mut self,
+        unit: u8,
+        req: &Request<'_>,
+        timeout: Duration,
+    ) -> Result<Answer, LinkError> {
+        let pdu = frame::encode_request(req).map_err(LinkError::Protocol)?;
+        let function = pdu[0];
+        let adu = frame::rtu_adu(unit, &pdu);
+        let deadline = Instant::now() + timeout;
+        self.drain(timeout).await?;
+        tokio::time::sleep_until(self.last_traffic + self.silence).await;
+        let port = self.config.port.get_ref().clone();
+        let Some(stream) = self.stream.as_mut() else {
+            return Err(LinkError::NotConnected(port));
+        };
+        let sent = timeout_at(deadline, async {
+            stream.write_all(&adu).await?;
+            stream.flush().await
+        })
+        .await;
+        match sent {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => {
+                self.stream = None;
+                return Err(LinkError::Io(e.to_string()));
+            }
+            Err(_) => {
+                self.dirty = true;
+                return Err(LinkError::Timeout);
+            }
+        }
+        self.last_traffic = Instant::now();
+        self.buf.clear();
+        let mut chunk = [0u8; 256];
+        loop {
+            if let Some((at, len)) = frame::find_rtu_reply(&self.buf, unit, function) {
+                if at > 0 {
+                    self.counters.garbage_bytes += at as u64;
+                }
+                // Anything after the reply is noise: drain it before the next request.
+                self.dirty = at + len < self.buf.len();
+                let pdu = self.buf[at + 1..at + len - 2].to_vec();
+                self.last_traffic = Instant::now();
+                return frame::parse_response(req, &pdu).map_err(LinkError::Protocol);
+            }
+            if self.buf.len() > 4096 {
+                // A babbling line: start again from the newest bytes.
+                let keep = self.buf.split_off(self.buf.len() - 512);
+                self.counters.garbage_bytes += self.buf.len() as u64;
+                self.buf = keep;
+            }
+            let Some(stream) = self.stream.as_mut() else {
+                return Err(LinkError::NotConnected(port));
+            };
+            match timeout_at(deadline, stream.read(&mut chunk)).await {
+                Err(_) => {
+                    self.dirty = true;
+                    if !self.buf.is_empty() {
+                        self.counters.garbage_bytes += self.buf.len() as u64;
+                        return Err(LinkError::Garbage(format!(
+                            "{} bytes but no valid reply from slave {unit}",
+                            self.buf.len()
+                        )));
+                    }
+                    return Err(LinkError::Timeout);
+                }
+                Ok(Ok(0)) => {
+                    self.stream = None;
+                    return Err(LinkError::Io("serial port closed".into()));
+                }
+                Ok(Ok(n)) => {
+                    self.buf.extend_from_slice(&chunk[..n]);
+                    self.last_traffic = Instant::now();
+                }
+                Ok(Err(e)) => {
+                    self.stream = None;
+                    return Err(LinkError::Io(e.to_string()));
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn serial(text: &str) -> SerialConfig {
+        toml::from_str(text).unwrap()
+    }
+
+    #[test]
+    fn silence_follows_the_baud_rate() {
+        // 10 bits per char at 9600 baud: 3.5 * 1.0417 ms = 3.65 ms.
+        let s = inter_frame_silence(&serial("port = \"/dev/null\"\nbaud = 9600"));
+        assert!(
+            s > Duration::from_micros(3600) && s < Duration::from_micros(3700),
+            "{s:?}"
+        );
+        let even = serial("port = \"/dev/null\"\nbaud = 9600\nparity = \"even\"");
+        assert!(inter_frame_silence(&even) > Duration::from_micros(4000));
+        let fast = serial("port = \"/dev/null\"\nbaud = 115200");
+        assert_eq!(inter_frame_silence(&fast), Duration::from_micros(1750));
+    }
+}

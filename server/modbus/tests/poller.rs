@@ -1,0 +1,556 @@
+//! The poller against in-process tokio-modbus TCP servers.
+
+mod common;
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use common::*;
+use gridscada_modbus::FieldIo;
+use gridscada_tagdb::{QualityCode, SystemClock, TagDb, Value, WriteError};
+
+const SECOND: Duration = Duration::from_secs(1);
+
+fn value(db: &TagDb, name: &str) -> Option<Value> {
+    db.get_by_name(name)
+        .filter(|s| s.quality.is_good())
+        .map(|s| s.value)
+}
+
+fn bad_reason(db: &TagDb, name: &str) -> Option<String> {
+    db.get_by_name(name)
+        .filter(|s| s.quality.code == QualityCode::Bad)
+        .map(|s| s.quality.reason.as_deref().unwrap_or("").to_string())
+}
+
+fn start(plant: &gridscada_config::Plant) -> (Arc<TagDb>, FieldIo) {
+    let db = tagdb(plant);
+    let io = FieldIo::start(plant, Arc::clone(&db), Arc::new(SystemClock)).expect("start");
+    (db, io)
+}
+
+fn words_be(bytes: &[u8]) -> Vec<u16> {
+    bytes
+        .chunks(2)
+        .map(|c| u16::from_be_bytes([c[0], c[1]]))
+        .collect()
+}
+
+fn typed_tags() -> String {
+    let w = "writable = true\nwrite_role = \"operator\"\n";
+    let t = |name: &str, kind: &str, addr: u32, extra: &str| {
+        format!("[[tag]]\nname = \"D.{name}\"\ndevice = \"D\"\nkind = \"{kind}\"\naddress = {addr}\n{extra}\n")
+    };
+    [
+        t("Coil", "coil", 0, w),
+        t("DI", "discrete_input", 0, ""),
+        t(
+            "I16",
+            "holding_register",
+            0,
+            &format!("type = \"i16\"\n{w}"),
+        ),
+        t(
+            "U16",
+            "holding_register",
+            1,
+            &format!("type = \"u16\"\n{w}"),
+        ),
+        t(
+            "I32",
+            "holding_register",
+            2,
+            &format!("type = \"i32\"\nword_order = \"little\"\n{w}"),
+        ),
+        t(
+            "U32",
+            "holding_register",
+            4,
+            &format!("type = \"u32\"\nbyte_order = \"little\"\n{w}"),
+        ),
+        t(
+            "I64",
+            "holding_register",
+            6,
+            &format!("type = \"i64\"\n{w}"),
+        ),
+        t(
+            "U64",
+            "holding_register",
+            10,
+            &format!("type = \"u64\"\n{w}"),
+        ),
+        t(
+            "F32",
+            "holding_register",
+            14,
+            &format!("type = \"f32\"\n{w}"),
+        ),
+        t(
+            "F64",
+            "holding_register",
+            16,
+            &format!("type = \"f64\"\n{w}"),
+        ),
+        t(
+            "Str",
+            "holding_register",
+            20,
+            &format!("type = \"string\"\nlength = 4\n{w}"),
+        ),
+        t("Bit", "holding_register", 30, &format!("bit = 5\n{w}")),
+        t(
+            "Scaled",
+            "input_register",
+            0,
+            "type = \"i16\"\nscale = 0.1\noffset = -40.0\n",
+        ),
+        t("Big", "input_register", 1, "type = \"u64\"\n"),
+    ]
+    .concat()
+}
+
+#[tokio::test]
+async fn every_data_type_reads_and_writes_with_read_back() {
+    let bank = Bank::with_units(&[1]);
+    bank.unit(1, |u| {
+        u.coils[0] = true;
+        u.discrete[0] = true;
+        u.holding[0] = (-1234i16) as u16;
+        u.holding[1] = 54321;
+        let i32w = words_be(&(-123_456_789i32).to_be_bytes());
+        u.holding[2] = i32w[1]; // little word order: low word first
+        u.holding[3] = i32w[0];
+        u.holding[4] = 0xADDE; // 0xDEADBEEF with bytes swapped in each word
+        u.holding[5] = 0xEFBE;
+        u.holding[6..10].copy_from_slice(&words_be(&(-9_000_000_000_000i64).to_be_bytes()));
+        u.holding[10..14].copy_from_slice(&words_be(&12_345_678_901_234u64.to_be_bytes()));
+        u.holding[14..16].copy_from_slice(&words_be(&230.5f32.to_be_bytes()));
+        u.holding[16..20].copy_from_slice(&words_be(&49.95f64.to_be_bytes()));
+        u.holding[20..24].copy_from_slice(&words_be(b"ABCDEFG\0"));
+        u.holding[30] = 1 << 5 | 1;
+        u.input[0] = 655;
+        u.input[1..5].copy_from_slice(&[0xFFFF, 0xFFFF, 0xFFFF, 0xFFFE]);
+    });
+    let (addr, _server) = serve(Arc::clone(&bank), "127.0.0.1:0").await;
+    let plant = plant(&format!(
+        "{}{}",
+        device("D", addr, 1, 50, 500),
+        typed_tags()
+    ));
+    let (db, io) = start(&plant);
+
+    eventually("all tags read", 5 * SECOND, || {
+        plant
+            .tags
+            .iter()
+            .all(|t| value(&db, t.name.get_ref()).is_some())
+    })
+    .await;
+    assert_eq!(value(&db, "D.Coil"), Some(Value::Bool(true)));
+    assert_eq!(value(&db, "D.DI"), Some(Value::Bool(true)));
+    assert_eq!(value(&db, "D.I16"), Some(Value::Int(-1234)));
+    assert_eq!(value(&db, "D.U16"), Some(Value::Int(54321)));
+    assert_eq!(value(&db, "D.I32"), Some(Value::Int(-123_456_789)));
+    assert_eq!(value(&db, "D.U32"), Some(Value::Int(0xDEAD_BEEF)));
+    assert_eq!(value(&db, "D.I64"), Some(Value::Int(-9_000_000_000_000)));
+    assert_eq!(value(&db, "D.U64"), Some(Value::Int(12_345_678_901_234)));
+    assert_eq!(value(&db, "D.F32"), Some(Value::Float(230.5)));
+    assert_eq!(value(&db, "D.F64"), Some(Value::Float(49.95)));
+    assert_eq!(value(&db, "D.Str"), Some(Value::from("ABCDEFG")));
+    assert_eq!(value(&db, "D.Bit"), Some(Value::Bool(true)));
+    let Some(Value::Float(scaled)) = value(&db, "D.Scaled") else {
+        panic!("scaled tag is not a float")
+    };
+    assert!((scaled - 25.5).abs() < 1e-9);
+    assert_eq!(
+        value(&db, "D.Big"),
+        Some(Value::Float((u64::MAX - 1) as f64))
+    );
+
+    // Writes: each is confirmed by read-back, and the wire image is right.
+    let w = io.writer();
+    let cases: Vec<(&str, Value)> = vec![
+        ("D.Coil", Value::Bool(false)),
+        ("D.I16", Value::Int(-2)),
+        ("D.U16", Value::Int(7)),
+        ("D.I32", Value::Int(-70_000)),
+        ("D.U32", Value::Int(0x0102_0304)),
+        ("D.I64", Value::Int(-5)),
+        ("D.U64", Value::Int(1 << 40)),
+        ("D.F32", Value::Float(-1.25)),
+        ("D.F64", Value::Float(1.0e-3)),
+        ("D.Str", Value::from("xy")),
+        ("D.Bit", Value::Bool(false)),
+    ];
+    for (tag, v) in &cases {
+        let sample = w
+            .write(tag, v.clone())
+            .await
+            .unwrap_or_else(|e| panic!("{tag}: {e}"));
+        assert!(sample.quality.is_good());
+        assert_eq!(&sample.value, v, "{tag}");
+        assert_eq!(value(&db, tag).as_ref(), Some(v), "{tag} in the tag db");
+    }
+    bank.unit(1, |u| {
+        assert!(!u.coils[0]);
+        assert_eq!(u.holding[0], 0xFFFE);
+        let i32w = words_be(&(-70_000i32).to_be_bytes());
+        assert_eq!(&u.holding[2..4], &[i32w[1], i32w[0]]);
+        assert_eq!(&u.holding[4..6], &[0x0201, 0x0403]);
+        assert_eq!(&u.holding[6..10], &[0xFFFF, 0xFFFF, 0xFFFF, 0xFFFB]);
+        assert_eq!(&u.holding[10..14], &[0, 0x100, 0, 0]);
+        assert_eq!(
+            &u.holding[14..16],
+            words_be(&(-1.25f32).to_be_bytes()).as_slice()
+        );
+        assert_eq!(&u.holding[20..24], &[0x7879, 0, 0, 0]);
+        // Only bit 5 cleared; bit 0 kept (read-modify-write).
+        assert_eq!(u.holding[30], 1);
+    });
+
+    // Checks before the wire.
+    assert!(matches!(
+        w.write("D.U16", Value::Int(70_000)).await,
+        Err(WriteError::BadValue { .. })
+    ));
+    assert!(matches!(
+        w.write("D.Scaled", Value::Float(1.0)).await,
+        Err(WriteError::ReadOnly(_))
+    ));
+    assert!(matches!(
+        w.write("D.Nope", Value::Int(1)).await,
+        Err(WriteError::UnknownTag(_))
+    ));
+    let stats = io.stats();
+    assert!(stats.device("D").unwrap().requests > 0);
+    io.shutdown().await;
+}
+
+#[tokio::test]
+async fn exception_turns_tags_bad_with_the_exception_named() {
+    let bank = Bank::with_units(&[1]);
+    bank.unit(1, |u| {
+        u.readable_below = 500;
+        u.holding[0] = 42;
+    });
+    let (addr, _server) = serve(Arc::clone(&bank), "127.0.0.1:0").await;
+    let tags = "[[tag]]\nname = \"D.Ok\"\ndevice = \"D\"\nkind = \"holding_register\"\naddress = 0\n\n\
+                [[tag]]\nname = \"D.Missing\"\ndevice = \"D\"\nkind = \"holding_register\"\naddress = 600\n";
+    let plant = plant(&format!("{}{tags}", device("D", addr, 1, 50, 500)));
+    let (db, io) = start(&plant);
+    eventually("exception reported", 5 * SECOND, || {
+        bad_reason(&db, "D.Missing").is_some_and(|r| r.contains("illegal data address"))
+    })
+    .await;
+    eventually("the other block is good", 5 * SECOND, || {
+        value(&db, "D.Ok") == Some(Value::Int(42))
+    })
+    .await;
+    // An answering device is connected, whatever the exception.
+    assert_eq!(value(&db, "D.Comm.Connected"), Some(Value::Bool(true)));
+    assert!(io.stats().device("D").unwrap().exceptions > 0);
+    io.shutdown().await;
+}
+
+#[tokio::test]
+async fn silent_unit_goes_bad_while_its_neighbour_keeps_its_scan_rate() {
+    let bank = Bank::with_units(&[1, 2]);
+    bank.unit(1, |u| u.holding[0] = 11);
+    bank.unit(2, |u| u.holding[0] = 22);
+    let (addr, _server) = serve(Arc::clone(&bank), "127.0.0.1:0").await;
+    let period = Duration::from_millis(200);
+    let tags = "[[tag]]\nname = \"A.V\"\ndevice = \"A\"\nkind = \"holding_register\"\naddress = 0\n\n\
+                [[tag]]\nname = \"B.V\"\ndevice = \"B\"\nkind = \"holding_register\"\naddress = 0\n";
+    let plant = plant(&format!(
+        "{}{}{tags}",
+        device("A", addr, 1, 200, 60),
+        device("B", addr, 2, 200, 60)
+    ));
+    let (db, io) = start(&plant);
+    eventually("both good", 5 * SECOND, || {
+        value(&db, "A.V") == Some(Value::Int(11)) && value(&db, "B.V") == Some(Value::Int(22))
+    })
+    .await;
+
+    bank.unit(2, |u| u.silent = true);
+    let silenced = tokio::time::Instant::now();
+    let scans_before = io.stats().device("A").unwrap().scans;
+    // Bad within two scan periods (plus scheduling slack for a loaded machine).
+    eventually("B bad", 2 * period + Duration::from_millis(150), || {
+        bad_reason(&db, "B.V").is_some()
+    })
+    .await;
+    let reason = bad_reason(&db, "B.V").unwrap();
+    assert!(
+        reason.contains("timeout") || reason.contains("no answer"),
+        "{reason}"
+    );
+    assert_eq!(value(&db, "B.Comm.Connected"), Some(Value::Bool(false)));
+
+    // Over the next two seconds A keeps (nearly) its 5 scans a second and
+    // stays Good, while B is only probed now and then.
+    tokio::time::sleep(2 * SECOND).await;
+    let elapsed = silenced.elapsed().as_secs_f64();
+    let a = io.stats().device("A").unwrap().clone();
+    let b = io.stats().device("B").unwrap().clone();
+    let a_scans = (a.scans - scans_before) as f64;
+    assert!(
+        a_scans >= 0.8 * elapsed / period.as_secs_f64(),
+        "A scanned {a_scans} times in {elapsed:.2}s"
+    );
+    assert_eq!(value(&db, "A.V"), Some(Value::Int(11)));
+    assert!(b.timeouts >= 2);
+    assert!(
+        b.timeouts < 8,
+        "B is backed off, not polled at full rate: {} timeouts",
+        b.timeouts
+    );
+
+    // B comes back: Good again via a probe.
+    bank.unit(2, |u| u.silent = false);
+    eventually("B good again", 20 * SECOND, || {
+        value(&db, "B.V") == Some(Value::Int(22))
+    })
+    .await;
+    io.shutdown().await;
+}
+
+#[tokio::test]
+async fn server_killed_then_restarted_reconnects() {
+    let bank = Bank::with_units(&[1]);
+    bank.unit(1, |u| u.holding[0] = 5);
+    let (addr, server) = serve(Arc::clone(&bank), "127.0.0.1:0").await;
+    let tags =
+        "[[tag]]\nname = \"D.V\"\ndevice = \"D\"\nkind = \"holding_register\"\naddress = 0\n";
+    let plant = plant(&format!("{}{tags}", device("D", addr, 1, 100, 200)));
+    let (db, io) = start(&plant);
+    eventually("good", 5 * SECOND, || {
+        value(&db, "D.V") == Some(Value::Int(5))
+    })
+    .await;
+
+    server.abort();
+    let _ = server.await;
+    eventually("bad after the server died", 5 * SECOND, || {
+        bad_reason(&db, "D.V").is_some()
+    })
+    .await;
+    tokio::time::sleep(Duration::from_millis(700)).await;
+    assert!(bad_reason(&db, "D.V").is_some());
+
+    bank.unit(1, |u| u.holding[0] = 6);
+    let (_addr, _server) = serve(Arc::clone(&bank), &addr.to_string()).await;
+    eventually("good again", 15 * SECOND, || {
+        value(&db, "D.V") == Some(Value::Int(6))
+    })
+    .await;
+    let link = io.stats().links[0].clone();
+    assert!(link.connects >= 2, "{link:?}");
+    io.shutdown().await;
+}
+
+#[tokio::test]
+async fn late_reply_is_never_taken_for_the_next_answer() {
+    let bank = Bank::with_units(&[1]);
+    bank.unit(1, |u| {
+        u.holding[0] = 1000; // block one
+        u.holding[100] = 2000; // block two: a late block-one reply would look like this
+    });
+    let (addr, _server) = serve(Arc::clone(&bank), "127.0.0.1:0").await;
+    let tags = "[[tag]]\nname = \"D.A\"\ndevice = \"D\"\nkind = \"holding_register\"\naddress = 0\n\n\
+                [[tag]]\nname = \"D.B\"\ndevice = \"D\"\nkind = \"holding_register\"\naddress = 100\n";
+    let mut text = format!("{}{tags}", device("D", addr, 1, 100, 80));
+    text = text.replace("retries = 1", "retries = 3");
+    let plant = plant(&text);
+    let (db, io) = start(&plant);
+    let ids = [db.id("D.A").unwrap(), db.id("D.B").unwrap()];
+    let mut sub = db.subscribe(&ids);
+    eventually("good", 5 * SECOND, || {
+        value(&db, "D.B") == Some(Value::Int(2000))
+    })
+    .await;
+
+    // Three times: the reply to block two comes after its timeout, while the
+    // poller is already waiting for block one of the next scan (same unit,
+    // same function, same length: only the transaction id tells them apart).
+    for _ in 0..3 {
+        bank.unit(1, |u| {
+            u.delay = Duration::from_millis(150);
+            u.delay_once_at = Some(100);
+        });
+        eventually("delay used", 5 * SECOND, || {
+            bank.unit(1, |u| u.delay_once_at.is_none())
+        })
+        .await;
+        tokio::time::sleep(Duration::from_millis(400)).await;
+    }
+    eventually("late replies seen", 5 * SECOND, || {
+        io.stats().links[0].late_replies >= 1
+    })
+    .await;
+    // Every Good sample ever published carried the right value.
+    while let Some(update) = sub.try_recv() {
+        for (id, s) in &update.batch().changes {
+            if s.quality.is_good() {
+                let want = if *id == ids[0] { 1000 } else { 2000 };
+                assert_eq!(
+                    s.value,
+                    Value::Int(want),
+                    "tag {id:?} got a mis-assigned reply"
+                );
+            }
+        }
+    }
+    assert_eq!(value(&db, "D.A"), Some(Value::Int(1000)));
+    assert_eq!(value(&db, "D.B"), Some(Value::Int(2000)));
+    io.shutdown().await;
+}
+
+#[tokio::test]
+async fn write_whose_read_back_differs_is_a_mismatch_and_never_good() {
+    let bank = Bank::with_units(&[1]);
+    bank.unit(1, |u| {
+        u.holding[0] = 100;
+        u.ignore_writes = true;
+    });
+    let (addr, _server) = serve(Arc::clone(&bank), "127.0.0.1:0").await;
+    let tags = "[[tag]]\nname = \"D.Setpoint_kW\"\ndevice = \"D\"\nkind = \"holding_register\"\naddress = 0\n\
+                type = \"i16\"\nscale = 0.5\nwritable = true\nwrite_role = \"operator\"\n";
+    let plant = plant(&format!("{}{tags}", device("D", addr, 1, 50, 300)));
+    let (db, io) = start(&plant);
+    let id = db.id("D.Setpoint_kW").unwrap();
+    eventually("good", 5 * SECOND, || {
+        value(&db, "D.Setpoint_kW") == Some(Value::Float(50.0))
+    })
+    .await;
+    let mut sub = db.subscribe(&[id]);
+    let err = io
+        .writer()
+        .write("D.Setpoint_kW", Value::Float(60.0))
+        .await
+        .unwrap_err();
+    match &err {
+        WriteError::Mismatch {
+            written, read_back, ..
+        } => {
+            assert_eq!(written, "60");
+            assert_eq!(read_back, "50");
+        }
+        other => panic!("expected a mismatch, got {other}"),
+    }
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    while let Some(update) = sub.try_recv() {
+        for (_, s) in &update.batch().changes {
+            assert_ne!(s.value, Value::Float(60.0), "unconfirmed value shown");
+        }
+    }
+    // The device takes writes again: confirmed.
+    bank.unit(1, |u| u.ignore_writes = false);
+    let s = io
+        .writer()
+        .write("D.Setpoint_kW", Value::Float(60.0))
+        .await
+        .unwrap();
+    assert_eq!(s.value, Value::Float(60.0));
+    assert_eq!(bank.unit(1, |u| u.holding[0]), 120);
+    io.shutdown().await;
+}
+
+#[tokio::test]
+async fn writes_jump_ahead_of_queued_reads() {
+    let bank = Bank::with_units(&[1]);
+    bank.unit(1, |u| u.delay = Duration::from_millis(15));
+    let (addr, _server) = serve(Arc::clone(&bank), "127.0.0.1:0").await;
+    // Twenty blocks (gaps beyond max_gap): one scan is twenty requests.
+    let mut tags = String::new();
+    for i in 0..20 {
+        tags += &format!(
+            "[[tag]]\nname = \"D.R{i}\"\ndevice = \"D\"\nkind = \"holding_register\"\naddress = {}\n\n",
+            i * 100
+        );
+    }
+    tags += "[[tag]]\nname = \"D.Cmd\"\ndevice = \"D\"\nkind = \"coil\"\naddress = 0\nwritable = true\nwrite_role = \"operator\"\n";
+    let text = format!("{}{tags}", device("D", addr, 1, 2000, 500))
+        .replace("retries = 1", "retries = 1\nmax_gap = 4");
+    let plant = plant(&text);
+    let (_db, io) = start(&plant);
+    // Wait for the second scan to begin: its first block read.
+    eventually("a scan under way", 10 * SECOND, || {
+        bank.log
+            .lock()
+            .iter()
+            .filter(|(_, fc, a)| *fc == 3 && *a == 0)
+            .count()
+            >= 2
+    })
+    .await;
+    let at_call = bank.log.lock().len();
+    io.writer().write("D.Cmd", Value::Bool(true)).await.unwrap();
+    let log = bank.log.lock().clone();
+    let write_at = log
+        .iter()
+        .position(|(_, fc, _)| *fc == 5)
+        .expect("write sent");
+    let reads_between = log[at_call..write_at]
+        .iter()
+        .filter(|(_, fc, _)| *fc == 3)
+        .count();
+    assert!(
+        reads_between <= 1,
+        "{reads_between} queued reads went before the write"
+    );
+    // The scan went on after the write.
+    let reads_after = log[write_at..].iter().filter(|(_, fc, _)| *fc == 3).count();
+    assert!(reads_after >= 1 || log.len() == write_at + 2);
+    io.shutdown().await;
+}
+
+#[tokio::test]
+async fn status_tags_are_registered_and_kept() {
+    let bank = Bank::with_units(&[1]);
+    let (addr, _server) = serve(Arc::clone(&bank), "127.0.0.1:0").await;
+    let tags = "[[tag]]\nname = \"D.V\"\ndevice = \"D\"\nkind = \"input_register\"\naddress = 3\n";
+    let plant = plant(&format!("{}{tags}", device("D", addr, 1, 50, 300)));
+    let names: Vec<String> = gridscada_modbus::device_status_tags(&plant)
+        .iter()
+        .map(|m| m.name.to_string())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "D.Comm.Connected",
+            "D.Comm.LastError",
+            "D.Comm.ResponseMs",
+            "D.Comm.Requests",
+            "D.Comm.Errors",
+            "D.Comm.Timeouts",
+            "D.Comm.Overruns"
+        ]
+    );
+    let (db, io) = start(&plant);
+    eventually(
+        "requests counted",
+        5 * SECOND,
+        || matches!(value(&db, "D.Comm.Requests"), Some(Value::Int(n)) if n >= 3),
+    )
+    .await;
+    assert_eq!(value(&db, "D.Comm.Connected"), Some(Value::Bool(true)));
+    assert_eq!(value(&db, "D.Comm.Errors"), Some(Value::Int(0)));
+    assert!(matches!(value(&db, "D.Comm.ResponseMs"), Some(Value::Float(ms)) if ms >= 0.0));
+    // A tag database without the status tags is refused with a clear error.
+    let bare = Arc::new(
+        TagDb::new(
+            plant
+                .tags
+                .iter()
+                .map(|t| gridscada_tagdb::TagMeta::new(t.name.get_ref().as_str(), t.value_kind())),
+        )
+        .unwrap(),
+    );
+    let err = FieldIo::start(&plant, bare, Arc::new(SystemClock))
+        .err()
+        .unwrap();
+    assert!(err.to_string().contains("D.Comm.Connected"), "{err}");
+    io.shutdown().await;
+}
