@@ -1,0 +1,839 @@
+//! The live outer loop of the microgrid cascade.
+//!
+//! **Owns:** every `dispatch_period_s` of plant time: reading demand,
+//! availability, state of charge and running state from the tag database;
+//! the diesel commitment rule; building and solving the single-period LP (the
+//! same [`DispatchProblem::solve`] as `gridscada dispatch solve`); switching
+//! to the rule-based fallback on stale or Bad measurements, a failed solve or
+//! a failed write; writing each unit's setpoint and the diesels' run commands
+//! through the `TagWriter`; publishing a [`DispatchStatus`] and emitting
+//! [`DispatchNotice`]s (events, the "dispatch fallback" alarm).
+//!
+//! **Must not touch:** Modbus or any device directly (only `TagWriter`), the
+//! alarm engine and the event store (it only sends notices), wall time (plant
+//! time comes from the `Clock`). [`Dispatcher::step`] is one period without
+//! sleeping, so tests drive it with a fake writer and tag database.
+
+use std::collections::{BTreeMap, HashMap, VecDeque};
+use std::sync::Arc;
+use std::time::Duration;
+
+use serde::Serialize;
+use tokio::sync::{mpsc, watch};
+
+use gridscada_config::{MicrogridConfig, UnitConfig, UnitIo, UnitKind};
+use gridscada_tagdb::{Clock, TagDb, TagWriter, Timestamp, Value};
+
+use super::rules::{commit_diesels, fallback_dispatch, DieselState};
+use super::single::{DispatchProblem, OilUnit, RenewableUnit, StorageUnit};
+use super::{DispatchError, Setpoints};
+
+/// Name of the alarm raised while the loop runs on the fallback rule.
+pub const FALLBACK_ALARM: &str = "dispatch fallback";
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DispatchMode {
+    /// Setpoints come from the LP.
+    Optimal,
+    /// Setpoints come from the rule (see `reason`).
+    Fallback,
+}
+
+/// What the outer loop did in its last period; published on a watch channel
+/// for the HMI.
+#[derive(Debug, Clone, Serialize)]
+pub struct DispatchStatus {
+    /// Plant time of the period (0 before the first one).
+    pub at: Timestamp,
+    pub mode: DispatchMode,
+    /// The solver's verdict: "optimal", "infeasible", "error", or "not solved"
+    /// (inputs unusable) / "not run" (before the first period).
+    pub status: String,
+    /// Why the loop is in fallback (or why the solve failed).
+    pub reason: Option<String>,
+    /// The problem built from the measurements (in fallback: with substitutes).
+    pub inputs: Option<DispatchProblem>,
+    /// Setpoints written (or attempted), kW per unit id.
+    pub setpoints_kw: Setpoints,
+    /// Run command per diesel id.
+    pub run_cmd: BTreeMap<String, bool>,
+    pub shed_kw: f64,
+    pub objective: Option<f64>,
+    pub solve_ms: Option<f64>,
+    /// Writes the field did not confirm in this period.
+    pub write_failures: Vec<String>,
+}
+
+impl Default for DispatchStatus {
+    fn default() -> Self {
+        DispatchStatus {
+            at: Timestamp::from_millis(0),
+            mode: DispatchMode::Fallback,
+            status: "not run".into(),
+            reason: None,
+            inputs: None,
+            setpoints_kw: Setpoints::default(),
+            run_cmd: BTreeMap::new(),
+            shed_kw: 0.0,
+            objective: None,
+            solve_ms: None,
+            write_failures: Vec::new(),
+        }
+    }
+}
+
+/// For the event log and the alarm engine.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "type", rename_all = "lowercase")]
+pub enum DispatchNotice {
+    /// A system event ("dispatch back to optimal", "dg1 start: ...").
+    Event { at: Timestamp, message: String },
+    /// Raise (`active`) or clear an alarm, e.g. [`FALLBACK_ALARM`].
+    Alarm {
+        at: Timestamp,
+        name: String,
+        active: bool,
+        reason: String,
+    },
+}
+
+/// Runs the outer loop until the task is dropped: one [`Dispatcher::step`]
+/// every `dispatch_period_s` of plant time.
+pub async fn run_dispatch(
+    cfg: MicrogridConfig,
+    db: Arc<TagDb>,
+    writer: Arc<dyn TagWriter>,
+    clock: Arc<dyn Clock>,
+    status: watch::Sender<DispatchStatus>,
+    notices: mpsc::Sender<DispatchNotice>,
+) {
+    let period = Duration::from_secs_f64(period_s(&cfg));
+    let mut d = Dispatcher::new(cfg, clock.now());
+    // Notices the channel had no room for; sent first next period, never dropped.
+    let mut backlog: VecDeque<DispatchNotice> = VecDeque::new();
+    loop {
+        let (st, out) = d.step(&db, &*writer, clock.now()).await;
+        status.send_replace(st);
+        backlog.extend(out);
+        while let Some(n) = backlog.pop_front() {
+            match notices.try_send(n) {
+                Ok(()) => {}
+                Err(mpsc::error::TrySendError::Full(n)) => {
+                    tracing::warn!(
+                        "dispatch notice channel full; {} notices wait",
+                        backlog.len() + 1
+                    );
+                    backlog.push_front(n);
+                    break;
+                }
+                Err(mpsc::error::TrySendError::Closed(_)) => {
+                    backlog.clear();
+                    break;
+                }
+            }
+        }
+        clock.sleep(period).await;
+    }
+}
+
+fn period_s(cfg: &MicrogridConfig) -> f64 {
+    let p = *cfg.dispatch_period_s.get_ref();
+    if p.is_finite() && p >= 0.1 {
+        p
+    } else {
+        5.0
+    }
+}
+
+struct LiveUnit {
+    cfg: UnitConfig,
+    io: UnitIo,
+}
+
+/// The outer loop's state between periods.
+pub struct Dispatcher {
+    cfg: MicrogridConfig,
+    units: Vec<LiveUnit>,
+    diesels: Vec<DieselState>,
+    /// Last good value of each measurement, held for the fallback.
+    held: HashMap<String, f64>,
+    alarm_active: bool,
+    first: bool,
+    /// Run commands the field confirmed.
+    run_written: HashMap<String, bool>,
+}
+
+/// One measurement: the value, or why it cannot be used.
+type Meas = Result<f64, String>;
+
+impl Dispatcher {
+    pub fn new(cfg: MicrogridConfig, now: Timestamp) -> Self {
+        let units: Vec<LiveUnit> = cfg
+            .units
+            .iter()
+            .map(|u| LiveUnit {
+                io: u.io(),
+                cfg: u.clone(),
+            })
+            .collect();
+        let eligible = Timestamp::from_millis(
+            now.as_millis()
+                - ((cfg.commitment.min_stop_s.max(0.0) + cfg.commitment.min_run_s.max(0.0))
+                    * 1000.0)
+                    .min(1e12) as i64,
+        );
+        let diesels = units
+            .iter()
+            .filter(|u| u.cfg.kind == UnitKind::Diesel)
+            .map(|u| DieselState {
+                id: u.cfg.id.get_ref().clone(),
+                max_kw: u.cfg.max_kw,
+                cost_per_kwh: u.cfg.cost_per_kwh,
+                // Set from the measured running state in the first period.
+                run: false,
+                since: eligible,
+            })
+            .collect();
+        Dispatcher {
+            cfg,
+            units,
+            diesels,
+            held: HashMap::new(),
+            alarm_active: false,
+            first: true,
+            run_written: HashMap::new(),
+        }
+    }
+
+    fn read(&self, db: &TagDb, name: &str, now: Timestamp) -> Meas {
+        let s = db
+            .get_by_name(name)
+            .ok_or_else(|| format!("tag {name} is not in the tag database"))?;
+        if !s.quality.is_good() {
+            return Err(format!("{name} is {}", s.quality));
+        }
+        let age = now.since(s.timestamp).as_secs_f64();
+        if age > self.cfg.stale_after_s {
+            return Err(format!("{name} is stale ({age:.0} s old)"));
+        }
+        match s.value.as_f64() {
+            Some(x) if x.is_finite() => Ok(x),
+            _ => Err(format!("{name} has no numeric value ({})", s.value)),
+        }
+    }
+
+    /// A measurement, remembered when good; else the held value (or
+    /// `default`) and the reason is added to `problems`.
+    fn meas_or_held(
+        &mut self,
+        m: Meas,
+        key: &str,
+        default: f64,
+        problems: &mut Vec<String>,
+    ) -> f64 {
+        match m {
+            Ok(v) => {
+                self.held.insert(key.to_string(), v);
+                v
+            }
+            Err(e) => {
+                problems.push(e);
+                self.held.get(key).copied().unwrap_or(default)
+            }
+        }
+    }
+
+    /// One dispatch period at plant time `now`: read, commit, solve or fall
+    /// back, write. Returns the status and the notices to send.
+    pub async fn step(
+        &mut self,
+        db: &TagDb,
+        writer: &dyn TagWriter,
+        now: Timestamp,
+    ) -> (DispatchStatus, Vec<DispatchNotice>) {
+        let mut notices = Vec::new();
+        let mut problems: Vec<String> = Vec::new();
+        let dt_h = period_s(&self.cfg) / 3600.0;
+
+        // Read the plant.
+        let demand_tag = self.cfg.demand_tag.get_ref().clone();
+        let m = self.read(db, &demand_tag, now);
+        let demand = self
+            .meas_or_held(m, &demand_tag, 0.0, &mut problems)
+            .max(0.0);
+        let mut problem = DispatchProblem {
+            dt_h,
+            demand_kw: demand,
+            voll_per_kwh: self.cfg.voll_per_kwh,
+            pv: vec![],
+            wind: vec![],
+            oil: vec![],
+            storage: vec![],
+        };
+        let mut measured_running: HashMap<String, bool> = HashMap::new();
+        let mut soc_sum = 0.0;
+        let mut cap_sum = 0.0;
+        let mut soc_known = true;
+        let mut storage_cover = 0.0;
+        let cover_h = (self.cfg.commitment.min_run_s / 3600.0).max(dt_h);
+        for i in 0..self.units.len() {
+            let (cfg, io) = (self.units[i].cfg.clone(), self.units[i].io.clone());
+            let id = cfg.id.get_ref().clone();
+            match cfg.kind {
+                UnitKind::Pv | UnitKind::Wind => {
+                    let m = self.read(db, &io.available_kw, now);
+                    let mut a = self
+                        .meas_or_held(m, &io.available_kw, 0.0, &mut problems)
+                        .max(0.0);
+                    if cfg.rated_kw > 0.0 {
+                        a = a.min(cfg.rated_kw);
+                    }
+                    let u = RenewableUnit {
+                        id,
+                        available_kw: a,
+                        cost_per_kwh: cfg.cost_per_kwh,
+                    };
+                    if cfg.kind == UnitKind::Pv {
+                        problem.pv.push(u);
+                    } else {
+                        problem.wind.push(u);
+                    }
+                }
+                UnitKind::Storage => {
+                    let m = self.read(db, &io.soc_kwh, now);
+                    let good = m.is_ok();
+                    let soc = self.meas_or_held(m, &io.soc_kwh, cfg.soc_min_kwh, &mut problems);
+                    // A reading just outside the band is physics, not bad input: clamp.
+                    let soc = soc.clamp(cfg.soc_min_kwh, cfg.soc_max_kwh.max(cfg.soc_min_kwh));
+                    let mut s = StorageUnit {
+                        id,
+                        soc_kwh: soc,
+                        soc_min_kwh: cfg.soc_min_kwh,
+                        soc_max_kwh: cfg.soc_max_kwh.max(cfg.soc_min_kwh),
+                        max_charge_kw: cfg.max_charge_kw,
+                        max_discharge_kw: cfg.max_discharge_kw,
+                        eff_charge: *cfg.eff_charge.get_ref(),
+                        eff_discharge: *cfg.eff_discharge.get_ref(),
+                        cycle_cost_per_kwh: cfg.cycle_cost_per_kwh,
+                    };
+                    if !good {
+                        soc_known = false;
+                        // Never move a battery whose state of charge we cannot see.
+                        s.max_charge_kw = 0.0;
+                        s.max_discharge_kw = 0.0;
+                    }
+                    let cap = if cfg.capacity_kwh > 0.0 {
+                        cfg.capacity_kwh
+                    } else {
+                        cfg.soc_max_kwh
+                    };
+                    soc_sum += soc;
+                    cap_sum += cap;
+                    storage_cover += s
+                        .max_discharge_kw
+                        .min((soc - s.soc_min_kwh).max(0.0) * s.eff_discharge / cover_h);
+                    problem.storage.push(s);
+                }
+                UnitKind::Diesel => {
+                    let running = match self.read(db, &io.running, now) {
+                        Ok(v) => Some(v != 0.0),
+                        Err(e) => {
+                            problems.push(e);
+                            None
+                        }
+                    };
+                    if let Some(r) = running {
+                        measured_running.insert(id.clone(), r);
+                    }
+                    problem.oil.push(OilUnit {
+                        id,
+                        running: running.unwrap_or(false),
+                        min_kw: cfg.min_kw,
+                        max_kw: cfg.max_kw,
+                        cost_per_kwh: cfg.cost_per_kwh,
+                    });
+                }
+            }
+        }
+
+        // Commitment: adopt the measured state the first time, then the rule.
+        if self.first {
+            for d in &mut self.diesels {
+                d.run = measured_running.get(&d.id).copied().unwrap_or(false);
+                if d.run {
+                    d.since = now; // do not stop a running diesel right after a restart
+                }
+            }
+        }
+        let renewables: f64 = problem
+            .pv
+            .iter()
+            .chain(&problem.wind)
+            .map(|u| u.available_kw)
+            .sum();
+        let soc_frac = (soc_known && cap_sum > 0.0).then(|| soc_sum / cap_sum);
+        if let Some(dec) = commit_diesels(
+            &self.cfg.commitment,
+            now,
+            problem.demand_kw - renewables,
+            storage_cover,
+            soc_frac,
+            &self.diesels,
+        ) {
+            if let Some(d) = self.diesels.iter_mut().find(|d| d.id == dec.id) {
+                d.run = dec.run;
+                d.since = now;
+            }
+            notices.push(DispatchNotice::Event {
+                at: now,
+                message: format!(
+                    "{} {}: {}",
+                    dec.id,
+                    if dec.run { "start" } else { "stop" },
+                    dec.reason
+                ),
+            });
+        }
+        // The LP sees a diesel only when it is commanded on and reports running.
+        for o in &mut problem.oil {
+            let cmd = self
+                .diesels
+                .iter()
+                .find(|d| d.id == o.id)
+                .is_some_and(|d| d.run);
+            let meas = measured_running.get(&o.id).copied();
+            o.running = cmd && meas.unwrap_or(cmd);
+        }
+
+        // Solve, or fall back.
+        let mut st = DispatchStatus {
+            at: now,
+            ..DispatchStatus::default()
+        };
+        let mut reason: Option<String> = None;
+        if problems.is_empty() {
+            match problem.solve() {
+                Ok(sol) => {
+                    st.mode = DispatchMode::Optimal;
+                    st.status = "optimal".into();
+                    st.objective = Some(sol.objective);
+                    st.solve_ms = Some(sol.solve_ms);
+                    st.shed_kw = sol.shed_kw;
+                    st.setpoints_kw = sol.setpoints_kw;
+                }
+                Err(e) => {
+                    st.status = match &e {
+                        DispatchError::Infeasible(_) => "infeasible",
+                        _ => "error",
+                    }
+                    .into();
+                    reason = Some(format!("dispatch solve failed: {e}"));
+                }
+            }
+        } else {
+            st.status = "not solved".into();
+            reason = Some(format!("measurements unusable: {}", problems.join("; ")));
+        }
+        if st.mode == DispatchMode::Fallback {
+            self.apply_fallback(&problem, &mut st);
+        }
+
+        // Write setpoints, then run commands.
+        let mut failures = self.write_setpoints(writer, &st.setpoints_kw).await;
+        if !failures.is_empty() && st.mode == DispatchMode::Optimal {
+            // The optimal set no longer balances: replace it by the rule.
+            reason = Some(format!("setpoint write failed: {}", failures.join("; ")));
+            st.mode = DispatchMode::Fallback;
+            self.apply_fallback(&problem, &mut st);
+            failures.extend(self.write_setpoints(writer, &st.setpoints_kw).await);
+        }
+        for d in &self.diesels {
+            st.run_cmd.insert(d.id.clone(), d.run);
+        }
+        let diesel_io: Vec<(String, String)> = self
+            .units
+            .iter()
+            .filter(|u| u.cfg.kind == UnitKind::Diesel)
+            .map(|u| (u.cfg.id.get_ref().clone(), u.io.run_cmd.clone()))
+            .collect();
+        for (id, tag) in diesel_io {
+            let run = st.run_cmd.get(&id).copied().unwrap_or(false);
+            if self.run_written.get(&id) == Some(&run) {
+                continue;
+            }
+            match writer.write(&tag, Value::Bool(run)).await {
+                Ok(_) => {
+                    self.run_written.insert(id, run);
+                }
+                Err(e) => failures.push(format!("{tag}: {e}")),
+            }
+        }
+        if !failures.is_empty() && reason.is_none() {
+            reason = Some(format!("write failed: {}", failures.join("; ")));
+            st.mode = DispatchMode::Fallback;
+        }
+        st.write_failures = failures;
+        st.reason = reason.clone();
+        st.inputs = Some(problem);
+
+        // Alarm and events on transitions.
+        match (st.mode, self.alarm_active) {
+            (DispatchMode::Fallback, false) => {
+                let r = reason.unwrap_or_default();
+                tracing::warn!("dispatch fallback: {r}");
+                notices.push(DispatchNotice::Alarm {
+                    at: now,
+                    name: FALLBACK_ALARM.into(),
+                    active: true,
+                    reason: r.clone(),
+                });
+                notices.push(DispatchNotice::Event {
+                    at: now,
+                    message: format!("dispatch switched to the fallback rule: {r}"),
+                });
+                self.alarm_active = true;
+            }
+            (DispatchMode::Optimal, true) => {
+                notices.push(DispatchNotice::Alarm {
+                    at: now,
+                    name: FALLBACK_ALARM.into(),
+                    active: false,
+                    reason: "optimal dispatch restored".into(),
+                });
+                notices.push(DispatchNotice::Event {
+                    at: now,
+                    message: "dispatch back to optimal".into(),
+                });
+                self.alarm_active = false;
+            }
+            _ => {}
+        }
+        self.first = false;
+        (st, notices)
+    }
+
+    fn apply_fallback(&self, problem: &DispatchProblem, st: &mut DispatchStatus) {
+        let f = fallback_dispatch(problem);
+        st.mode = DispatchMode::Fallback;
+        st.setpoints_kw = f.setpoints_kw;
+        st.shed_kw = f.shed_kw;
+        st.objective = None;
+    }
+
+    async fn write_setpoints(&self, writer: &dyn TagWriter, sp: &Setpoints) -> Vec<String> {
+        let mut failures = Vec::new();
+        for u in &self.units {
+            let Some(v) = sp.get(u.cfg.id.get_ref()) else {
+                continue;
+            };
+            if let Err(e) = writer.write(&u.io.setpoint_kw, Value::Float(v)).await {
+                failures.push(format!("{}: {e}", u.io.setpoint_kw));
+            }
+        }
+        failures
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use gridscada_tagdb::{Quality, Sample, TagMeta, ValueKind, WriteError, WriteFuture};
+    use std::sync::Mutex;
+
+    const CFG: &str = r#"
+dispatch_period_s = 5.0
+voll_per_kwh = 5.0
+demand_tag = "MG.Load.P_kW"
+stale_after_s = 15.0
+
+[commitment]
+start_soc_frac = 0.25
+stop_soc_frac = 0.6
+min_run_s = 900.0
+min_stop_s = 300.0
+
+[[unit]]
+id = "pv1"
+kind = "pv"
+name = "PV array"
+prefix = "MG.PV1"
+rated_kw = 100.0
+
+[[unit]]
+id = "bess1"
+kind = "storage"
+name = "Battery"
+prefix = "MG.BESS1"
+capacity_kwh = 200.0
+soc_min_kwh = 20.0
+soc_max_kwh = 190.0
+max_charge_kw = 50.0
+max_discharge_kw = 60.0
+cycle_cost_per_kwh = 0.02
+
+[[unit]]
+id = "dg1"
+kind = "diesel"
+name = "Diesel"
+prefix = "MG.DG1"
+min_kw = 30.0
+max_kw = 150.0
+cost_per_kwh = 0.35
+"#;
+
+    fn config() -> MicrogridConfig {
+        toml::from_str(CFG).unwrap()
+    }
+
+    fn db(cfg: &MicrogridConfig) -> Arc<TagDb> {
+        let mut metas = vec![TagMeta::new(
+            cfg.demand_tag.get_ref().as_str(),
+            ValueKind::Float,
+        )];
+        for u in &cfg.units {
+            for t in u.required_tags() {
+                let kind = if t.ends_with("Running") || t.ends_with("RunCmd") {
+                    ValueKind::Bool
+                } else {
+                    ValueKind::Float
+                };
+                metas.push(TagMeta::new(t.as_str(), kind).writable(true));
+            }
+        }
+        Arc::new(TagDb::new(metas).unwrap())
+    }
+
+    /// Confirms writes by storing them in the tag database; can fail one tag.
+    struct FakeWriter {
+        db: Arc<TagDb>,
+        now: Mutex<Timestamp>,
+        fail: Mutex<Option<String>>,
+        log: Mutex<Vec<(String, Value)>>,
+    }
+
+    impl TagWriter for FakeWriter {
+        fn write<'a>(&'a self, name: &'a str, value: Value) -> WriteFuture<'a> {
+            Box::pin(async move {
+                if self.fail.lock().unwrap().as_deref() == Some(name) {
+                    return Err(WriteError::Timeout(name.to_string()));
+                }
+                let id = self
+                    .db
+                    .id(name)
+                    .ok_or_else(|| WriteError::UnknownTag(name.into()))?;
+                let s = Sample {
+                    value: value.clone(),
+                    quality: Quality::GOOD,
+                    timestamp: *self.now.lock().unwrap(),
+                };
+                self.db.apply([(id, s.clone())]);
+                self.log.lock().unwrap().push((name.to_string(), value));
+                Ok(s)
+            })
+        }
+    }
+
+    fn set(db: &TagDb, name: &str, v: impl Into<Value>, at: Timestamp) {
+        db.set(db.id(name).unwrap(), v, Quality::GOOD, at);
+    }
+
+    fn plant(db: &TagDb, at: Timestamp, demand: f64, pv: f64, soc: f64, running: bool) {
+        set(db, "MG.Load.P_kW", demand, at);
+        set(db, "MG.PV1.Available_kW", pv, at);
+        set(db, "MG.BESS1.SoC_kWh", soc, at);
+        set(db, "MG.DG1.Running", running, at);
+    }
+
+    fn written(w: &FakeWriter, tag: &str) -> Option<Value> {
+        w.log
+            .lock()
+            .unwrap()
+            .iter()
+            .rev()
+            .find(|(n, _)| n == tag)
+            .map(|(_, v)| v.clone())
+    }
+
+    fn fixture() -> (MicrogridConfig, Arc<TagDb>, FakeWriter) {
+        let cfg = config();
+        let db = db(&cfg);
+        let w = FakeWriter {
+            db: db.clone(),
+            now: Mutex::new(Timestamp::from_millis(0)),
+            fail: Mutex::new(None),
+            log: Mutex::new(Vec::new()),
+        };
+        (cfg, db, w)
+    }
+
+    #[tokio::test]
+    async fn optimal_period_writes_balanced_setpoints() {
+        let (cfg, db, w) = fixture();
+        let now = Timestamp::from_millis(1_000_000);
+        plant(&db, now, 150.0, 60.0, 100.0, true);
+        let mut d = Dispatcher::new(cfg, now);
+        let (st, notices) = d.step(&db, &w, now).await;
+        assert_eq!(st.mode, DispatchMode::Optimal, "{:?}", st.reason);
+        assert_eq!(st.status, "optimal");
+        // PV 60, battery 60, diesel 30.
+        assert_eq!(
+            written(&w, "MG.PV1.Setpoint_kW")
+                .and_then(|v| v.as_f64())
+                .map(|v| v.round()),
+            Some(60.0)
+        );
+        assert_eq!(
+            written(&w, "MG.BESS1.Setpoint_kW")
+                .and_then(|v| v.as_f64())
+                .map(|v| v.round()),
+            Some(60.0)
+        );
+        assert_eq!(
+            written(&w, "MG.DG1.Setpoint_kW")
+                .and_then(|v| v.as_f64())
+                .map(|v| v.round()),
+            Some(30.0)
+        );
+        assert_eq!(written(&w, "MG.DG1.RunCmd"), Some(Value::Bool(true)));
+        let total: f64 = st.setpoints_kw.0.iter().map(|(_, v)| v).sum::<f64>() + st.shed_kw;
+        assert!((total - 150.0).abs() < 1e-6);
+        assert!(notices
+            .iter()
+            .all(|n| !matches!(n, DispatchNotice::Alarm { .. })));
+        serde_json::to_string(&st).unwrap();
+    }
+
+    #[tokio::test]
+    async fn stale_or_bad_measurements_fall_back_and_raise_then_clear_the_alarm() {
+        let (cfg, db, w) = fixture();
+        let t0 = Timestamp::from_millis(1_000_000);
+        plant(&db, t0, 150.0, 60.0, 100.0, true);
+        let mut d = Dispatcher::new(cfg, t0);
+        d.step(&db, &w, t0).await;
+        // 20 s later nothing was refreshed: stale.
+        let t1 = t0.add(Duration::from_secs(20));
+        let (st, notices) = d.step(&db, &w, t1).await;
+        assert_eq!(st.mode, DispatchMode::Fallback);
+        assert!(
+            st.reason.as_deref().unwrap().contains("stale"),
+            "{:?}",
+            st.reason
+        );
+        assert!(notices.iter().any(|n| matches!(n, DispatchNotice::Alarm { active: true, name, .. } if name == FALLBACK_ALARM)));
+        // Fallback still writes sane, balanced setpoints from the held values.
+        let total: f64 = st.setpoints_kw.0.iter().map(|(_, v)| v).sum::<f64>() + st.shed_kw;
+        assert!((total - 150.0).abs() < 1e-6);
+        // A Bad quality demand also falls back (alarm already active: no new raise).
+        plant(&db, t1, 150.0, 60.0, 100.0, true);
+        db.set(
+            db.id("MG.Load.P_kW").unwrap(),
+            150.0,
+            Quality::bad("comm failure"),
+            t1,
+        );
+        let (st, notices) = d.step(&db, &w, t1).await;
+        assert_eq!(st.mode, DispatchMode::Fallback);
+        assert!(st.reason.as_deref().unwrap().contains("Bad"));
+        assert!(notices.is_empty());
+        // Fresh and good again: optimal, alarm cleared.
+        plant(&db, t1, 150.0, 60.0, 100.0, true);
+        let (st, notices) = d.step(&db, &w, t1).await;
+        assert_eq!(st.mode, DispatchMode::Optimal);
+        assert!(notices
+            .iter()
+            .any(|n| matches!(n, DispatchNotice::Alarm { active: false, .. })));
+    }
+
+    #[tokio::test]
+    async fn failed_write_switches_to_the_rule() {
+        let (cfg, db, w) = fixture();
+        let now = Timestamp::from_millis(1_000_000);
+        plant(&db, now, 150.0, 60.0, 100.0, true);
+        *w.fail.lock().unwrap() = Some("MG.BESS1.Setpoint_kW".into());
+        let mut d = Dispatcher::new(cfg, now);
+        let (st, notices) = d.step(&db, &w, now).await;
+        assert_eq!(st.mode, DispatchMode::Fallback);
+        assert!(st
+            .reason
+            .as_deref()
+            .unwrap()
+            .contains("MG.BESS1.Setpoint_kW"));
+        assert!(!st.write_failures.is_empty());
+        assert!(notices
+            .iter()
+            .any(|n| matches!(n, DispatchNotice::Alarm { active: true, .. })));
+        // The other units still got setpoints.
+        assert!(written(&w, "MG.PV1.Setpoint_kW").is_some());
+        assert!(written(&w, "MG.DG1.Setpoint_kW").is_some());
+    }
+
+    #[tokio::test]
+    async fn diesel_is_started_by_the_rule_and_only_loaded_once_running() {
+        let (cfg, db, w) = fixture();
+        let now = Timestamp::from_millis(1_000_000);
+        // Net load 200 - 20 = 180 kW, far beyond the battery: start dg1.
+        plant(&db, now, 200.0, 20.0, 100.0, false);
+        let mut d = Dispatcher::new(cfg, now);
+        let (st, notices) = d.step(&db, &w, now).await;
+        assert_eq!(written(&w, "MG.DG1.RunCmd"), Some(Value::Bool(true)));
+        assert!(notices.iter().any(
+            |n| matches!(n, DispatchNotice::Event { message, .. } if message.contains("dg1 start"))
+        ));
+        // Not yet running: zero setpoint and the deficit is shed.
+        assert_eq!(st.setpoints_kw.get("dg1"), Some(0.0));
+        assert!(st.shed_kw > 100.0);
+        // Next period it reports running: loaded.
+        let t1 = now.add(Duration::from_secs(5));
+        plant(&db, t1, 200.0, 20.0, 100.0, true);
+        let (st, _) = d.step(&db, &w, t1).await;
+        assert!(st.setpoints_kw.get("dg1").unwrap() > 100.0);
+        assert!(st.shed_kw < 1e-6);
+    }
+
+    /// A plant clock for the loop: sleeping advances plant time at once.
+    struct StepClock(Mutex<Timestamp>);
+    impl Clock for StepClock {
+        fn now(&self) -> Timestamp {
+            *self.0.lock().unwrap()
+        }
+        fn sleep(
+            &self,
+            d: Duration,
+        ) -> std::pin::Pin<Box<dyn std::future::Future<Output = ()> + Send>> {
+            let mut t = self.0.lock().unwrap();
+            *t = t.add(d);
+            Box::pin(tokio::task::yield_now())
+        }
+    }
+
+    #[tokio::test]
+    async fn run_dispatch_publishes_status_and_notices() {
+        let (cfg, db, w) = fixture();
+        // Stale measurements at start: a fallback alarm must arrive.
+        plant(&db, Timestamp::from_millis(0), 150.0, 60.0, 100.0, true);
+        let clock = Arc::new(StepClock(Mutex::new(Timestamp::from_millis(1_000_000))));
+        let (stx, mut srx) = watch::channel(DispatchStatus::default());
+        let (ntx, mut nrx) = mpsc::channel(16);
+        let task = tokio::spawn(run_dispatch(cfg, db.clone(), Arc::new(w), clock, stx, ntx));
+        loop {
+            let n = nrx.recv().await.unwrap();
+            if let DispatchNotice::Alarm {
+                active,
+                name,
+                reason,
+                ..
+            } = n
+            {
+                assert!(
+                    active && name == FALLBACK_ALARM && reason.contains("stale"),
+                    "{reason}"
+                );
+                break;
+            }
+        }
+        srx.changed().await.unwrap();
+        assert_eq!(srx.borrow().mode, DispatchMode::Fallback);
+        task.abort();
+    }
+}

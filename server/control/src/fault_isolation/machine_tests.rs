@@ -1,0 +1,1120 @@
+//! Tests of the pure sequence against a tiny simulated panel.
+//!
+//! The panel model: the ELCB trips whenever an energised load is faulty
+//! (load 0 = main MCCB, energised when ELCB and MCCB are closed; zone k when the
+//! MCCB and zone k are closed too). A reset pulse recloses the ELCB only if no
+//! load that would then be energised is faulty. Commands take effect at once and
+//! each batch of outputs is followed by a fresh snapshot, like the driver does.
+//! With `late_trip`, a faulty load trips the ELCB only after the snapshots that
+//! confirm the commands (before the next timer runs out): a trip detected late,
+//! which must still be pinned on the right load.
+
+use super::machine::*;
+
+#[derive(Debug, Clone)]
+struct Panel {
+    n: u8,
+    fault: Vec<bool>,
+    elcb: bool,
+    mccb: bool,
+    zones: Vec<bool>,
+    /// The ELCB does not reclose on reset (a failed ELCB).
+    elcb_stuck: bool,
+    /// These breakers ignore their commands.
+    stuck: Vec<Breaker>,
+    energised: Vec<bool>,
+    energise_count: Vec<u32>,
+    closes_while_elcb_open: u32,
+    trips: u32,
+    comm_ok: bool,
+    late_trip: bool,
+    /// A faulty load is energised; the ELCB trips at the next `fire_late_trip`.
+    trip_armed: bool,
+}
+
+impl Panel {
+    fn new(n: u8) -> Panel {
+        let loads = usize::from(n) + 1;
+        Panel {
+            n,
+            fault: vec![false; loads],
+            elcb: true,
+            mccb: true,
+            zones: vec![true; usize::from(n)],
+            elcb_stuck: false,
+            stuck: Vec::new(),
+            energised: vec![true; loads],
+            energise_count: vec![0; loads],
+            closes_while_elcb_open: 0,
+            trips: 0,
+            comm_ok: true,
+            late_trip: false,
+            trip_armed: false,
+        }
+    }
+
+    fn load_closed(&self, l: usize) -> bool {
+        self.mccb && (l == 0 || self.zones[l - 1])
+    }
+
+    fn update(&mut self) {
+        for l in 0..=usize::from(self.n) {
+            let en = self.elcb && self.load_closed(l);
+            if en && !self.energised[l] && self.fault[l] {
+                self.energise_count[l] += 1;
+            }
+            self.energised[l] = en;
+        }
+        if (0..=usize::from(self.n)).any(|l| self.energised[l] && self.fault[l]) {
+            if self.late_trip {
+                self.trip_armed = true;
+            } else {
+                self.trip();
+            }
+        }
+    }
+
+    fn trip(&mut self) {
+        self.elcb = false;
+        self.trips += 1;
+        self.trip_armed = false;
+        self.energised.iter_mut().for_each(|e| *e = false);
+    }
+
+    /// Trips the ELCB if a fault was energised (late mode); true if it did.
+    fn fire_late_trip(&mut self) -> bool {
+        if !self.trip_armed {
+            return false;
+        }
+        if self.elcb {
+            self.trip();
+        }
+        self.trip_armed = false;
+        true
+    }
+
+    fn apply(&mut self, b: Breaker, v: bool) {
+        if self.stuck.contains(&b) {
+            return;
+        }
+        match b {
+            Breaker::Elcb => {
+                let would_fault =
+                    (0..=usize::from(self.n)).any(|l| self.load_closed(l) && self.fault[l]);
+                if v && !self.elcb && !self.elcb_stuck && !would_fault {
+                    self.elcb = true;
+                }
+            }
+            Breaker::Mccb => {
+                if v && !self.elcb {
+                    self.closes_while_elcb_open += 1;
+                }
+                self.mccb = v;
+            }
+            Breaker::Zone(z) => {
+                if v && !self.elcb {
+                    self.closes_while_elcb_open += 1;
+                }
+                self.zones[usize::from(z) - 1] = v;
+            }
+        }
+        self.update();
+    }
+
+    fn snapshot(&self) -> Snapshot {
+        let mut s = Snapshot::good(self.elcb, self.mccb, &self.zones);
+        if !self.comm_ok {
+            s.elcb.good = false;
+        }
+        s
+    }
+
+    /// Exactly the healthy loads closed, ELCB closed.
+    fn healthy_on(&self) -> bool {
+        self.elcb
+            && self.mccb
+            && (1..=usize::from(self.n)).all(|z| self.zones[z - 1] != self.fault[z])
+    }
+
+    fn all_off(&self) -> bool {
+        !self.mccb && self.zones.iter().all(|z| !z)
+    }
+}
+
+/// How to disturb a run: at handle call `at`, lose communication for 10 s.
+#[derive(Debug, Clone, Copy)]
+struct Outage {
+    at: usize,
+    /// Someone closes/opens a zone locally while the SCADA is blind.
+    local_change: bool,
+}
+
+struct Harness {
+    seq: Sequence,
+    panel: Panel,
+    now: f64,
+    timers: Vec<(f64, Timer, u64)>,
+    need_snapshot: bool,
+    calls: usize,
+    outage: Option<Outage>,
+    /// Whether the machine was running a sequence when the outage began.
+    outage_while_running: Option<bool>,
+    step_after_outage: Option<Step>,
+    commands_while_suspended: usize,
+    events: Vec<(&'static str, String)>,
+    alarms: Vec<(String, bool)>,
+    commands: Vec<(Breaker, bool)>,
+    steps: Vec<&'static str>,
+}
+
+fn settings(n: u8) -> Settings {
+    Settings {
+        zones: n,
+        reclose_delay_s: 3.0,
+        dwell_s: 1.0,
+        confirm_timeout_s: 2.0,
+        max_trips: u32::from(n) + 2,
+        start_mode: Mode::Auto,
+    }
+}
+
+impl Harness {
+    fn new(settings: Settings) -> Harness {
+        let n = settings.zones;
+        let mut h = Harness {
+            seq: Sequence::new(settings),
+            panel: Panel::new(n),
+            now: 0.0,
+            timers: Vec::new(),
+            need_snapshot: false,
+            calls: 0,
+            outage: None,
+            outage_while_running: None,
+            step_after_outage: None,
+            commands_while_suspended: 0,
+            events: Vec::new(),
+            alarms: Vec::new(),
+            commands: Vec::new(),
+            steps: Vec::new(),
+        };
+        let s = h.panel.snapshot();
+        h.input(Input::Snapshot(s));
+        h
+    }
+
+    fn process(&mut self, out: Vec<Output>) {
+        let suspended = self.seq.step() == Step::Suspended;
+        for o in out {
+            match o {
+                Output::Command { breaker, value } => {
+                    if suspended {
+                        self.commands_while_suspended += 1;
+                    }
+                    self.commands.push((breaker, value));
+                    self.panel.apply(breaker, value);
+                    self.need_snapshot = true;
+                }
+                Output::StartTimer {
+                    timer,
+                    after_s,
+                    token,
+                } => {
+                    assert!(after_s > 0.0);
+                    self.timers.retain(|(_, t, _)| *t != timer);
+                    self.timers.push((self.now + after_s, timer, token));
+                }
+                Output::CancelTimer { timer } => self.timers.retain(|(_, t, _)| *t != timer),
+                Output::Event { kind, message } => {
+                    if kind == "step" {
+                        self.steps.push(self.seq_step_from(&message));
+                    }
+                    self.events.push((kind, message));
+                }
+                Output::Alarm { key, active, .. } => self.alarms.push((key, active)),
+            }
+        }
+    }
+
+    fn seq_step_from(&self, message: &str) -> &'static str {
+        let name = message.split(':').next().unwrap_or("");
+        [
+            Step::Idle,
+            Step::Tripped,
+            Step::RecloseWait,
+            Step::ElcbReset,
+            Step::Oluc,
+            Step::OlucDwell,
+            Step::Oldc,
+            Step::OldcDwell,
+            Step::Isolated,
+            Step::Lockout,
+            Step::Suspended,
+            Step::Manual,
+        ]
+        .into_iter()
+        .map(Step::name)
+        .find(|n| *n == name)
+        .unwrap_or("?")
+    }
+
+    fn input(&mut self, input: Input) {
+        self.calls += 1;
+        if let Some(o) = self.outage {
+            if o.at == self.calls {
+                self.lose_comm(o.local_change);
+                return; // the original input is superseded by the re-read
+            }
+        }
+        let out = self.seq.handle(input, self.now);
+        self.process(out);
+    }
+
+    fn lose_comm(&mut self, local_change: bool) {
+        let was_running = self.seq.step().is_running();
+        self.outage_while_running = Some(was_running);
+        let stale = self.timers.clone();
+        self.panel.comm_ok = false;
+        let out = self
+            .seq
+            .handle(Input::Snapshot(self.panel.snapshot()), self.now);
+        self.process(out);
+        if was_running {
+            assert_eq!(self.seq.step(), Step::Suspended);
+            assert!(
+                self.timers.is_empty(),
+                "timers must be cancelled when suspended"
+            );
+        }
+        // Expiries of cancelled timers arrive late: they must be ignored.
+        self.now += 10.0;
+        for (_, timer, token) in stale {
+            let out = self
+                .seq
+                .handle(Input::TimerExpired { timer, token }, self.now);
+            self.process(out);
+        }
+        if was_running {
+            assert_eq!(self.seq.step(), Step::Suspended);
+        }
+        if local_change {
+            // A breaker switched locally, directly at the panel: one whose
+            // state agrees with what the machine knows (so no command of the
+            // machine can explain the change).
+            let known = self.seq.known_state().cloned();
+            let pick = known.and_then(|k| {
+                (0..=self.panel.n).find(|l| {
+                    let here = if *l == 0 {
+                        self.panel.mccb
+                    } else {
+                        self.panel.zones[usize::from(*l) - 1]
+                    };
+                    k.closed(Breaker::load(*l)) == here
+                })
+            });
+            match pick {
+                Some(0) => self.panel.mccb = !self.panel.mccb,
+                Some(z) => self.panel.zones[usize::from(z) - 1] ^= true,
+                None => self.outage_while_running = Some(false), // nothing to assert
+            }
+            self.panel.update();
+        }
+        self.panel.comm_ok = true;
+        let out = self
+            .seq
+            .handle(Input::Snapshot(self.panel.snapshot()), self.now);
+        self.process(out);
+        self.step_after_outage = Some(self.seq.step());
+    }
+
+    /// Runs until nothing is left to do.
+    fn run(&mut self) {
+        self.run_until(|_| false);
+    }
+
+    /// Runs until `stop` holds (checked before each input) or nothing is left
+    /// to do.
+    fn run_until(&mut self, stop: impl Fn(&Harness) -> bool) {
+        for _ in 0..10_000 {
+            if stop(self) || !self.step_once() {
+                return;
+            }
+        }
+        panic!("sequence did not settle");
+    }
+
+    /// Delivers the next input: a snapshot after commands, a late trip, or the
+    /// earliest timer. False when nothing is left to do.
+    fn step_once(&mut self) -> bool {
+        if self.need_snapshot {
+            self.need_snapshot = false;
+            let s = self.panel.snapshot();
+            self.input(Input::Snapshot(s));
+            return true;
+        }
+        if self.panel.fire_late_trip() {
+            self.need_snapshot = true;
+            return true;
+        }
+        let Some(i) =
+            (0..self.timers.len()).min_by(|a, b| self.timers[*a].0.total_cmp(&self.timers[*b].0))
+        else {
+            return false;
+        };
+        let (at, timer, token) = self.timers.remove(i);
+        self.now = self.now.max(at);
+        self.input(Input::TimerExpired { timer, token });
+        true
+    }
+
+    fn command(&mut self, cmd: OperatorCommand) -> Result<(), CommandError> {
+        let out = self.seq.command(cmd, self.now)?;
+        self.process(out);
+        Ok(())
+    }
+
+    /// Injects faults on the given loads (0 = MCCB); the ELCB trips.
+    fn fault(&mut self, loads: &[u8]) {
+        for l in loads {
+            self.panel.fault[usize::from(*l)] = true;
+        }
+        self.panel.update();
+        self.panel.fire_late_trip();
+        self.need_snapshot = true;
+    }
+
+    fn clear_faults(&mut self) {
+        self.panel.fault.iter_mut().for_each(|f| *f = false);
+    }
+
+    fn has_event(&self, kind: &str) -> bool {
+        self.events.iter().any(|(k, _)| *k == kind)
+    }
+
+    fn alarm_active(&self, key: &str) -> bool {
+        self.alarms
+            .iter()
+            .rev()
+            .find(|(k, _)| k == key)
+            .is_some_and(|(_, a)| *a)
+    }
+}
+
+fn loads_of(mask: u32, n: u8) -> Vec<u8> {
+    (0..=n).filter(|l| mask & (1 << l) != 0).collect()
+}
+
+/// Checks the end state of a run with faults on `loads` (permanent or not).
+fn check_outcome(h: &Harness, loads: &[u8], permanent: bool, ctx: &str) {
+    let p = &h.panel;
+    assert_eq!(p.closes_while_elcb_open, 0, "{ctx}: closed while ELCB open");
+    if !permanent {
+        assert!(
+            p.healthy_on() && p.zones.iter().all(|z| *z),
+            "{ctx}: not all restored"
+        );
+        assert_eq!(h.seq.step(), Step::Idle, "{ctx}");
+        assert!(h.seq.faulty_zones().is_empty(), "{ctx}");
+        assert!(h.has_event("transient_fault"), "{ctx}: no transient event");
+        assert_eq!(h.seq.metrics().outcome, Outcome::Restored, "{ctx}");
+        return;
+    }
+    let zones: Vec<u8> = loads.iter().copied().filter(|l| *l > 0).collect();
+    if loads.contains(&0) {
+        assert_eq!(h.seq.step(), Step::Lockout, "{ctx}");
+        assert!(h.seq.lockout() && h.seq.load0_faulty(), "{ctx}");
+        assert!(p.all_off() && !p.elcb, "{ctx}: everything must be left off");
+        assert_eq!(p.energise_count[0], 1, "{ctx}: load 0 re-energised once");
+        assert!(
+            h.alarm_active("load0.fault") && h.alarm_active("lockout"),
+            "{ctx}"
+        );
+        return;
+    }
+    assert!(
+        p.healthy_on(),
+        "{ctx}: not exactly the healthy zones on: {p:?}"
+    );
+    assert_eq!(h.seq.faulty_zones(), zones, "{ctx}");
+    for z in &zones {
+        assert_eq!(
+            p.energise_count[usize::from(*z)],
+            1,
+            "{ctx}: zone {z} re-energised"
+        );
+        assert!(h.alarm_active(&format!("zone{z}.isolated")), "{ctx}");
+    }
+    assert_eq!(h.seq.step(), Step::Isolated, "{ctx}");
+    assert!(!h.seq.lockout(), "{ctx}");
+    let m = h.seq.metrics();
+    assert_eq!(m.reenergisations as usize, zones.len(), "{ctx}");
+    assert_eq!(m.trips as usize, zones.len() + 1, "{ctx}");
+    assert_eq!(m.elcb_resets as usize, zones.len() + 1, "{ctx}");
+    assert!(
+        !h.alarm_active("elcb.trip"),
+        "{ctx}: trip alarm must clear on reclose"
+    );
+    assert!(!h.has_event("transient_fault"), "{ctx}");
+}
+
+fn run_case(n: u8, mask: u32, permanent: bool, outage: Option<Outage>) -> Harness {
+    run_case_with(n, mask, permanent, outage, false)
+}
+
+fn run_case_with(
+    n: u8,
+    mask: u32,
+    permanent: bool,
+    outage: Option<Outage>,
+    late_trip: bool,
+) -> Harness {
+    let mut h = Harness::new(settings(n));
+    h.panel.late_trip = late_trip;
+    h.outage = outage;
+    h.fault(&loads_of(mask, n));
+    if !permanent {
+        h.clear_faults();
+    }
+    h.run();
+    h
+}
+
+#[test]
+fn every_subset_of_faulty_loads_for_1_to_8_zones() {
+    let mut runs = 0;
+    for late_trip in [false, true] {
+        for n in 1..=8u8 {
+            for mask in 1..(1u32 << (n + 1)) {
+                for permanent in [true, false] {
+                    let h = run_case_with(n, mask, permanent, None, late_trip);
+                    let ctx = format!(
+                        "N={n} faults={:?} permanent={permanent} late_trip={late_trip}",
+                        loads_of(mask, n)
+                    );
+                    check_outcome(&h, &loads_of(mask, n), permanent, &ctx);
+                    // Faults present from the start never trip a batch of
+                    // proven loads: every trip is pinned on one load.
+                    assert!(!h.has_event("proven_load_trip"), "{ctx}");
+                    runs += 1;
+                }
+            }
+        }
+    }
+    assert_eq!(runs, 4 * (2..=9).map(|k| (1 << k) - 1).sum::<usize>());
+}
+
+#[test]
+fn seed_case_zone_2_of_4() {
+    let mut h = Harness::new(settings(4));
+    h.fault(&[2]);
+    h.run();
+    check_outcome(&h, &[2], true, "seed");
+    assert_eq!(h.seq.count_l_cur_sv(), 2);
+    let m = h.seq.metrics();
+    assert_eq!(
+        m.reenergisations, 1,
+        "the fault is re-energised exactly once"
+    );
+    assert_eq!(m.elcb_resets, 2, "the ELCB is reclosed twice");
+    // The seed's order of steps.
+    let want = [
+        "tripped",
+        "reclose_wait",
+        "elcb_reset",
+        "oluc",
+        "oluc_dwell", // MCCB
+        "oluc",
+        "oluc_dwell", // zone 1
+        "oluc",       // zone 2 -> trip
+        "tripped",
+        "reclose_wait",
+        "elcb_reset",
+        "oluc",       // MCCB, proven: no dwell of its own
+        "oluc",       // zone 1, proven
+        "oluc_dwell", // one settle dwell for the batch
+        "oldc",
+        "oldc_dwell", // zone 4
+        "oldc",
+        "oldc_dwell", // zone 3
+        "isolated",
+    ];
+    assert_eq!(h.steps, want);
+    // Zone closes after the second reclose: MCCB, 1, then 4, 3.
+    let closes: Vec<Breaker> = h
+        .commands
+        .iter()
+        .filter(|(b, v)| *v && *b != Breaker::Elcb)
+        .map(|(b, _)| *b)
+        .collect();
+    assert_eq!(
+        closes,
+        [
+            Breaker::Mccb,
+            Breaker::Zone(1),
+            Breaker::Zone(2),
+            Breaker::Mccb,
+            Breaker::Zone(1),
+            Breaker::Zone(4),
+            Breaker::Zone(3)
+        ]
+    );
+}
+
+/// Bound vs. measured restore time for a permanent fault on each zone of the
+/// seed's 4-zone panel (reclose 3 s, dwell 1 s, instantaneous I/O):
+///
+/// | faulty zone | restore_s | bound_s | switching ops |
+/// |---|---|---|---|
+/// | 1 | 10 | 11 | 15 |
+/// | 2 | 10 | 11 | 17 |
+/// | 3 | 10 | 11 | 19 |
+/// | 4 | 10 | 11 | 21 |
+///
+/// restore_s = 2 × reclose + N × dwell for every k: the first OLUC walks up to
+/// zone k (k dwells, the last cut short by the trip), the second pass re-closes
+/// the proven loads 0..k−1 without dwell, settles once, then closes zones
+/// N..k+1 with a dwell each (the last zone counts when confirmed closed). When
+/// every pass dwelled on every load it was 2 × reclose + (N + k − 1) × dwell,
+/// over the bound for k > 2.
+#[test]
+fn timing_bound_vs_measured() {
+    println!("N | faulty zone | restore_s | bound_s | switching_ops | reenergisations");
+    for n in 1..=8u8 {
+        for k in 1..=n {
+            for late_trip in [false, true] {
+                let h = run_case_with(n, 1 << k, true, None, late_trip);
+                let m = h.seq.metrics();
+                if !late_trip {
+                    println!(
+                        "{n} | {k} | {:.1} | {:.1} | {} | {}",
+                        m.restore_s, m.bound_s, m.switching_ops, m.reenergisations
+                    );
+                }
+                let ctx = format!("N={n} k={k} late_trip={late_trip}: {m:?}");
+                assert_eq!(m.bound_s, 6.0 + f64::from(n) + 1.0, "{ctx}");
+                assert!(m.restore_s <= m.bound_s, "{ctx}");
+                // Instantaneous I/O: exactly 2 × reclose + N × dwell, and
+                // 2 × N + 5 + 2k switching operations (the first trip opens
+                // N + 1 loads; the ELCB is reset twice; k + 1 closes and
+                // opens around the second trip; N closes at the end).
+                assert!((m.restore_s - (6.0 + f64::from(n))).abs() < 1e-9, "{ctx}");
+                assert_eq!(
+                    m.switching_ops,
+                    2 * u32::from(n) + 5 + 2 * u32::from(k),
+                    "{ctx}"
+                );
+                assert_eq!(m.reenergisations, 1, "{ctx}");
+            }
+        }
+    }
+}
+
+#[test]
+fn comm_loss_at_every_step_resumes_or_locks_out() {
+    let mut runs = 0;
+    for n in 1..=5u8 {
+        for mask in 1..(1u32 << (n + 1)) {
+            for permanent in [true, false] {
+                let clean = run_case(n, mask, permanent, None);
+                for at in 2..=clean.calls {
+                    for local_change in [false, true] {
+                        let h = run_case(n, mask, permanent, Some(Outage { at, local_change }));
+                        runs += 1;
+                        let ctx = format!(
+                            "N={n} faults={:?} permanent={permanent} outage at call {at} local_change={local_change}",
+                            loads_of(mask, n)
+                        );
+                        assert_eq!(h.commands_while_suspended, 0, "{ctx}");
+                        assert_eq!(h.panel.closes_while_elcb_open, 0, "{ctx}");
+                        let Some(running) = h.outage_while_running else {
+                            continue; // the run ended before the outage
+                        };
+                        if !running {
+                            continue;
+                        }
+                        assert!(h.alarms.iter().any(|(k, a)| k == "comm" && *a), "{ctx}");
+                        assert!(!h.alarm_active("comm"), "{ctx}: comm alarm must clear");
+                        if local_change {
+                            assert_eq!(h.step_after_outage, Some(Step::Lockout), "{ctx}");
+                            assert!(h.seq.lockout(), "{ctx}");
+                        } else {
+                            check_outcome(&h, &loads_of(mask, n), permanent, &ctx);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    assert!(runs > 1000, "{runs}");
+}
+
+#[test]
+fn comm_loss_at_every_step_with_late_trips() {
+    let mut runs = 0;
+    for n in 1..=4u8 {
+        for mask in 1..(1u32 << (n + 1)) {
+            let clean = run_case_with(n, mask, true, None, true);
+            for at in 2..=clean.calls {
+                let h = run_case_with(
+                    n,
+                    mask,
+                    true,
+                    Some(Outage {
+                        at,
+                        local_change: false,
+                    }),
+                    true,
+                );
+                runs += 1;
+                let ctx = format!(
+                    "N={n} faults={:?} late trip, outage at call {at}",
+                    loads_of(mask, n)
+                );
+                assert_eq!(h.commands_while_suspended, 0, "{ctx}");
+                check_outcome(&h, &loads_of(mask, n), true, &ctx);
+                assert!(!h.has_event("proven_load_trip"), "{ctx}");
+            }
+        }
+    }
+    assert!(runs > 500, "{runs}");
+}
+
+/// Runs `h` (fault on zone 3 of 4) to the reclose wait after zone 3 tripped:
+/// MCCB and zones 1, 2 are proven healthy by then.
+fn run_to_second_reclose_wait(h: &mut Harness) {
+    h.fault(&[3]);
+    h.run_until(|h| h.seq.metrics().trips == 2 && h.seq.step() == Step::RecloseWait);
+    assert_eq!(h.seq.faulty_zones(), vec![3]);
+    assert_eq!(h.seq.step(), Step::RecloseWait);
+}
+
+/// A new fault on a zone proven healthy earlier in the same sequence trips the
+/// batch of proven loads (at once, or late: during its settle dwell). No load
+/// is blamed; the proofs are withdrawn and the plain algorithm, a full dwell
+/// on every load, pins the fault on the right zone.
+#[test]
+fn new_fault_on_a_proven_zone_withdraws_the_proofs() {
+    for late_trip in [false, true] {
+        let ctx = format!("late_trip={late_trip}");
+        let mut h = Harness::new(settings(4));
+        h.panel.late_trip = late_trip;
+        run_to_second_reclose_wait(&mut h);
+        h.panel.fault[1] = true; // zone 1 develops a fault while open
+        h.run();
+        let (i, (_, msg)) = h
+            .events
+            .iter()
+            .enumerate()
+            .find(|(_, (k, _))| *k == "proven_load_trip")
+            .unwrap_or_else(|| panic!("{ctx}: no proven_load_trip event"));
+        // At once: on closing zone 1. Late: in the settle dwell of the batch.
+        let suspects = if late_trip {
+            "load(s) 0, 1, 2 "
+        } else {
+            "load(s) 0, 1 "
+        };
+        assert!(msg.contains(suspects), "{ctx}: {msg}");
+        // After the withdrawal every load is closed with a full dwell.
+        assert!(
+            h.events[i + 1..]
+                .iter()
+                .all(|(_, m)| !m.contains("re-closing") && !m.contains("re-closed")),
+            "{ctx}"
+        );
+        assert!(h.panel.healthy_on(), "{ctx}: {:?}", h.panel);
+        assert_eq!(h.seq.faulty_zones(), vec![1, 3], "{ctx}");
+        assert_eq!(h.seq.step(), Step::Isolated, "{ctx}");
+        assert_eq!(h.panel.closes_while_elcb_open, 0, "{ctx}");
+        let m = h.seq.metrics();
+        assert_eq!(m.trips, 4, "{ctx}: first, zone 3, batch, zone 1");
+        assert_eq!(m.reenergisations, 2, "{ctx}");
+        assert_eq!(h.panel.energise_count[3], 1, "{ctx}");
+        assert_eq!(
+            h.panel.energise_count[1], 2,
+            "{ctx}: batch, then its own dwell"
+        );
+        assert!(!h.alarm_active("zone2.isolated") && !h.alarm_active("zone4.isolated"));
+    }
+}
+
+/// The trip of a batch counts against the trip limit like any other.
+#[test]
+fn proven_batch_trip_counts_against_the_trip_limit() {
+    let mut s = settings(4);
+    s.max_trips = 2;
+    let mut h = Harness::new(s);
+    run_to_second_reclose_wait(&mut h);
+    h.panel.fault[2] = true;
+    h.run();
+    assert!(h.has_event("proven_load_trip"));
+    assert_eq!(h.seq.step(), Step::Lockout);
+    assert_eq!(h.seq.metrics().trips, 3);
+    assert!(h.panel.all_off() && !h.panel.elcb);
+    assert_eq!(
+        h.seq.faulty_zones(),
+        vec![3],
+        "no zone is blamed for the batch trip"
+    );
+}
+
+/// Proven loads are re-closed one at a time, each confirmed by its status
+/// input; one that does not follow is a mismatch and locks out.
+#[test]
+fn proven_load_not_following_its_command_locks_out() {
+    let mut h = Harness::new(settings(4));
+    run_to_second_reclose_wait(&mut h);
+    h.panel.stuck.push(Breaker::Zone(1)); // stays open
+    let t0 = h.now;
+    h.run();
+    assert!(h.alarm_active("zone1.mismatch"));
+    assert_eq!(h.seq.step(), Step::Lockout);
+    // Reclose wait, then the confirmation timeout of zone 1's close.
+    assert!((h.now - t0 - (3.0 + 2.0)).abs() < 1e-9, "{}", h.now - t0);
+    assert!(!h.panel.zones[1] && !h.panel.zones[3]);
+    assert_eq!(h.panel.closes_while_elcb_open, 0);
+}
+
+/// After a Reset the loads found closed are skipped, not proven: a later pass
+/// interleaves unproven loads (full dwell) and proven ones (no dwell, then one
+/// settle dwell before the next unproven load).
+#[test]
+fn reset_pass_interleaves_proven_and_unproven_loads() {
+    let mut h = Harness::new(settings(4));
+    h.fault(&[3]);
+    h.run();
+    // Zone 3 is not repaired. The operator opens zone 2 too before the Reset (manual mode).
+    h.command(OperatorCommand::SetMode(Mode::Manual)).unwrap();
+    h.command(OperatorCommand::Breaker {
+        breaker: Breaker::Zone(2),
+        close: false,
+    })
+    .unwrap();
+    h.run();
+    h.command(OperatorCommand::SetMode(Mode::Auto)).unwrap();
+    h.run();
+    let from = h.steps.len();
+    let events_from = h.events.len();
+    h.command(OperatorCommand::Reset).unwrap();
+    h.run();
+    // Reset pass: MCCB, zone 1, zone 4 on (skipped); zone 2 closed + dwell
+    // (proven); zone 3 trips. Next pass: MCCB and zone 1 with a dwell each,
+    // zone 2 re-closed without, one settle dwell, zone 4 with a dwell.
+    assert_eq!(
+        &h.steps[from..],
+        [
+            "oluc",
+            "oluc_dwell", // zone 2, proven
+            "oluc",       // zone 3 -> trip
+            "tripped",
+            "reclose_wait",
+            "elcb_reset",
+            "oluc",
+            "oluc_dwell", // MCCB
+            "oluc",
+            "oluc_dwell", // zone 1
+            "oluc",       // zone 2, no dwell of its own
+            "oluc_dwell", // settle
+            "oldc",
+            "oldc_dwell", // zone 4
+            "isolated",
+        ]
+    );
+    assert!(h.events[events_from..]
+        .iter()
+        .any(|(_, m)| m.contains("re-closing zone 2 MCB")));
+    assert!(h.panel.healthy_on(), "{:?}", h.panel);
+    assert_eq!(h.seq.faulty_zones(), vec![3]);
+    assert_eq!(h.seq.metrics().trips, 1);
+    assert_eq!(h.panel.closes_while_elcb_open, 0);
+    assert_eq!(h.panel.energise_count[3], 2, "once per sequence");
+}
+
+#[test]
+fn elcb_reset_not_confirmed_locks_out() {
+    let mut h = Harness::new(settings(4));
+    h.panel.elcb_stuck = true;
+    h.fault(&[3]);
+    h.run();
+    assert_eq!(h.seq.step(), Step::Lockout);
+    assert!(h.alarm_active("elcb.reset_failed") && h.alarm_active("lockout"));
+    assert!(h.panel.all_off());
+    // The lockout came one confirmation timeout after the reset.
+    assert!((h.now - (3.0 + 2.0)).abs() < 1e-9, "{}", h.now);
+}
+
+#[test]
+fn trip_limit_locks_out_with_everything_off() {
+    let mut s = settings(4);
+    s.max_trips = 2;
+    let mut h = Harness::new(s);
+    h.fault(&[2, 3]); // isolating both takes three trips
+    h.run();
+    assert_eq!(h.seq.step(), Step::Lockout);
+    assert!(h.alarm_active("lockout"));
+    assert_eq!(h.seq.metrics().trips, 3);
+    assert_eq!(h.seq.metrics().outcome, Outcome::Lockout);
+    assert!(h.panel.all_off() && !h.panel.elcb);
+    // The operator must act: nothing happens by itself afterwards.
+    let n = h.commands.len();
+    h.now += 100.0;
+    h.need_snapshot = true;
+    h.run();
+    assert_eq!(h.commands.len(), n);
+}
+
+#[test]
+fn breaker_not_following_its_command_is_a_mismatch_and_locks_out() {
+    let mut h = Harness::new(settings(4));
+    h.panel.stuck.push(Breaker::Zone(3));
+    h.panel.zones[2] = false; // zone 3 stuck open
+    h.need_snapshot = true;
+    h.run();
+    h.fault(&[1]);
+    h.run();
+    assert!(h.alarm_active("zone3.mismatch"));
+    assert_eq!(h.seq.step(), Step::Lockout);
+    assert!(h.seq.lockout());
+}
+
+#[test]
+fn refused_write_locks_out_and_comm_failure_suspends() {
+    let mut h = Harness::new(settings(4));
+    h.fault(&[2]);
+    // Run to the first OLUC close of the MCCB, then fail it.
+    while !h.commands.iter().any(|(b, v)| *b == Breaker::Mccb && *v) {
+        if h.need_snapshot {
+            h.need_snapshot = false;
+            let s = h.panel.snapshot();
+            h.input(Input::Snapshot(s));
+            continue;
+        }
+        let (at, timer, token) = h.timers.remove(0);
+        h.now = at;
+        h.input(Input::TimerExpired { timer, token });
+    }
+    let mut comm = h.seq.clone();
+    let out = comm.handle(
+        Input::CommandFailed {
+            breaker: Breaker::Mccb,
+            value: true,
+            reason: "device 'SS1.IO1' did not take the write: timeout".into(),
+            comm: true,
+        },
+        h.now,
+    );
+    assert_eq!(comm.step(), Step::Suspended);
+    assert!(!out.iter().any(|o| matches!(o, Output::Command { .. })));
+
+    let out = h.seq.handle(
+        Input::CommandFailed {
+            breaker: Breaker::Mccb,
+            value: true,
+            reason: "read-back mismatch".into(),
+            comm: false,
+        },
+        h.now,
+    );
+    assert_eq!(h.seq.step(), Step::Lockout);
+    assert!(out
+        .iter()
+        .any(|o| matches!(o, Output::Alarm { key, active: true, .. } if key == "mccb.mismatch")));
+}
+
+#[test]
+fn local_operation_during_sequence_locks_out() {
+    let mut h = Harness::new(settings(4));
+    h.fault(&[4]);
+    // Up to the reclose wait.
+    h.need_snapshot = false;
+    let s = h.panel.snapshot();
+    h.input(Input::Snapshot(s));
+    let s = h.panel.snapshot();
+    h.input(Input::Snapshot(s));
+    assert_eq!(h.seq.step(), Step::RecloseWait);
+    h.panel.elcb = true; // someone reset the ELCB at the panel
+    let s = h.panel.snapshot();
+    h.input(Input::Snapshot(s));
+    assert_eq!(h.seq.step(), Step::Lockout);
+    assert!(h.alarm_active("lockout"));
+}
+
+#[test]
+fn manual_mode_stops_the_sequence_and_interlocks_commands() {
+    let mut h = Harness::new(settings(4));
+    assert_eq!(
+        h.command(OperatorCommand::Breaker {
+            breaker: Breaker::Zone(1),
+            close: false
+        }),
+        Err(CommandError::NotManual)
+    );
+    h.fault(&[2]);
+    h.need_snapshot = false;
+    let s = h.panel.snapshot();
+    h.input(Input::Snapshot(s));
+    assert!(h.seq.step().is_running());
+    h.command(OperatorCommand::SetMode(Mode::Manual)).unwrap();
+    assert_eq!(h.seq.step(), Step::Manual);
+    assert_eq!(h.seq.metrics().outcome, Outcome::Stopped);
+    // Nothing switches by itself in manual mode.
+    let n = h.commands.len();
+    h.run();
+    h.now += 100.0;
+    h.need_snapshot = true;
+    h.run();
+    assert_eq!(h.commands.len(), n);
+    assert!(!h.panel.elcb);
+    // Interlock: no zone or MCCB close while the ELCB is open.
+    for b in [Breaker::Mccb, Breaker::Zone(1)] {
+        assert!(matches!(
+            h.command(OperatorCommand::Breaker {
+                breaker: b,
+                close: true
+            }),
+            Err(CommandError::Interlocked(_))
+        ));
+    }
+    assert_eq!(
+        h.command(OperatorCommand::Breaker {
+            breaker: Breaker::Elcb,
+            close: false
+        }),
+        Err(CommandError::ElcbCannotOpen)
+    );
+    // The operator isolates by hand: reset the ELCB, close MCCB and zone 1.
+    h.command(OperatorCommand::Breaker {
+        breaker: Breaker::Elcb,
+        close: true,
+    })
+    .unwrap();
+    h.run();
+    assert!(h.panel.elcb);
+    for b in [Breaker::Mccb, Breaker::Zone(1)] {
+        h.command(OperatorCommand::Breaker {
+            breaker: b,
+            close: true,
+        })
+        .unwrap();
+        h.run();
+    }
+    assert!(h.panel.mccb && h.panel.zones[0] && h.panel.elcb);
+    assert!(!h.alarms.iter().any(|(k, a)| k.ends_with(".mismatch") && *a));
+    assert_eq!(h.panel.closes_while_elcb_open, 0);
+    // Back to auto: the ELCB is closed, so nothing starts by itself.
+    h.command(OperatorCommand::SetMode(Mode::Auto)).unwrap();
+    h.run();
+    assert_eq!(h.seq.step(), Step::Idle);
+}
+
+#[test]
+fn manual_command_not_followed_raises_mismatch_without_lockout() {
+    let mut s = settings(2);
+    s.start_mode = Mode::Manual;
+    let mut h = Harness::new(s);
+    h.panel.stuck.push(Breaker::Zone(2));
+    h.command(OperatorCommand::Breaker {
+        breaker: Breaker::Zone(2),
+        close: false,
+    })
+    .unwrap();
+    h.run();
+    assert!(h.alarm_active("zone2.mismatch"));
+    assert_eq!(h.seq.step(), Step::Manual);
+    assert!(!h.seq.lockout());
+}
+
+#[test]
+fn reset_after_repair_restores_the_repaired_zone() {
+    let mut h = Harness::new(settings(4));
+    h.fault(&[2]);
+    h.run();
+    assert_eq!(h.seq.step(), Step::Isolated);
+    // Reset is refused while a sequence runs (checked on a fresh trip below).
+    h.clear_faults(); // repaired
+    let before = h.commands.len();
+    h.command(OperatorCommand::Reset).unwrap();
+    assert_eq!(h.seq.count_l_cur_sv(), 0);
+    h.run();
+    assert!(h.panel.healthy_on() && h.panel.zones.iter().all(|z| *z));
+    assert_eq!(h.seq.step(), Step::Idle);
+    assert!(h.seq.faulty_zones().is_empty());
+    assert!(!h.alarm_active("zone2.isolated"));
+    // Healthy zones were not interrupted: the only command is closing zone 2.
+    assert_eq!(&h.commands[before..], &[(Breaker::Zone(2), true)]);
+    assert!(!h.has_event("transient_fault"));
+}
+
+#[test]
+fn reset_with_fault_not_repaired_isolates_it_again() {
+    let mut h = Harness::new(settings(4));
+    h.fault(&[3]);
+    h.run();
+    h.command(OperatorCommand::Reset).unwrap();
+    h.run();
+    assert!(h.panel.healthy_on());
+    assert_eq!(h.seq.faulty_zones(), vec![3]);
+    assert_eq!(h.panel.energise_count[3], 2);
+}
+
+#[test]
+fn reset_clears_a_lockout_and_reruns() {
+    let mut h = Harness::new(settings(3));
+    h.fault(&[0]);
+    h.run();
+    assert_eq!(h.seq.step(), Step::Lockout);
+    assert!(h.panel.all_off());
+    h.clear_faults();
+    h.command(OperatorCommand::Reset).unwrap();
+    assert!(h.seq.step().is_running());
+    assert_eq!(
+        h.seq.clone().command(OperatorCommand::Reset, h.now),
+        Err(CommandError::Busy(h.seq.step_name()))
+    );
+    h.run();
+    assert!(h.panel.healthy_on() && h.panel.zones.iter().all(|z| *z));
+    assert!(!h.seq.lockout() && !h.alarm_active("lockout") && !h.alarm_active("load0.fault"));
+    assert_eq!(h.panel.closes_while_elcb_open, 0);
+}
+
+#[test]
+fn reset_refused_without_communication() {
+    let mut h = Harness::new(settings(2));
+    h.panel.comm_ok = false;
+    let s = h.panel.snapshot();
+    h.input(Input::Snapshot(s));
+    assert_eq!(
+        h.command(OperatorCommand::Reset),
+        Err(CommandError::CommLost)
+    );
+}
+
+#[test]
+fn start_up_with_a_tripped_elcb_starts_a_sequence_and_manual_start_does_not() {
+    for mode in [Mode::Auto, Mode::Manual] {
+        let mut s = settings(2);
+        s.start_mode = mode;
+        let mut seq = Sequence::new(s);
+        // No decision on bad data.
+        let out = seq.handle(Input::Snapshot(Snapshot::good(false, true, &[true])), 0.0);
+        assert!(
+            out.iter().all(|o| !matches!(o, Output::Command { .. })),
+            "malformed snapshot"
+        );
+        let out = seq.handle(
+            Input::Snapshot(Snapshot::good(false, true, &[true, true])),
+            0.0,
+        );
+        let commands = out.iter().any(|o| matches!(o, Output::Command { .. }));
+        assert_eq!(commands, mode == Mode::Auto);
+    }
+}
+
+#[test]
+fn breaker_names_parse() {
+    assert_eq!(Breaker::parse("ELCB", 4), Ok(Breaker::Elcb));
+    assert_eq!(Breaker::parse(" mccb ", 4), Ok(Breaker::Mccb));
+    assert_eq!(Breaker::parse("zone4", 4), Ok(Breaker::Zone(4)));
+    for bad in ["zone0", "zone5", "zone", "zone-1", "zone999999", "", "x"] {
+        assert!(Breaker::parse(bad, 4).is_err(), "{bad}");
+    }
+    assert_eq!(Breaker::Zone(3).name(), "zone3");
+}
