@@ -5,8 +5,11 @@
 //! subcommand hands its work to the crate that owns it.
 
 mod demo_plant;
+mod dispatch_cmd;
 mod logging;
 mod runtime;
+mod sinks;
+mod users;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -52,6 +55,63 @@ enum Command {
         #[arg(default_value = ".")]
         path: PathBuf,
     },
+    /// Run the simulated plant alone, as Modbus servers on the configured
+    /// addresses, for third-party clients and commissioning.
+    Sim {
+        /// A plant configuration; the embedded demo plant by default.
+        #[arg(long)]
+        config: Option<PathBuf>,
+    },
+    /// Manage users.
+    User {
+        #[command(subcommand)]
+        command: UserCommand,
+    },
+    /// Microgrid dispatch tools.
+    Dispatch {
+        #[command(subcommand)]
+        command: DispatchCommand,
+    },
+}
+
+#[derive(Subcommand)]
+enum UserCommand {
+    /// Create a user. The password is read from standard input when piped;
+    /// otherwise one is generated and printed once.
+    Add {
+        name: String,
+        #[arg(long, value_parser = parse_role)]
+        role: gridscada_config::Role,
+        /// Screen-access group; the role's name by default.
+        #[arg(long)]
+        group: Option<String>,
+        /// The plant whose database holds the user.
+        #[arg(long, conflicts_with = "data")]
+        config: Option<PathBuf>,
+        /// The demo's data folder (when not using --config).
+        #[arg(long, default_value = "gridscada-data")]
+        data: PathBuf,
+    },
+}
+
+#[derive(Subcommand)]
+enum DispatchCommand {
+    /// Solve a dispatch problem given as JSON (FILE, or - for stdin) and print
+    /// the solution. Exit code 0 optimal, 1 bad input, 2 infeasible, 3 solver failure.
+    Solve { file: String },
+}
+
+fn parse_role(s: &str) -> Result<gridscada_config::Role, String> {
+    use gridscada_config::Role;
+    match s {
+        "guest" => Ok(Role::Guest),
+        "operator" => Ok(Role::Operator),
+        "supervisor" => Ok(Role::Supervisor),
+        "administrator" | "admin" => Ok(Role::Administrator),
+        other => Err(format!(
+            "'{other}' is not a role; use guest, operator, supervisor or administrator"
+        )),
+    }
 }
 
 fn main() -> ExitCode {
@@ -61,6 +121,28 @@ fn main() -> ExitCode {
         Command::Check { path } => check(&path),
         Command::Demo { http, data } => runtime::block_on(runtime::demo(http, data)),
         Command::Serve { config } => runtime::block_on(runtime::serve(config)),
+        Command::Sim { config } => runtime::block_on(runtime::sim(config)),
+        Command::User {
+            command:
+                UserCommand::Add {
+                    name,
+                    role,
+                    group,
+                    config,
+                    data,
+                },
+        } => {
+            let target = match config {
+                Some(c) => users::Target::Config(c),
+                None => users::Target::DemoData(data),
+            };
+            runtime::block_on(async move {
+                runtime::report(users::add(name, role, group, target).await)
+            })
+        }
+        Command::Dispatch {
+            command: DispatchCommand::Solve { file },
+        } => ExitCode::from(dispatch_cmd::run_solve(&file).clamp(0, 255) as u8),
     }
 }
 

@@ -1,5 +1,6 @@
-//! Wiring: builds the tag database from the plant configuration, starts the
-//! components and the HTTP server, and stops them on Ctrl-C.
+//! Wiring: opens the store, builds the tag database, starts the simulators
+//! (demo), the field I/O, the control loops and the HTTP server, and stops
+//! them in reverse order on Ctrl-C.
 
 use std::future::Future;
 use std::net::SocketAddr;
@@ -10,9 +11,15 @@ use std::time::Instant;
 
 use anyhow::{anyhow, Context};
 use gridscada_config::Plant;
-use gridscada_tagdb::TagDb;
+use gridscada_control::dispatch::{self, DispatchStatus};
+use gridscada_control::fault_isolation::{self, PanelNotice, PanelStatus};
+use gridscada_store::{NewEvent, OpenOptions, Store};
+use gridscada_tagdb::{Clock, SystemClock, TagDb, TagMeta};
+use gridscada_web::api::panels::PanelHandle;
+use tokio::sync::{mpsc, watch};
+use tokio::task::JoinSet;
 
-use crate::demo_plant;
+use crate::{demo_plant, sinks, users};
 
 pub fn block_on(fut: impl Future<Output = ExitCode>) -> ExitCode {
     match tokio::runtime::Builder::new_multi_thread()
@@ -27,7 +34,7 @@ pub fn block_on(fut: impl Future<Output = ExitCode>) -> ExitCode {
     }
 }
 
-fn report(result: anyhow::Result<()>) -> ExitCode {
+pub fn report(result: anyhow::Result<()>) -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
@@ -37,75 +44,393 @@ fn report(result: anyhow::Result<()>) -> ExitCode {
     }
 }
 
-/// `gridscada demo`: the embedded plant, on loopback.
-pub async fn demo(http: String, data: PathBuf) -> ExitCode {
-    report(demo_inner(http, data).await)
+fn diagnostics(what: &str, diags: Vec<gridscada_config::Diagnostic>) -> anyhow::Error {
+    let lines: Vec<String> = diags.iter().map(|d| d.to_string()).collect();
+    anyhow!(
+        "{what} has {} problem(s); not starting:\n{}",
+        diags.len(),
+        lines.join("\n")
+    )
 }
 
-async fn demo_inner(http: String, data: PathBuf) -> anyhow::Result<()> {
-    let plant = demo_plant::load().map_err(|diags| {
-        let lines: Vec<String> = diags.iter().map(|d| d.to_string()).collect();
-        anyhow!("the embedded demo plant is invalid:\n{}", lines.join("\n"))
-    })?;
-    let addr: SocketAddr = http
-        .parse()
-        .with_context(|| format!("--http '{http}' is not an address like 127.0.0.1:8080"))?;
-    run(plant, addr, &data, "demo").await
+/// How the server runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Mode {
+    /// Embedded plant, simulators on loopback, generated credentials.
+    Demo,
+    /// A real plant.
+    Serve,
+}
+
+impl Mode {
+    fn label(self) -> &'static str {
+        match self {
+            Mode::Demo => "demo",
+            Mode::Serve => "serve",
+        }
+    }
+}
+
+/// `gridscada demo`: the embedded plant, on loopback.
+pub async fn demo(http: String, data: PathBuf) -> ExitCode {
+    report(
+        async {
+            let plant = demo_plant::load().map_err(|d| diagnostics("the embedded demo plant", d))?;
+            let addr: SocketAddr = http
+                .parse()
+                .with_context(|| format!("--http '{http}' is not an address like 127.0.0.1:8080"))?;
+            if !addr.ip().is_loopback() {
+                return Err(anyhow!(
+                    "the demo prints its passwords and serves a simulated plant, so it only binds loopback addresses; --http {addr} is not one"
+                ));
+            }
+            run(plant, addr, &data, Mode::Demo).await
+        }
+        .await,
+    )
 }
 
 /// `gridscada serve`: a real plant configuration. Refuses to start on any
 /// configuration problem.
 pub async fn serve(config: PathBuf) -> ExitCode {
-    report(serve_inner(config).await)
+    report(
+        async {
+            let plant = gridscada_config::load_path(&config)
+                .map_err(|d| diagnostics("the configuration", d))?;
+            let addr: SocketAddr = plant
+                .server
+                .http
+                .get_ref()
+                .parse()
+                .context("[server] http is not a socket address")?;
+            let data = PathBuf::from(&plant.server.data_dir);
+            run(plant, addr, &data, Mode::Serve).await
+        }
+        .await,
+    )
 }
 
-async fn serve_inner(config: PathBuf) -> anyhow::Result<()> {
-    let plant = gridscada_config::load_path(&config).map_err(|diags| {
-        let lines: Vec<String> = diags.iter().map(|d| d.to_string()).collect();
-        anyhow!(
-            "the configuration has {} problem(s); not starting:\n{}",
-            diags.len(),
-            lines.join("\n")
-        )
-    })?;
-    let addr: SocketAddr = plant
-        .server
-        .http
-        .get_ref()
-        .parse()
-        .context("[server] http is not a socket address")?;
-    let data = PathBuf::from(&plant.server.data_dir);
-    run(plant, addr, &data, "serve").await
+/// `gridscada sim`: the simulated plant alone on its configured addresses.
+pub async fn sim(config: Option<PathBuf>) -> ExitCode {
+    report(
+        async {
+            let plant = match config {
+                Some(c) => gridscada_config::load_path(&c)
+                    .map_err(|d| diagnostics("the configuration", d))?,
+                None => {
+                    demo_plant::load().map_err(|d| diagnostics("the embedded demo plant", d))?
+                }
+            };
+            gridscada_sim::run_standalone(&plant)
+                .await
+                .context("running the simulated plant")
+        }
+        .await,
+    )
 }
 
-async fn run(plant: Plant, http: SocketAddr, data: &Path, mode: &str) -> anyhow::Result<()> {
+/// Opens (and migrates) the plant's store. A relative SQLite path lives in
+/// the data folder.
+pub async fn open_store(plant: &Plant, data: &Path) -> anyhow::Result<Store> {
     std::fs::create_dir_all(data)
         .with_context(|| format!("cannot create the data folder {}", data.display()))?;
-    let db = Arc::new(TagDb::new(plant.tag_metas()).context("building the tag database")?);
+    let url = plant.storage.url.get_ref();
+    let store = Store::open(url, &OpenOptions::new(data))
+        .await
+        .with_context(|| format!("opening the database {url}"))?;
+    store.migrate().await.context("migrating the database")?;
+    Ok(store)
+}
+
+/// Every tag the database holds: the plant's, plus the derived ones.
+fn all_tags(plant: &Plant) -> Vec<TagMeta> {
+    let mut tags: Vec<TagMeta> = plant.tag_metas().collect();
+    tags.extend(gridscada_modbus::device_status_tags(plant));
+    for panel in &plant.panels {
+        tags.extend(fault_isolation::panel_tags(panel));
+    }
+    if plant.microgrid.is_some() {
+        tags.extend(dispatch::tags::dispatch_tags());
+    }
+    tags
+}
+
+/// The simulator's fault injection, as the web layer reaches it.
+struct SimAdapter(gridscada_sim::SimHandle);
+
+impl gridscada_web::api::sim::SimControl for SimAdapter {
+    fn inject_fault(
+        &self,
+        panel: &str,
+        zone: u8,
+        kind: gridscada_web::api::sim::FaultKind,
+    ) -> Result<(), String> {
+        let kind = match kind {
+            gridscada_web::api::sim::FaultKind::Permanent => gridscada_sim::FaultKind::Permanent,
+            gridscada_web::api::sim::FaultKind::Transient => gridscada_sim::FaultKind::Transient,
+        };
+        self.0
+            .inject_zone_fault(panel, zone, kind)
+            .map_err(|e| e.to_string())
+    }
+    fn repair(&self, panel: &str, zone: u8) -> Result<(), String> {
+        self.0.repair_zone(panel, zone).map_err(|e| e.to_string())
+    }
+    fn set_offline(&self, device: &str, offline: bool) -> Result<(), String> {
+        self.0
+            .set_device_offline(device, offline)
+            .map_err(|e| e.to_string())
+    }
+}
+
+async fn run(mut plant: Plant, http: SocketAddr, data: &Path, mode: Mode) -> anyhow::Result<()> {
+    let clock: Arc<dyn Clock> = Arc::new(SystemClock);
+    let store = open_store(&plant, data).await?;
+    let mut tasks = JoinSet::new();
+
+    // Events from every part go through one sink into the store.
+    let (events_tx, events_rx) = mpsc::channel::<NewEvent>(4096);
+    tasks.spawn(sinks::events(store.clone(), events_rx));
+
+    // Simulators first, so the poller finds its devices (demo only).
+    let simulator = if mode == Mode::Demo {
+        let sim = gridscada_sim::start(&plant, clock.clone(), gridscada_sim::BindMode::Ephemeral)
+            .await
+            .context("starting the simulated plant")?;
+        sim.patch_plant(&mut plant);
+        Some(sim)
+    } else {
+        None
+    };
+    let plant = Arc::new(plant);
+
+    let db = Arc::new(TagDb::new(all_tags(&plant)).context("building the tag database")?);
     tracing::info!(
         tags = db.len(),
         devices = plant.devices.len(),
-        mode,
+        mode = mode.label(),
         "tag database ready"
     );
 
+    // The alarm engine, restored from the store.
+    let restore = store.alarm_states().await.context("loading alarm states")?;
+    let (transitions_tx, transitions_rx) = mpsc::channel(4096);
+    let (alarm_events_tx, alarm_events_rx) = mpsc::channel(1024);
+    let (states_tx, states_rx) = mpsc::channel(4096);
+    tasks.spawn(sinks::alarm_transitions(store.clone(), transitions_rx));
+    tasks.spawn(sinks::alarm_events(alarm_events_rx, events_tx.clone()));
+    tasks.spawn(sinks::alarm_states(store.clone(), states_rx));
+    let alarms = gridscada_alarms::AlarmEngine::new(
+        &plant,
+        db.clone(),
+        clock.clone(),
+        gridscada_alarms::AlarmChannels {
+            transitions: transitions_tx,
+            events: alarm_events_tx,
+            states: Some(states_tx),
+        },
+        &restore,
+        Default::default(),
+    )
+    .map_err(|e| anyhow!("starting the alarm engine: {e}"))?;
+    tasks.spawn(alarms.clone().run());
+
+    // The historian.
+    let historian = gridscada_store::Historian::spawn(store.clone(), Default::default());
+    tasks.spawn(sinks::historian_feed(
+        plant.clone(),
+        db.clone(),
+        historian.handle(),
+        store.clone(),
+        alarms.clone(),
+        clock.clone(),
+    ));
+
+    let field = gridscada_modbus::FieldIo::start(&plant, db.clone(), clock.clone())
+        .context("starting field I/O")?;
+    let writer = field.writer();
+
+    // One fault-isolation sequence per panel.
+    let (panel_notices_tx, panel_notices_rx) = mpsc::channel::<PanelNotice>(1024);
+    let selections = plant
+        .panels
+        .iter()
+        .map(|p| (p.id.get_ref().clone(), p.prefix.get_ref().clone()))
+        .collect();
+    tasks.spawn(sinks::panel_notices(
+        panel_notices_rx,
+        events_tx.clone(),
+        alarms.clone(),
+        selections,
+        clock.clone(),
+    ));
+    let mut panels = Vec::new();
+    for panel in &plant.panels {
+        let (cmd_tx, cmd_rx) = mpsc::channel(16);
+        let (status_tx, status_rx) = watch::channel(PanelStatus::initial(panel));
+        let id = panel.id.get_ref().clone();
+        let driver = fault_isolation::run_panel(
+            panel.clone(),
+            db.clone(),
+            writer.clone(),
+            clock.clone(),
+            cmd_rx,
+            status_tx,
+            panel_notices_tx.clone(),
+        );
+        let label = id.clone();
+        tasks.spawn(async move {
+            if let Err(e) = driver.await {
+                tracing::error!(panel = %label, error = %e, "fault-isolation sequence stopped");
+            }
+        });
+        panels.push(PanelHandle {
+            id,
+            status: status_rx,
+            commands: cmd_tx,
+        });
+    }
+
+    // The microgrid's outer loop.
+    let dispatch_rx = match &plant.microgrid {
+        Some(mg) => {
+            let (status_tx, status_rx) = watch::channel(DispatchStatus::default());
+            let (notices_tx, notices_rx) = mpsc::channel(256);
+            tasks.spawn(dispatch::run_dispatch(
+                mg.clone(),
+                db.clone(),
+                writer.clone(),
+                clock.clone(),
+                status_tx,
+                notices_tx,
+            ));
+            tasks.spawn(sinks::dispatch_notices(
+                notices_rx,
+                events_tx.clone(),
+                alarms.clone(),
+            ));
+            tasks.spawn(sinks::dispatch_results(
+                store.clone(),
+                db.clone(),
+                status_rx.clone(),
+                clock.clone(),
+            ));
+            Some(status_rx)
+        }
+        None => None,
+    };
+
+    // Users.
+    let credentials = match mode {
+        Mode::Demo => Some(users::demo_credentials(&store, data, clock.as_ref()).await?),
+        Mode::Serve => {
+            users::warn_if_no_administrator(&store, &plant.main_path).await?;
+            None
+        }
+    };
+
+    let auth = gridscada_web::Auth {
+        sessions: Arc::new(gridscada_web::auth::Sessions::new(Default::default())),
+        throttle: Arc::new(Default::default()),
+        secure_cookies: false,
+        decoy_hash: gridscada_web::auth::make_decoy_hash().await.into(),
+    };
     let state = gridscada_web::WebState {
         db: db.clone(),
+        plant: plant.clone(),
+        store: store.clone(),
+        auth,
+        clock: clock.clone(),
+        writer: Some(writer.clone()),
         started: Instant::now(),
+        components: gridscada_web::Components {
+            panels,
+            alarms: Some(alarms.clone()),
+            dispatch: dispatch_rx,
+        },
+        sim: simulator.as_ref().map(|s| {
+            Arc::new(SimAdapter(s.handle())) as Arc<dyn gridscada_web::api::sim::SimControl>
+        }),
     };
     let (local, server) = gridscada_web::bind(http, gridscada_web::router(state))
         .await
         .with_context(|| format!("cannot listen on {http}"))?;
 
-    println!("gridscada {mode} is running.");
+    let _ = events_tx
+        .send(sinks::system_event(
+            clock.as_ref(),
+            "server",
+            "server",
+            format!("gridscada {} started", mode.label()),
+        ))
+        .await;
+    println!("gridscada {} is running.", mode.label());
     println!("  HMI and API: http://{local}/");
     println!("  Health:      http://{local}/healthz");
     println!("  Data folder: {}", data.display());
+    if let Some(creds) = &credentials {
+        println!(
+            "  Log in with one of these generated accounts (also in {}):",
+            creds.file.display()
+        );
+        for (role, user, password) in &creds.accounts {
+            println!("    {role:<13} user {user:<11} password {password}");
+        }
+    }
     println!("Press Ctrl-C to stop.");
 
-    tokio::select! {
-        r = server => r.context("HTTP server failed")?,
-        _ = tokio::signal::ctrl_c() => tracing::info!("Ctrl-C: stopping"),
+    let outcome = tokio::select! {
+        r = server => r.context("HTTP server failed"),
+        _ = shutdown_signal() => {
+            tracing::info!("stopping");
+            Ok(())
+        }
+    };
+
+    // Stop in reverse: the producers first, then what records their output.
+    let _ = events_tx
+        .send(sinks::system_event(
+            clock.as_ref(),
+            "server",
+            "server",
+            format!("gridscada {} stopping", mode.label()),
+        ))
+        .await;
+    field.shutdown().await;
+    if let Some(sim) = simulator {
+        sim.shutdown().await;
     }
-    Ok(())
+    let written = historian.shutdown().await;
+    tracing::info!(
+        samples = written.samples_written,
+        dropped = written.dropped,
+        "historian flushed"
+    );
+    drop(events_tx);
+    // Give the sinks a moment to drain their channels into the store.
+    tokio::time::sleep(std::time::Duration::from_millis(300)).await;
+    tasks.abort_all();
+    store.close().await;
+    outcome
+}
+
+/// Ctrl-C or SIGTERM (a service manager stopping us).
+async fn shutdown_signal() {
+    #[cfg(unix)]
+    {
+        let mut term =
+            match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+                Ok(t) => t,
+                Err(_) => {
+                    let _ = tokio::signal::ctrl_c().await;
+                    return;
+                }
+            };
+        tokio::select! {
+            _ = tokio::signal::ctrl_c() => {}
+            _ = term.recv() => {}
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = tokio::signal::ctrl_c().await;
 }

@@ -6,41 +6,46 @@
 //! **Must not touch:** Modbus, SQL or control logic. It reads the tag database,
 //! asks the alarm engine, the store and the control loops through the handles in
 //! [`WebState`], and sends commands through `TagWriter`. Every route declares its
-//! permission in one table; anything not declared is denied.
+//! permission in one table ([`routes::table`]); anything not declared is denied.
+
+pub mod api;
+pub mod auth;
+pub mod error;
+mod hmi;
+pub mod routes;
 
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Instant;
 
-use axum::extract::State;
-use axum::routing::get;
-use axum::{Json, Router};
-use gridscada_tagdb::TagDb;
-use serde_json::json;
+use axum::Router;
+use gridscada_config::Plant;
+use gridscada_store::Store;
+use gridscada_tagdb::{Clock, TagDb, TagWriter};
+
+pub use api::Components;
+pub use auth::Auth;
 
 /// What the HTTP layer can reach.
 #[derive(Clone)]
 pub struct WebState {
     pub db: Arc<TagDb>,
+    pub plant: Arc<Plant>,
+    pub store: Store,
+    pub auth: Auth,
+    pub clock: Arc<dyn Clock>,
+    /// Commands to the field; `None` when no field I/O runs.
+    pub writer: Option<Arc<dyn TagWriter>>,
     pub started: Instant,
+    /// The alarm engine, panels, dispatch and simulator, where running.
+    pub components: Components,
+    /// Fault injection: only in `demo` and `replay`.
+    pub sim: Option<Arc<dyn api::sim::SimControl>>,
 }
 
 /// The application's routes.
 pub fn router(state: WebState) -> Router {
-    Router::new()
-        .route("/healthz", get(healthz))
-        .with_state(state)
-}
-
-/// Liveness and a one-line picture of the server, for load balancers and the
-/// commissioning engineer's `curl`.
-async fn healthz(State(s): State<WebState>) -> Json<serde_json::Value> {
-    Json(json!({
-        "status": "ok",
-        "version": env!("CARGO_PKG_VERSION"),
-        "tags": s.db.len(),
-        "uptime_s": s.started.elapsed().as_secs(),
-    }))
+    routes::build(state)
 }
 
 /// Binds `addr` now (so the caller can report a bind error before printing

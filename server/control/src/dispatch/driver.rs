@@ -109,6 +109,7 @@ pub async fn run_dispatch(
     notices: mpsc::Sender<DispatchNotice>,
 ) {
     let period = Duration::from_secs_f64(period_s(&cfg));
+    wait_for_first_reading(&cfg, &db, &*clock).await;
     let mut d = Dispatcher::new(cfg, clock.now());
     // Notices the channel had no room for; sent first next period, never dropped.
     let mut backlog: VecDeque<DispatchNotice> = VecDeque::new();
@@ -134,6 +135,35 @@ pub async fn run_dispatch(
             }
         }
         clock.sleep(period).await;
+    }
+}
+
+/// Lets the field I/O read the plant once before the first decision: acting
+/// on "no value yet" would run the fallback (and start the diesel) on every
+/// server start. Waits at most `stale_after_s`; after that, the loop runs
+/// and the fallback handles whatever is still missing.
+async fn wait_for_first_reading(cfg: &MicrogridConfig, db: &TagDb, clock: &dyn Clock) {
+    let mut names = vec![cfg.demand_tag.get_ref().clone()];
+    for u in &cfg.units {
+        let io = u.io();
+        names.extend(
+            u.required_tags()
+                .into_iter()
+                .filter(|t| *t != io.setpoint_kw && *t != io.run_cmd),
+        );
+    }
+    let ids: Vec<_> = names.iter().filter_map(|n| db.id(n)).collect();
+    let give_up = clock
+        .now()
+        .add(Duration::from_secs_f64(cfg.stale_after_s.max(0.0)));
+    while clock.now() < give_up {
+        let read_once = ids
+            .iter()
+            .all(|id| db.get(*id).is_some_and(|s| s.timestamp.as_millis() > 0));
+        if read_once {
+            return;
+        }
+        clock.sleep(Duration::from_millis(100)).await;
     }
 }
 

@@ -19,6 +19,7 @@ mod input;
 mod lp;
 pub mod rules;
 pub mod single;
+pub mod tags;
 
 use serde::ser::{Serialize, SerializeMap, Serializer};
 use serde_json::Value;

@@ -1,0 +1,62 @@
+#!/usr/bin/env bash
+# The whole gridscada test suite, on a fresh Debian machine.
+# It installs what the tests need first (Debian packages, Python test peers,
+# a throwaway PostgreSQL cluster when none runs on 127.0.0.1:5432), then runs
+# formatting and lint checks, every Rust test, and the end-to-end tests.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+root=$(pwd)
+export CARGO_TERM_COLOR=never
+
+step() { printf '\n==> %s\n' "$*"; }
+
+as_root() {
+    if [ "$(id -u)" -eq 0 ]; then "$@"; else sudo "$@"; fi
+}
+
+# --- 1. Debian packages the tests use ------------------------------------
+debian_packages=(postgresql socat mbpoll libmodbus-dev pkg-config)
+missing=()
+for p in "${debian_packages[@]}"; do
+    dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+    step "installing Debian packages: ${missing[*]}"
+    as_root apt-get update -qq
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+# --- 2. Python test peers, in a venv of their own -------------------------
+venv="$root/target/test-venv"
+if [ ! -x "$venv/bin/python" ]; then
+    step "creating the Python test venv"
+    python3 -m venv "$venv"
+fi
+step "installing Python test peers"
+"$venv/bin/pip" install -q --disable-pip-version-check -r tests/requirements.txt
+export PATH="$venv/bin:$PATH"
+
+# --- 3. PostgreSQL for the store tests ------------------------------------
+step "PostgreSQL"
+eval "$(bash scripts/pg-test-cluster.sh)"
+export GRIDSCADA_REQUIRE_PG=1
+
+# --- 4. Rust: format, lint, tests -----------------------------------------
+step "cargo fmt --check"
+cargo fmt --all -- --check
+step "cargo clippy"
+cargo clippy --workspace --all-targets -- -D warnings
+step "cargo test"
+cargo test --workspace
+
+# --- 5. End-to-end tests against third-party peers ------------------------
+step "building the gridscada binary for end-to-end tests"
+cargo build -p gridscada
+export GRIDSCADA_BIN="$root/target/debug/gridscada"
+for t in tests/e2e/*.sh; do
+    [ -e "$t" ] || continue
+    step "end-to-end: $t"
+    bash "$t"
+done
+
+step "all tests passed"

@@ -1,0 +1,327 @@
+//! Sinks: the tasks that carry what the components produce (events, alarm
+//! transitions and states, historian samples, panel and dispatch notices) to
+//! the store and the alarm engine. Each batches what it can, and none of them
+//! ever blocks the producer's hot path: producers hand over through channels.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::time::Duration;
+
+use gridscada_alarms::AlarmEngine;
+use gridscada_config::Plant;
+use gridscada_control::dispatch::{self, DispatchMode, DispatchNotice, DispatchStatus};
+use gridscada_control::fault_isolation::PanelNotice;
+use gridscada_store::{
+    HistorianHandle, NewDispatch, NewEvent, RecordPolicy, Recorder, RetentionPolicy, Store,
+};
+use gridscada_tagdb::{Clock, TagDb};
+use tokio::sync::{mpsc, watch};
+
+/// Priority of the system alarms the application raises itself.
+const SYSTEM_PRIORITY: u32 = 700;
+
+pub fn system_event(clock: &dyn Clock, kind: &str, source: &str, message: String) -> NewEvent {
+    NewEvent {
+        ts: clock.now(),
+        user: None,
+        source: source.to_string(),
+        kind: kind.to_string(),
+        message,
+    }
+}
+
+/// Writes events to the store in batches.
+pub async fn events(store: Store, mut rx: mpsc::Receiver<NewEvent>) {
+    let mut batch = Vec::new();
+    while rx.recv_many(&mut batch, 256).await > 0 {
+        if let Err(e) = store.insert_events(&batch).await {
+            tracing::error!(error = %e, lost = batch.len(), "could not record events");
+        }
+        batch.clear();
+    }
+}
+
+/// The alarm engine's operator events, into the event log.
+pub async fn alarm_events(
+    mut rx: mpsc::Receiver<gridscada_alarms::Event>,
+    events: mpsc::Sender<NewEvent>,
+) {
+    while let Some(e) = rx.recv().await {
+        let e = NewEvent {
+            ts: e.time,
+            user: e.user,
+            source: e.source,
+            kind: e.kind.as_str().to_string(),
+            message: e.message,
+        };
+        if events.send(e).await.is_err() {
+            return;
+        }
+    }
+}
+
+/// Alarm history, in batches.
+pub async fn alarm_transitions(
+    store: Store,
+    mut rx: mpsc::Receiver<gridscada_alarms::AlarmTransition>,
+) {
+    let mut batch = Vec::new();
+    while rx.recv_many(&mut batch, 512).await > 0 {
+        let rows: Vec<gridscada_store::AlarmTransition> = batch.iter().map(Into::into).collect();
+        if let Err(e) = store.insert_alarm_transitions(&rows).await {
+            tracing::error!(error = %e, lost = rows.len(), "could not record alarm transitions");
+        }
+        batch.clear();
+    }
+}
+
+/// Alarm states, upserted so acknowledgements and shelving survive a restart.
+/// Only the newest state of each alarm in a batch is written.
+pub async fn alarm_states(
+    store: Store,
+    mut rx: mpsc::Receiver<gridscada_alarms::AlarmStateRecord>,
+) {
+    let mut batch = Vec::new();
+    while rx.recv_many(&mut batch, 512).await > 0 {
+        let mut newest: HashMap<String, gridscada_alarms::AlarmStateRecord> = HashMap::new();
+        for r in batch.drain(..) {
+            newest.insert(r.key.clone(), r);
+        }
+        let rows: Vec<_> = newest.into_values().collect();
+        if let Err(e) = store.upsert_alarm_states(&rows).await {
+            tracing::error!(error = %e, "could not save alarm states");
+        }
+    }
+}
+
+/// Raises or clears a system alarm, logging (not failing) on error.
+fn system_alarm(
+    alarms: &AlarmEngine,
+    key: &str,
+    active: bool,
+    priority: u32,
+    selection: &str,
+    message: &str,
+) {
+    let r = if active {
+        alarms.raise(key, priority, selection, message).map(|_| ())
+    } else {
+        alarms.clear(key).map(|_| ())
+    };
+    if let Err(e) = r {
+        tracing::error!(%key, error = %e, "system alarm");
+    }
+}
+
+/// Panel notices: events to the log, alarm conditions to the alarm engine
+/// (keyed `PANEL:KEY`, in the panel's selection).
+pub async fn panel_notices(
+    mut rx: mpsc::Receiver<PanelNotice>,
+    events: mpsc::Sender<NewEvent>,
+    alarms: Arc<AlarmEngine>,
+    selection_of: HashMap<String, String>,
+    clock: Arc<dyn Clock>,
+) {
+    while let Some(n) = rx.recv().await {
+        match n {
+            PanelNotice::Event {
+                panel,
+                kind,
+                message,
+                user,
+            } => {
+                let e = NewEvent {
+                    ts: clock.now(),
+                    user,
+                    source: panel,
+                    kind,
+                    message,
+                };
+                if events.send(e).await.is_err() {
+                    return;
+                }
+            }
+            PanelNotice::Alarm {
+                panel,
+                key,
+                active,
+                priority,
+                message,
+            } => {
+                let selection = selection_of
+                    .get(&panel)
+                    .cloned()
+                    .unwrap_or_else(|| panel.clone());
+                system_alarm(
+                    &alarms,
+                    &format!("{panel}:{key}"),
+                    active,
+                    priority,
+                    &selection,
+                    &message,
+                );
+            }
+        }
+    }
+}
+
+/// Dispatch: each period's result into the store and the dispatch tags;
+/// notices into the event log and the alarm engine.
+pub async fn dispatch_results(
+    store: Store,
+    db: Arc<TagDb>,
+    mut status: watch::Receiver<DispatchStatus>,
+    clock: Arc<dyn Clock>,
+) {
+    while status.changed().await.is_ok() {
+        let s = status.borrow_and_update().clone();
+        dispatch::tags::publish(&db, &s, clock.now());
+        let record = NewDispatch {
+            ts: s.at,
+            status: s.status.clone(),
+            mode: match s.mode {
+                DispatchMode::Optimal => "optimal".into(),
+                DispatchMode::Fallback => "fallback".into(),
+            },
+            objective: s.objective,
+            solve_ms: s.solve_ms.unwrap_or(0.0),
+            inputs: serde_json::to_value(&s.inputs).unwrap_or_default(),
+            setpoints: serde_json::to_value(&s.setpoints_kw).unwrap_or_default(),
+            reason: s.reason.clone(),
+        };
+        if let Err(e) = store.insert_dispatch(&record).await {
+            tracing::error!(error = %e, "could not record the dispatch");
+        }
+    }
+}
+
+pub async fn dispatch_notices(
+    mut rx: mpsc::Receiver<DispatchNotice>,
+    events: mpsc::Sender<NewEvent>,
+    alarms: Arc<AlarmEngine>,
+) {
+    while let Some(n) = rx.recv().await {
+        match n {
+            DispatchNotice::Event { at, message } => {
+                let e = NewEvent {
+                    ts: at,
+                    user: None,
+                    source: "dispatch".into(),
+                    kind: "dispatch".into(),
+                    message,
+                };
+                if events.send(e).await.is_err() {
+                    return;
+                }
+            }
+            DispatchNotice::Alarm {
+                name,
+                active,
+                reason,
+                ..
+            } => {
+                let message = format!("Dispatch {name}: {reason}");
+                system_alarm(
+                    &alarms,
+                    &format!("dispatch:{name}"),
+                    active,
+                    SYSTEM_PRIORITY,
+                    "MG",
+                    &message,
+                );
+            }
+        }
+    }
+}
+
+/// The historian's logging policy, per configured tag.
+pub fn recorder(plant: &Plant, db: &TagDb) -> Recorder {
+    let mut r = Recorder::new();
+    for t in &plant.tags {
+        if let Some(id) = db.id(t.name.get_ref()) {
+            r.set_policy(
+                id,
+                t.name.get_ref().as_str(),
+                RecordPolicy::from_config(&t.history),
+            );
+        }
+    }
+    r
+}
+
+/// Feeds tag changes through the logging policy into the historian's bounded
+/// buffer, re-logs quiet tags at their maximum interval, applies retention
+/// daily, and raises a system alarm while samples are being dropped.
+pub async fn historian_feed(
+    plant: Arc<Plant>,
+    db: Arc<TagDb>,
+    historian: HistorianHandle,
+    store: Store,
+    alarms: Arc<AlarmEngine>,
+    clock: Arc<dyn Clock>,
+) {
+    let mut recorder = recorder(&plant, &db);
+    let mut sub = db.subscribe_all();
+    // Log the starting point of every tag.
+    let start = db.snapshot_all();
+    historian.push_all(
+        start
+            .changes
+            .iter()
+            .filter_map(|(id, s)| recorder.offer(*id, s)),
+    );
+    let retention = RetentionPolicy {
+        default_days: Some(plant.storage.retention_days),
+        per_tag_days: plant
+            .tags
+            .iter()
+            .filter_map(|t| {
+                t.history
+                    .retention_days
+                    .map(|d| (t.name.get_ref().clone(), d))
+            })
+            .collect(),
+    };
+    let mut overflow = historian.overflow();
+    let mut tick = tokio::time::interval(Duration::from_secs(1));
+    let mut last_retention = None;
+    loop {
+        tokio::select! {
+            update = sub.recv() => {
+                let Some(update) = update else { return };
+                let samples: Vec<_> = update
+                    .batch()
+                    .changes
+                    .iter()
+                    .filter_map(|(id, s)| recorder.offer(*id, s))
+                    .collect();
+                historian.push_all(samples);
+            }
+            _ = tick.tick() => {
+                let now = clock.now();
+                historian.push_all(recorder.tick(now));
+                let day = now.as_millis() / 86_400_000;
+                if last_retention != Some(day) {
+                    last_retention = Some(day);
+                    match store.apply_retention(&retention, now).await {
+                        Ok(n) if n > 0 => tracing::info!(deleted = n, "historian retention applied"),
+                        Ok(_) => {}
+                        Err(e) => tracing::error!(error = %e, "historian retention"),
+                    }
+                }
+            }
+            changed = overflow.changed() => {
+                if changed.is_err() {
+                    return;
+                }
+                let over = *overflow.borrow_and_update();
+                let m = historian.metrics();
+                let message = format!(
+                    "Historian buffer full: {} samples dropped so far (buffer {}/{})",
+                    m.dropped, m.buffered, m.capacity
+                );
+                system_alarm(&alarms, "historian:overflow", over, 800, "SYSTEM", &message);
+            }
+        }
+    }
+}

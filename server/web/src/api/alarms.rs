@@ -1,0 +1,235 @@
+//! Alarms: summary, acknowledge, shelve, history and ISA-18.2 metrics.
+//!
+//! Acknowledge and shelve are recorded by the alarm engine itself (a
+//! transition naming the user, and an event), so they are not audited twice here.
+
+use axum::extract::{Path, Query, State};
+use axum::http::StatusCode;
+use axum::{Extension, Json};
+use gridscada_alarms::{AlarmEngine, AlarmError, AlarmFilter, AlarmId, AlarmState};
+use gridscada_store::AlarmHistoryFilter;
+use gridscada_tagdb::Timestamp;
+use serde::Deserialize;
+use serde_json::{json, Value};
+use std::sync::Arc;
+
+use crate::api::parse_time;
+use crate::auth::Principal;
+use crate::error::{ApiError, ApiResult};
+use crate::WebState;
+
+fn engine(s: &WebState) -> ApiResult<&Arc<AlarmEngine>> {
+    s.components
+        .alarms
+        .as_ref()
+        .ok_or_else(|| ApiError::unavailable("the alarm engine is not running"))
+}
+
+fn alarm_error(e: AlarmError) -> ApiError {
+    let text = e.to_string();
+    if text.contains("no alarm") || text.contains("unknown") {
+        ApiError::not_found(text)
+    } else {
+        ApiError::bad_request(text)
+    }
+}
+
+/// Filters as query parameters (the summary) or JSON (ack all).
+#[derive(Deserialize, Default, Clone)]
+#[serde(deny_unknown_fields)]
+pub struct FilterParams {
+    pub selection: Option<String>,
+    pub min_priority: Option<u32>,
+    /// Comma-separated states, e.g. `unack_active,shelved`.
+    pub state: Option<String>,
+    pub text: Option<String>,
+}
+
+impl FilterParams {
+    fn to_filter(&self) -> ApiResult<AlarmFilter> {
+        let states = match self.state.as_deref().filter(|s| !s.is_empty()) {
+            None => vec![],
+            Some(list) => list
+                .split(',')
+                .map(|st| {
+                    st.trim().parse::<AlarmState>().map_err(|_| {
+                        ApiError::bad_request(format!(
+                            "state '{st}' is not one of normal, unack_active, ack_active, unack_rtn, shelved, suppressed, out_of_service"
+                        ))
+                    })
+                })
+                .collect::<ApiResult<_>>()?,
+        };
+        Ok(AlarmFilter {
+            selection: self.selection.clone().filter(|s| !s.is_empty()),
+            min_priority: self.min_priority,
+            states,
+            text: self.text.clone().filter(|s| !s.is_empty()),
+        })
+    }
+}
+
+pub async fn summary(
+    State(s): State<WebState>,
+    Query(q): Query<FilterParams>,
+) -> ApiResult<Json<Value>> {
+    let filter = q.to_filter()?;
+    let alarms = engine(&s)?.summary(&filter);
+    Ok(Json(json!({ "alarms": alarms, "count": alarms.len() })))
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AckBody {
+    pub ids: Option<Vec<u32>>,
+    pub top: Option<bool>,
+    pub all: Option<bool>,
+    pub filter: Option<FilterParams>,
+}
+
+pub async fn ack(
+    State(s): State<WebState>,
+    Extension(who): Extension<Principal>,
+    body: Result<Json<AckBody>, axum::extract::rejection::JsonRejection>,
+) -> ApiResult<Json<Value>> {
+    let Json(b) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
+    let e = engine(&s)?;
+    let user = who.audit_name();
+    let filter = b.filter.unwrap_or_default().to_filter()?;
+    let acked: Vec<AlarmId> = match (b.ids, b.top, b.all) {
+        (Some(ids), None, None) => {
+            let ids: Vec<AlarmId> = ids.into_iter().map(AlarmId).collect();
+            e.ack_ids(&user, &ids).map_err(alarm_error)?
+        }
+        (None, Some(true), None) => e.ack_top(&user, &filter).map_err(alarm_error)?.into_iter().collect(),
+        (None, None, Some(true)) => e.ack_all(&user, &filter).map_err(alarm_error)?,
+        _ => {
+            return Err(ApiError::bad_request(
+                "send exactly one of {\"ids\": [...]}, {\"top\": true} or {\"all\": true, \"filter\": {...}}",
+            ))
+        }
+    };
+    Ok(Json(json!({ "acknowledged": acked, "count": acked.len() })))
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ShelveBody {
+    pub minutes: u32,
+    pub reason: String,
+}
+
+pub async fn shelve(
+    State(s): State<WebState>,
+    Extension(who): Extension<Principal>,
+    Path(id): Path<u32>,
+    body: Result<Json<ShelveBody>, axum::extract::rejection::JsonRejection>,
+) -> ApiResult<Json<Value>> {
+    let Json(b) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
+    let until = engine(&s)?
+        .shelve(AlarmId(id), &who.audit_name(), b.minutes, &b.reason)
+        .map_err(alarm_error)?;
+    Ok(Json(json!({ "id": id, "shelved_until": until })))
+}
+
+pub async fn unshelve(
+    State(s): State<WebState>,
+    Extension(who): Extension<Principal>,
+    Path(id): Path<u32>,
+) -> ApiResult<StatusCode> {
+    engine(&s)?
+        .unshelve(AlarmId(id), &who.audit_name())
+        .map_err(alarm_error)?;
+    Ok(StatusCode::NO_CONTENT)
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct HistoryQuery {
+    pub from: Option<String>,
+    pub to: Option<String>,
+    pub key: Option<String>,
+    pub tag: Option<String>,
+    pub selection: Option<String>,
+    pub min_priority: Option<i32>,
+    pub text: Option<String>,
+    pub limit: Option<u32>,
+    pub offset: Option<u32>,
+}
+
+fn opt_time(field: &str, v: &Option<String>) -> ApiResult<Option<Timestamp>> {
+    v.as_deref()
+        .filter(|v| !v.is_empty())
+        .map(|v| parse_time(field, v))
+        .transpose()
+}
+
+pub async fn history(
+    State(s): State<WebState>,
+    Query(q): Query<HistoryQuery>,
+) -> ApiResult<Json<Value>> {
+    let filter = AlarmHistoryFilter {
+        from: opt_time("from", &q.from)?,
+        to: opt_time("to", &q.to)?,
+        alarm_key: q.key.filter(|v| !v.is_empty()),
+        tag: q.tag.filter(|v| !v.is_empty()),
+        selection: q.selection.filter(|v| !v.is_empty()),
+        min_priority: q.min_priority,
+        text: q.text.filter(|v| !v.is_empty()),
+        limit: q.limit.unwrap_or(500).clamp(1, 10_000),
+        offset: q.offset.unwrap_or(0),
+        ..Default::default()
+    };
+    let rows = s.store.alarm_history(&filter).await?;
+    Ok(Json(json!({ "transitions": rows, "count": rows.len() })))
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct MetricsQuery {
+    pub from: Option<String>,
+    pub to: Option<String>,
+}
+
+pub async fn metrics(
+    State(s): State<WebState>,
+    Query(q): Query<MetricsQuery>,
+) -> ApiResult<Json<Value>> {
+    let e = engine(&s)?;
+    let to = opt_time("to", &q.to)?.unwrap_or_else(|| s.clock.now());
+    let from = opt_time("from", &q.from)?
+        .unwrap_or(Timestamp::from_millis(to.as_millis() - 24 * 3_600_000));
+    if from > to {
+        return Err(ApiError::bad_request("from must not be after to"));
+    }
+    let rows = s.store.alarm_activations(from, to).await?;
+    let activations: Vec<gridscada_alarms::Activation> = rows
+        .into_iter()
+        .map(|r| gridscada_alarms::Activation {
+            time: r.transition.ts,
+            key: r.transition.alarm_key,
+            priority: r.transition.priority.max(0) as u32,
+        })
+        .collect();
+    let m = gridscada_alarms::compute_metrics(
+        &activations,
+        &e.persisted_states(),
+        from,
+        to,
+        &Default::default(),
+    );
+    Ok(Json(serde_json::to_value(m).map_err(|e| {
+        ApiError::internal("serializing metrics", e)
+    })?))
+}
+
+/// The alarm summary for live push, if it changed since `since`.
+pub fn live_summary(s: &WebState, since: Option<u64>) -> Option<(u64, Value)> {
+    let e = s.components.alarms.as_ref()?;
+    let version = *e.subscribe_version().borrow();
+    if since == Some(version) {
+        return None;
+    }
+    let alarms = e.summary(&AlarmFilter::default());
+    Some((version, json!(alarms)))
+}

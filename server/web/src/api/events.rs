@@ -1,0 +1,96 @@
+//! The event log: every operator and system action.
+
+use axum::extract::{Query, State};
+use axum::Json;
+use gridscada_store::EventFilter;
+use gridscada_tagdb::Timestamp;
+use serde::Deserialize;
+use serde_json::{json, Value};
+
+use crate::api::parse_time;
+use crate::error::{ApiError, ApiResult};
+use crate::WebState;
+
+#[derive(Deserialize, Default)]
+pub struct EventQuery {
+    pub from: Option<String>,
+    pub to: Option<String>,
+    /// Today in the caller's time zone (see `tz_offset_min`).
+    pub today: Option<bool>,
+    /// Minutes east of UTC of the operator's time zone, for "today".
+    pub tz_offset_min: Option<i32>,
+    #[serde(rename = "type")]
+    pub kind: Option<String>,
+    pub user: Option<String>,
+    pub source: Option<String>,
+    pub text: Option<String>,
+    pub limit: Option<u32>,
+    pub offset: Option<u32>,
+}
+
+/// Start of the local day containing `now`, for a zone `offset_min` east of UTC.
+pub fn start_of_day(now: Timestamp, offset_min: i32) -> Timestamp {
+    const DAY: i64 = 86_400_000;
+    let offset = offset_min as i64 * 60_000;
+    let local = now.as_millis() + offset;
+    Timestamp::from_millis(local - local.rem_euclid(DAY) - offset)
+}
+
+pub async fn list(
+    State(s): State<WebState>,
+    Query(q): Query<EventQuery>,
+) -> ApiResult<Json<Value>> {
+    let mut filter = EventFilter {
+        limit: q.limit.unwrap_or(500).clamp(1, 10_000),
+        offset: q.offset.unwrap_or(0),
+        kind: q.kind.filter(|v| !v.is_empty()),
+        user: q.user.filter(|v| !v.is_empty()),
+        source: q.source.filter(|v| !v.is_empty()),
+        text: q.text.filter(|v| !v.is_empty()),
+        ..Default::default()
+    };
+    if let Some(offset) = q.tz_offset_min {
+        if !(-14 * 60..=14 * 60).contains(&offset) {
+            return Err(ApiError::bad_request(
+                "tz_offset_min must be within -840..=840",
+            ));
+        }
+    }
+    if q.today == Some(true) {
+        let now = s.clock.now();
+        filter.from = Some(start_of_day(now, q.tz_offset_min.unwrap_or(0)));
+        filter.to = Some(Timestamp::from_millis(i64::MAX / 2));
+    } else {
+        filter.from = q
+            .from
+            .as_deref()
+            .filter(|v| !v.is_empty())
+            .map(|v| parse_time("from", v))
+            .transpose()?;
+        filter.to =
+            q.to.as_deref()
+                .filter(|v| !v.is_empty())
+                .map(|v| parse_time("to", v))
+                .transpose()?;
+    }
+    let events = s.store.events(&filter).await?;
+    Ok(Json(json!({ "events": events, "count": events.len() })))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn start_of_day_respects_the_zone() {
+        // 2026-11-21 01:30 UTC is still 2026-11-20 in UTC-3.
+        let now = Timestamp::from_millis(1_763_688_600_000);
+        let utc = start_of_day(now, 0);
+        assert_eq!(utc.as_millis() % 86_400_000, 0);
+        let west = start_of_day(now, -180);
+        assert_eq!(
+            west.as_millis(),
+            utc.as_millis() - 86_400_000 + 3 * 3_600_000
+        );
+    }
+}

@@ -1,0 +1,164 @@
+//! `/api/live`: the WebSocket push of tag changes and the alarm summary.
+//!
+//! Each socket has its own tag-database subscription. Changes are merged per
+//! tag and flushed at most every 100 ms. A client too slow to take them falls
+//! behind its subscription's ring and gets a fresh snapshot instead of an
+//! unbounded queue. When the session ends (logout, expiry, user blocked), the
+//! socket is closed.
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade};
+use axum::extract::State;
+use axum::http::{header, HeaderMap};
+use axum::response::Response;
+use axum::Extension;
+use gridscada_tagdb::{Sample, TagId, Update};
+use serde::Deserialize;
+use serde_json::json;
+
+use crate::auth::{token_from_cookies, Principal};
+use crate::WebState;
+
+/// Longest a client message may be.
+const MAX_MESSAGE: usize = 64 * 1024;
+const FLUSH: Duration = Duration::from_millis(100);
+
+pub async fn upgrade(
+    State(s): State<WebState>,
+    Extension(who): Extension<Principal>,
+    headers: HeaderMap,
+    ws: WebSocketUpgrade,
+) -> Response {
+    let token = token_from_cookies(headers.get(header::COOKIE).and_then(|v| v.to_str().ok()));
+    ws.max_message_size(MAX_MESSAGE)
+        .on_upgrade(move |socket| async move {
+            if let Err(e) = run(s, who, token, socket).await {
+                tracing::debug!(error = %e, "live socket closed");
+            }
+        })
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ClientMessage {
+    subscribe: Option<Subscribe>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct Subscribe {
+    #[serde(default)]
+    tags: Vec<String>,
+    #[serde(default)]
+    prefixes: Vec<String>,
+    #[serde(default)]
+    alarms: bool,
+}
+
+fn tag_json(s: &WebState, id: TagId, sample: &Sample) -> serde_json::Value {
+    let name =
+        s.db.meta(id)
+            .map(|m| m.name.to_string())
+            .unwrap_or_default();
+    json!({
+        "name": name,
+        "value": sample.value,
+        "quality": sample.quality,
+        "timestamp": sample.timestamp,
+    })
+}
+
+async fn run(
+    s: WebState,
+    who: Principal,
+    token: Option<String>,
+    mut socket: WebSocket,
+) -> Result<(), axum::Error> {
+    let mut sub = s.db.subscribe(&[]);
+    let mut ended = s.auth.sessions.watch_ended();
+    let mut alarms_wanted = false;
+    let mut alarm_version = None::<u64>;
+    let mut pending: BTreeMap<TagId, Sample> = BTreeMap::new();
+    let mut pending_snapshot = false;
+    let mut tick = tokio::time::interval(FLUSH);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+
+    let hello = json!({"type": "hello", "user": who.user, "role": who.role});
+    socket.send(Message::Text(hello.to_string().into())).await?;
+
+    loop {
+        tokio::select! {
+            msg = socket.recv() => {
+                let Some(msg) = msg else { return Ok(()) };
+                match msg? {
+                    Message::Text(text) => match serde_json::from_str::<ClientMessage>(&text) {
+                        Ok(ClientMessage { subscribe: Some(sub_req) }) => {
+                            let mut ids: Vec<TagId> = sub_req.tags.iter().filter_map(|t| s.db.id(t)).collect();
+                            for p in sub_req.prefixes.iter().filter(|p| !p.is_empty()) {
+                                ids.extend(s.db.ids_with_prefix(p));
+                            }
+                            ids.sort();
+                            ids.dedup();
+                            let snap = sub.watch(Some(&ids));
+                            pending.clear();
+                            pending.extend(snap.batch().changes.iter().cloned());
+                            pending_snapshot = true;
+                            alarms_wanted = sub_req.alarms;
+                            alarm_version = None;
+                        }
+                        Ok(_) => {}
+                        Err(e) => {
+                            let err = json!({"type": "error", "detail": format!("bad message: {e}")});
+                            socket.send(Message::Text(err.to_string().into())).await?;
+                        }
+                    },
+                    Message::Close(_) => return Ok(()),
+                    _ => {}
+                }
+            }
+            update = sub.recv() => {
+                let Some(update) = update else { return Ok(()) };
+                if let Update::Snapshot(_) = &update {
+                    pending.clear();
+                    pending_snapshot = true;
+                }
+                for (id, sample) in &update.batch().changes {
+                    pending.insert(*id, sample.clone());
+                }
+            }
+            _ = ended.changed() => {
+                let live = token.as_deref().is_some_and(|t| s.auth.sessions.is_live(t));
+                if !live {
+                    let _ = socket.send(Message::Close(Some(CloseFrame { code: 4001, reason: "session ended".into() }))).await;
+                    return Ok(());
+                }
+            }
+            _ = tick.tick() => {
+                if !pending.is_empty() || pending_snapshot {
+                    let values: Vec<_> = pending.iter().map(|(id, smp)| tag_json(&s, *id, smp)).collect();
+                    let msg = json!({"type": "tags", "snapshot": pending_snapshot, "values": values});
+                    pending.clear();
+                    pending_snapshot = false;
+                    socket.send(Message::Text(msg.to_string().into())).await?;
+                }
+                if alarms_wanted {
+                    if let Some((version, summary)) = crate::api::alarms::live_summary(&s, alarm_version) {
+                        alarm_version = Some(version);
+                        let msg = json!({"type": "alarms", "version": version, "alarms": summary});
+                        socket.send(Message::Text(msg.to_string().into())).await?;
+                    }
+                }
+                // Re-check the session now and then even without a logout event
+                // (idle and absolute expiry).
+                if let Some(t) = token.as_deref() {
+                    if !s.auth.sessions.is_live(t) {
+                        let _ = socket.send(Message::Close(Some(CloseFrame { code: 4001, reason: "session ended".into() }))).await;
+                        return Ok(());
+                    }
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,201 @@
+//! Panels: the fault-isolation status of each panel, and its commands.
+
+use axum::extract::{Path, State};
+use axum::http::StatusCode;
+use axum::{Extension, Json};
+use gridscada_control::fault_isolation::{
+    CommandError, Mode, PanelCommand, PanelCommandKind, PanelStatus,
+};
+use serde::Deserialize;
+use serde_json::{json, Value};
+use tokio::sync::{mpsc, oneshot, watch};
+
+use crate::api::audit;
+use crate::auth::Principal;
+use crate::error::{ApiError, ApiResult};
+use crate::WebState;
+
+/// One running panel sequence, as the web layer reaches it.
+#[derive(Clone)]
+pub struct PanelHandle {
+    pub id: String,
+    pub status: watch::Receiver<PanelStatus>,
+    pub commands: mpsc::Sender<PanelCommand>,
+}
+
+fn find<'a>(s: &'a WebState, id: &str) -> ApiResult<&'a PanelHandle> {
+    s.components
+        .panels
+        .iter()
+        .find(|p| p.id == id)
+        .ok_or_else(|| ApiError::not_found(format!("no panel '{id}'")))
+}
+
+/// A panel's screen is its id; the main screen shows every panel.
+fn may_view(who: &Principal, id: &str) -> ApiResult<()> {
+    if who.may_open(id) || who.may_open("main") {
+        Ok(())
+    } else {
+        Err(ApiError::forbidden(format!(
+            "your group may not open the {id} screen"
+        )))
+    }
+}
+
+pub async fn list(State(s): State<WebState>, Extension(who): Extension<Principal>) -> Json<Value> {
+    let panels: Vec<PanelStatus> = s
+        .components
+        .panels
+        .iter()
+        .filter(|p| may_view(&who, &p.id).is_ok())
+        .map(|p| p.status.borrow().clone())
+        .collect();
+    Json(json!({ "panels": panels }))
+}
+
+pub async fn one(
+    State(s): State<WebState>,
+    Extension(who): Extension<Principal>,
+    Path(id): Path<String>,
+) -> ApiResult<Json<PanelStatus>> {
+    let p = find(&s, &id)?;
+    may_view(&who, &id)?;
+    let status = p.status.borrow().clone();
+    Ok(Json(status))
+}
+
+async fn send(s: &WebState, who: &Principal, id: &str, kind: PanelCommandKind) -> ApiResult<()> {
+    let p = find(s, id)?;
+    may_view(who, id)?;
+    let (reply, answer) = oneshot::channel();
+    let cmd = PanelCommand {
+        user: who.audit_name(),
+        kind,
+        reply,
+    };
+    p.commands.send(cmd).await.map_err(|_| {
+        ApiError::unavailable(format!("the sequence of panel '{id}' is not running"))
+    })?;
+    match answer.await {
+        Ok(Ok(())) => Ok(()),
+        Ok(Err(e)) => Err(refusal(e)),
+        Err(_) => Err(ApiError::unavailable(format!(
+            "the sequence of panel '{id}' stopped"
+        ))),
+    }
+}
+
+fn refusal(e: CommandError) -> ApiError {
+    let status = match e {
+        CommandError::UnknownBreaker { .. } => StatusCode::NOT_FOUND,
+        CommandError::CommLost => StatusCode::SERVICE_UNAVAILABLE,
+        _ => StatusCode::CONFLICT,
+    };
+    ApiError::new(status, "refused", e.to_string())
+}
+
+type JsonBody<T> = Result<Json<T>, axum::extract::rejection::JsonRejection>;
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModeBody {
+    pub mode: Mode,
+}
+
+pub async fn mode(
+    State(s): State<WebState>,
+    Extension(who): Extension<Principal>,
+    Path(id): Path<String>,
+    body: JsonBody<ModeBody>,
+) -> ApiResult<Json<PanelStatus>> {
+    let Json(b) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
+    send(&s, &who, &id, PanelCommandKind::SetMode(b.mode)).await?;
+    let label = match b.mode {
+        Mode::Auto => "auto",
+        Mode::Manual => "manual",
+    };
+    audit(
+        &s,
+        &who,
+        "mode",
+        &id,
+        format!("{} set panel {id} to {label} mode", who.audit_name()),
+    )
+    .await;
+    current(&s, &id).await
+}
+
+pub async fn reset(
+    State(s): State<WebState>,
+    Extension(who): Extension<Principal>,
+    Path(id): Path<String>,
+) -> ApiResult<Json<PanelStatus>> {
+    send(&s, &who, &id, PanelCommandKind::Reset).await?;
+    audit(
+        &s,
+        &who,
+        "reset",
+        &id,
+        format!("{} pressed Reset on panel {id}", who.audit_name()),
+    )
+    .await;
+    current(&s, &id).await
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BreakerBody {
+    pub closed: bool,
+}
+
+pub async fn breaker(
+    State(s): State<WebState>,
+    Extension(who): Extension<Principal>,
+    Path((id, breaker)): Path<(String, String)>,
+    body: JsonBody<BreakerBody>,
+) -> ApiResult<Json<PanelStatus>> {
+    let Json(b) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
+    let kind = PanelCommandKind::Breaker {
+        breaker: breaker.clone(),
+        close: b.closed,
+    };
+    let what = if b.closed { "close" } else { "open" };
+    match send(&s, &who, &id, kind).await {
+        Ok(()) => {
+            audit(
+                &s,
+                &who,
+                "command",
+                &id,
+                format!(
+                    "{} commanded {breaker} of panel {id} to {what}",
+                    who.audit_name()
+                ),
+            )
+            .await;
+            current(&s, &id).await
+        }
+        Err(e) => {
+            audit(
+                &s,
+                &who,
+                "command_refused",
+                &id,
+                format!(
+                    "{}'s command to {what} {breaker} of panel {id} was refused: {}",
+                    who.audit_name(),
+                    e.detail
+                ),
+            )
+            .await;
+            Err(e)
+        }
+    }
+}
+
+/// The status after a command, once the sequence has published it.
+async fn current(s: &WebState, id: &str) -> ApiResult<Json<PanelStatus>> {
+    let p = find(s, id)?;
+    let status = p.status.borrow().clone();
+    Ok(Json(status))
+}

@@ -1,0 +1,153 @@
+//! Log in, log out, and who am I.
+
+use axum::extract::{ConnectInfo, State};
+use axum::http::{header, HeaderMap, StatusCode};
+use axum::response::{IntoResponse, Response};
+use axum::{Extension, Json};
+use serde::Deserialize;
+use serde_json::json;
+
+use crate::api::audit;
+use crate::auth::{self, Principal};
+use crate::error::{ApiError, ApiResult};
+use crate::WebState;
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Login {
+    pub username: String,
+    pub password: String,
+}
+
+/// The same answer for an unknown user, a wrong password and a blocked user,
+/// so that a failed login does not reveal which names exist.
+fn refused() -> ApiError {
+    ApiError::new(
+        StatusCode::UNAUTHORIZED,
+        "invalid_credentials",
+        "invalid username or password",
+    )
+}
+
+pub async fn login(
+    State(s): State<WebState>,
+    ConnectInfo(peer): ConnectInfo<std::net::SocketAddr>,
+    headers: HeaderMap,
+    body: Result<Json<Login>, axum::extract::rejection::JsonRejection>,
+) -> ApiResult<Response> {
+    let Json(login) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
+    let ip = peer.ip();
+    let name = login.username.trim().to_string();
+    if name.is_empty() || name.len() > 128 || login.password.len() > 1024 {
+        return Err(refused());
+    }
+    if let Some(wait) = s.auth.throttle.check(&name, ip) {
+        return Err(ApiError::new(
+            StatusCode::TOO_MANY_REQUESTS,
+            "throttled",
+            format!(
+                "too many failed logins; try again in {} s",
+                wait.as_secs().max(1)
+            ),
+        ));
+    }
+    let user = s.store.user(&name).await?;
+    let hash = user
+        .as_ref()
+        .map(|u| u.password_hash.clone())
+        .unwrap_or_else(|| s.auth.decoy_hash.to_string());
+    let password_ok = auth::verify_password(login.password, hash).await;
+    let anon = Principal::anonymous();
+    let user = match user {
+        Some(u) if password_ok && !u.blocked => u,
+        other => {
+            s.auth.throttle.failure(&name, ip);
+            let why = match other {
+                Some(u) if u.blocked && password_ok => "user is blocked",
+                Some(_) => "wrong password",
+                None => "unknown user",
+            };
+            audit(
+                &s,
+                &anon,
+                "login_failed",
+                "web",
+                format!("failed login as '{name}' from {ip}: {why}"),
+            )
+            .await;
+            return Err(refused());
+        }
+    };
+    s.auth.throttle.success(&name, ip);
+    let previous =
+        auth::token_from_cookies(headers.get(header::COOKIE).and_then(|v| v.to_str().ok()));
+    let token = s.auth.sessions.create(&user.name, previous.as_deref());
+    let screens = s.screens_of(&user.group, user.role).await;
+    let who = Principal {
+        user: Some(user.name.clone()),
+        role: user.role,
+        group: Some(user.group.clone()),
+        screens,
+    };
+    audit(
+        &s,
+        &who,
+        "login",
+        "web",
+        format!("{} logged in from {ip}", user.name),
+    )
+    .await;
+    let body = session_body(&who);
+    Ok((
+        [(
+            header::SET_COOKIE,
+            auth::session_cookie(&token, s.auth.secure_cookies),
+        )],
+        Json(body),
+    )
+        .into_response())
+}
+
+fn session_body(p: &Principal) -> serde_json::Value {
+    json!({
+        "authenticated": p.is_logged_in(),
+        "user": p.user,
+        "role": p.role,
+        "group": p.group,
+        "screens": p.screens,
+    })
+}
+
+pub async fn current(Extension(p): Extension<Principal>) -> Json<serde_json::Value> {
+    Json(session_body(&p))
+}
+
+pub async fn logout(
+    State(s): State<WebState>,
+    Extension(p): Extension<Principal>,
+    headers: HeaderMap,
+) -> Response {
+    if let Some(token) =
+        auth::token_from_cookies(headers.get(header::COOKIE).and_then(|v| v.to_str().ok()))
+    {
+        s.auth.sessions.end(&token);
+    }
+    if p.is_logged_in() {
+        audit(
+            &s,
+            &p,
+            "logout",
+            "web",
+            format!("{} logged out", p.audit_name()),
+        )
+        .await;
+    }
+    (
+        StatusCode::NO_CONTENT,
+        [(
+            header::SET_COOKIE,
+            auth::clear_cookie(s.auth.secure_cookies),
+        )],
+    )
+        .into_response()
+}

@@ -1,0 +1,103 @@
+//! Trends: downsampled series for charts, raw CSV for export.
+
+use axum::body::Body;
+use axum::extract::{Query, State};
+use axum::http::header;
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+use serde::Deserialize;
+use serde_json::{json, Value};
+
+use crate::api::parse_time;
+use crate::error::{ApiError, ApiResult};
+use crate::WebState;
+
+#[derive(Deserialize)]
+pub struct TrendQuery {
+    /// Comma-separated tag names.
+    pub tags: String,
+    pub from: String,
+    pub to: String,
+    /// Points per series (buckets), at most 5000.
+    pub points: Option<u32>,
+}
+
+const MAX_PENS: usize = 16;
+
+fn tag_list<'a>(s: &WebState, tags: &'a str) -> ApiResult<Vec<&'a str>> {
+    let list: Vec<&str> = tags
+        .split(',')
+        .map(str::trim)
+        .filter(|t| !t.is_empty())
+        .collect();
+    if list.is_empty() {
+        return Err(ApiError::bad_request("tags: name at least one tag"));
+    }
+    if list.len() > MAX_PENS {
+        return Err(ApiError::bad_request(format!(
+            "tags: at most {MAX_PENS} tags at once"
+        )));
+    }
+    if let Some(unknown) = list.iter().find(|t| s.db.id(t).is_none()) {
+        return Err(ApiError::not_found(format!("no tag named '{unknown}'")));
+    }
+    Ok(list)
+}
+
+pub async fn trend(
+    State(s): State<WebState>,
+    Query(q): Query<TrendQuery>,
+) -> ApiResult<Json<Value>> {
+    let tags = tag_list(&s, &q.tags)?;
+    let from = parse_time("from", &q.from)?;
+    let to = parse_time("to", &q.to)?;
+    let points = q.points.unwrap_or(500);
+    if !(1..=5000).contains(&points) {
+        return Err(ApiError::bad_request("points must be 1 to 5000"));
+    }
+    let series = s.store.trend(&tags, from, to, points).await?;
+    Ok(Json(
+        json!({ "from": from, "to": to, "points": points, "series": series }),
+    ))
+}
+
+#[derive(Deserialize)]
+pub struct CsvQuery {
+    pub tags: String,
+    pub from: String,
+    pub to: String,
+}
+
+/// Raw samples as CSV, streamed so that a long range never sits in memory.
+pub async fn csv(State(s): State<WebState>, Query(q): Query<CsvQuery>) -> ApiResult<Response> {
+    let tags: Vec<String> = tag_list(&s, &q.tags)?
+        .into_iter()
+        .map(String::from)
+        .collect();
+    let from = parse_time("from", &q.from)?;
+    let to = parse_time("to", &q.to)?;
+    if from > to {
+        return Err(ApiError::bad_request("from must not be after to"));
+    }
+    let (mut tx, rx) = tokio::io::duplex(64 * 1024);
+    let store = s.store.clone();
+    tokio::spawn(async move {
+        let refs: Vec<&str> = tags.iter().map(String::as_str).collect();
+        if let Err(e) = store.export_csv(&refs, from, to, &mut tx).await {
+            // The response has started; the client sees a truncated file.
+            tracing::error!(error = %e, "CSV export failed part-way");
+        }
+    });
+    let body = Body::from_stream(tokio_util::io::ReaderStream::new(rx));
+    Ok((
+        [
+            (header::CONTENT_TYPE, "text/csv; charset=utf-8"),
+            (
+                header::CONTENT_DISPOSITION,
+                "attachment; filename=\"trend.csv\"",
+            ),
+        ],
+        body,
+    )
+        .into_response())
+}

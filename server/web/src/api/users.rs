@@ -1,0 +1,338 @@
+//! Users and screen access (administrators), and changing one's own password.
+
+use axum::extract::{Path, State};
+use axum::http::StatusCode;
+use axum::{Extension, Json};
+use gridscada_config::Role;
+use gridscada_store::{NewUser, UserSummary};
+use serde::Deserialize;
+use serde_json::{json, Value};
+
+use crate::api::audit;
+use crate::auth::{self, Principal, SCREENS};
+use crate::error::{ApiError, ApiResult};
+use crate::WebState;
+
+type JsonBody<T> = Result<Json<T>, axum::extract::rejection::JsonRejection>;
+
+fn body<T>(b: JsonBody<T>) -> ApiResult<T> {
+    b.map(|Json(v)| v)
+        .map_err(|e| ApiError::bad_request(e.body_text()))
+}
+
+pub async fn list(State(s): State<WebState>) -> ApiResult<Json<Value>> {
+    let users: Vec<UserSummary> = s.store.users().await?.iter().map(|u| u.summary()).collect();
+    Ok(Json(json!({ "users": users })))
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NewUserBody {
+    pub name: String,
+    pub role: Role,
+    /// Defaults to the role's name.
+    pub group: Option<String>,
+    /// Generated and returned once when absent.
+    pub password: Option<String>,
+}
+
+pub fn check_user_name(name: &str) -> ApiResult<()> {
+    if name.trim() != name
+        || name.is_empty()
+        || name.chars().count() > 64
+        || name.chars().any(char::is_control)
+    {
+        return Err(ApiError::bad_request(
+            "a user name needs 1 to 64 printable characters, without spaces at either end",
+        ));
+    }
+    Ok(())
+}
+
+pub async fn create(
+    State(s): State<WebState>,
+    Extension(who): Extension<Principal>,
+    b: JsonBody<NewUserBody>,
+) -> ApiResult<(StatusCode, Json<Value>)> {
+    let b = body(b)?;
+    check_user_name(&b.name)?;
+    let group = b.group.unwrap_or_else(|| b.role.label().to_string());
+    check_user_name(&group)
+        .map_err(|_| ApiError::bad_request("a group name needs 1 to 64 printable characters"))?;
+    let (password, generated) = match b.password {
+        Some(p) => {
+            auth::check_password_strength(&p).map_err(ApiError::bad_request)?;
+            (p, false)
+        }
+        None => (auth::generate_password(), true),
+    };
+    let hash = auth::hash_password(password.clone())
+        .await
+        .map_err(|e| ApiError::internal("hashing a password", e))?;
+    let user = s
+        .store
+        .create_user(&NewUser {
+            name: b.name.clone(),
+            role: b.role,
+            password_hash: hash,
+            group,
+            created_at: s.clock.now(),
+        })
+        .await?;
+    audit(
+        &s,
+        &who,
+        "user",
+        "users",
+        format!(
+            "{} created user '{}' as {}",
+            who.audit_name(),
+            user.name,
+            user.role.label()
+        ),
+    )
+    .await;
+    let mut out = json!({ "user": user.summary() });
+    if generated {
+        out["password"] = json!(password);
+    }
+    Ok((StatusCode::CREATED, Json(out)))
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UpdateBody {
+    pub role: Option<Role>,
+    pub group: Option<String>,
+    pub blocked: Option<bool>,
+}
+
+/// Refuses a change that would leave no usable administrator.
+async fn keep_an_administrator(s: &WebState, name: &str) -> ApiResult<()> {
+    let admins = s
+        .store
+        .users()
+        .await?
+        .into_iter()
+        .filter(|u| u.role == Role::Administrator && !u.blocked && u.name != name)
+        .count();
+    if admins == 0 {
+        return Err(ApiError::conflict(
+            "this would leave no administrator who can log in; create another administrator first",
+        ));
+    }
+    Ok(())
+}
+
+pub async fn update(
+    State(s): State<WebState>,
+    Extension(who): Extension<Principal>,
+    Path(name): Path<String>,
+    b: JsonBody<UpdateBody>,
+) -> ApiResult<Json<Value>> {
+    let b = body(b)?;
+    let user = s
+        .store
+        .user(&name)
+        .await?
+        .ok_or_else(|| ApiError::not_found(format!("no user named '{name}'")))?;
+    let demoted = b.role.is_some_and(|r| r != Role::Administrator);
+    if user.role == Role::Administrator && (demoted || b.blocked == Some(true)) {
+        keep_an_administrator(&s, &name).await?;
+    }
+    let mut changes = vec![];
+    if let Some(role) = b.role {
+        s.store.set_user_role(&name, role).await?;
+        changes.push(format!("role {}", role.label()));
+    }
+    if let Some(group) = &b.group {
+        check_user_name(group).map_err(|_| {
+            ApiError::bad_request("a group name needs 1 to 64 printable characters")
+        })?;
+        s.store.set_user_group(&name, group).await?;
+        changes.push(format!("group {group}"));
+    }
+    if let Some(blocked) = b.blocked {
+        s.store.set_user_blocked(&name, blocked).await?;
+        if blocked {
+            s.auth.sessions.end_user(&name);
+        }
+        changes.push(if blocked {
+            "blocked".into()
+        } else {
+            "unblocked".into()
+        });
+    }
+    audit(
+        &s,
+        &who,
+        "user",
+        "users",
+        format!(
+            "{} changed user '{name}': {}",
+            who.audit_name(),
+            changes.join(", ")
+        ),
+    )
+    .await;
+    let user = s
+        .store
+        .user(&name)
+        .await?
+        .ok_or_else(|| ApiError::not_found(format!("no user named '{name}'")))?;
+    Ok(Json(json!({ "user": user.summary() })))
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DeleteBody {
+    /// Must repeat the user's name: deleting is explicit.
+    pub confirm: String,
+}
+
+pub async fn remove(
+    State(s): State<WebState>,
+    Extension(who): Extension<Principal>,
+    Path(name): Path<String>,
+    b: JsonBody<DeleteBody>,
+) -> ApiResult<StatusCode> {
+    let b = body(b).map_err(|_| {
+        ApiError::bad_request(format!(
+            "deleting a user needs confirmation: send {{\"confirm\": \"{name}\"}}"
+        ))
+    })?;
+    if b.confirm != name {
+        return Err(ApiError::bad_request(format!(
+            "confirmation does not match: send {{\"confirm\": \"{name}\"}}"
+        )));
+    }
+    let user = s
+        .store
+        .user(&name)
+        .await?
+        .ok_or_else(|| ApiError::not_found(format!("no user named '{name}'")))?;
+    if user.role == Role::Administrator {
+        keep_an_administrator(&s, &name).await?;
+    }
+    s.store.delete_user(&name).await?;
+    s.auth.sessions.end_user(&name);
+    audit(
+        &s,
+        &who,
+        "user",
+        "users",
+        format!("{} deleted user '{name}'", who.audit_name()),
+    )
+    .await;
+    Ok(StatusCode::NO_CONTENT)
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PasswordBody {
+    pub password: String,
+    /// Required when changing one's own password.
+    pub current_password: Option<String>,
+}
+
+pub async fn password(
+    State(s): State<WebState>,
+    Extension(who): Extension<Principal>,
+    Path(name): Path<String>,
+    b: JsonBody<PasswordBody>,
+) -> ApiResult<StatusCode> {
+    let b = body(b)?;
+    let own = who.user.as_deref() == Some(name.as_str());
+    if !own && who.role < Role::Administrator {
+        return Err(ApiError::forbidden(
+            "only administrators may change another user's password",
+        ));
+    }
+    let user = s
+        .store
+        .user(&name)
+        .await?
+        .ok_or_else(|| ApiError::not_found(format!("no user named '{name}'")))?;
+    if own {
+        let current = b.current_password.clone().unwrap_or_default();
+        if !auth::verify_password(current, user.password_hash.clone()).await {
+            return Err(ApiError::forbidden("the current password is wrong"));
+        }
+    }
+    auth::check_password_strength(&b.password).map_err(ApiError::bad_request)?;
+    let hash = auth::hash_password(b.password)
+        .await
+        .map_err(|e| ApiError::internal("hashing a password", e))?;
+    s.store
+        .set_password_hash(&name, &hash, s.clock.now())
+        .await?;
+    if !own {
+        s.auth.sessions.end_user(&name);
+    }
+    audit(
+        &s,
+        &who,
+        "user",
+        "users",
+        format!("{} changed the password of '{name}'", who.audit_name()),
+    )
+    .await;
+    Ok(StatusCode::NO_CONTENT)
+}
+
+pub async fn group_screens(
+    State(s): State<WebState>,
+    Path(group): Path<String>,
+) -> ApiResult<Json<Value>> {
+    let role = role_named(&group);
+    let screens = s.screens_of(&group, role).await;
+    Ok(Json(
+        json!({ "group": group, "screens": screens, "available": SCREENS }),
+    ))
+}
+
+fn role_named(group: &str) -> Role {
+    match group {
+        "administrator" => Role::Administrator,
+        "supervisor" => Role::Supervisor,
+        "operator" => Role::Operator,
+        _ => Role::Guest,
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScreensBody {
+    pub screens: Vec<String>,
+}
+
+pub async fn set_group_screens(
+    State(s): State<WebState>,
+    Extension(who): Extension<Principal>,
+    Path(group): Path<String>,
+    b: JsonBody<ScreensBody>,
+) -> ApiResult<Json<Value>> {
+    let b = body(b)?;
+    check_user_name(&group)
+        .map_err(|_| ApiError::bad_request("a group name needs 1 to 64 printable characters"))?;
+    if let Some(bad) = b.screens.iter().find(|x| !SCREENS.contains(&x.as_str())) {
+        return Err(ApiError::bad_request(format!(
+            "unknown screen '{bad}'; screens are {}",
+            SCREENS.join(", ")
+        )));
+    }
+    s.store.set_group_screens(&group, &b.screens).await?;
+    audit(
+        &s,
+        &who,
+        "config",
+        "users",
+        format!(
+            "{} set the screens of group '{group}' to {}",
+            who.audit_name(),
+            b.screens.join(", ")
+        ),
+    )
+    .await;
+    Ok(Json(json!({ "group": group, "screens": b.screens })))
+}

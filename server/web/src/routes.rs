@@ -1,0 +1,441 @@
+//! The route table: every API route with the permission it needs, in one
+//! place. The router is built from this table, and the authorization tests are
+//! generated from it, so a route without a rule cannot exist.
+
+use axum::extract::{ConnectInfo, Request, State};
+use axum::http::{header, HeaderMap, HeaderValue, Method, StatusCode};
+use axum::middleware::{self, Next};
+use axum::response::{IntoResponse, Response};
+use axum::routing::MethodRouter;
+use axum::Router;
+use gridscada_config::Role;
+
+use crate::api;
+use crate::auth::{token_from_cookies, Principal};
+use crate::error::ApiError;
+use crate::WebState;
+
+/// What a route requires of its caller.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Perm {
+    /// Anyone, including anonymous clients.
+    Public,
+    /// Any logged-in user (Guest role or above).
+    LoggedIn,
+    /// A logged-in user whose group may open this screen.
+    Screen(&'static str),
+    /// At least this role.
+    Role(Role),
+    /// At least this role, and the screen.
+    RoleScreen(Role, &'static str),
+}
+
+impl Perm {
+    /// Whether `p` passes. The error says why not, in words for the operator.
+    pub fn check(self, p: &Principal) -> Result<(), ApiError> {
+        let logged_in = || {
+            if p.is_logged_in() {
+                Ok(())
+            } else {
+                Err(ApiError::unauthorized())
+            }
+        };
+        let role = |r: Role| {
+            if p.role >= r {
+                Ok(())
+            } else {
+                Err(ApiError::forbidden(format!(
+                    "this needs the {} role or above; you are {}",
+                    r.label(),
+                    p.role.label()
+                )))
+            }
+        };
+        let screen = |s: &str| {
+            if p.may_open(s) {
+                Ok(())
+            } else {
+                Err(ApiError::forbidden(format!(
+                    "your group may not open the {s} screen"
+                )))
+            }
+        };
+        match self {
+            Perm::Public => Ok(()),
+            Perm::LoggedIn => logged_in(),
+            Perm::Screen(s) => logged_in().and_then(|_| screen(s)),
+            Perm::Role(r) => logged_in().and_then(|_| role(r)),
+            Perm::RoleScreen(r, s) => logged_in().and_then(|_| role(r)).and_then(|_| screen(s)),
+        }
+    }
+}
+
+/// One route of the API.
+pub struct Route {
+    pub method: Method,
+    pub path: &'static str,
+    pub perm: Perm,
+    /// Only present when the server runs simulators (`demo`, `replay`).
+    pub sim_only: bool,
+    handler: fn() -> MethodRouter<WebState>,
+}
+
+const fn r(
+    method: Method,
+    path: &'static str,
+    perm: Perm,
+    handler: fn() -> MethodRouter<WebState>,
+) -> Route {
+    Route {
+        method,
+        path,
+        perm,
+        sim_only: false,
+        handler,
+    }
+}
+
+const fn sim(method: Method, path: &'static str, handler: fn() -> MethodRouter<WebState>) -> Route {
+    Route {
+        method,
+        path,
+        perm: Perm::Role(Role::Administrator),
+        sim_only: true,
+        handler,
+    }
+}
+
+use Role::{Administrator as Admin, Operator, Supervisor};
+
+/// Every API route. Anything not listed here is the static HMI or 404.
+pub fn table() -> Vec<Route> {
+    use axum::routing::{delete, get, patch, post, put};
+    vec![
+        r(Method::GET, "/healthz", Perm::Public, || {
+            get(api::misc::healthz)
+        }),
+        r(Method::GET, "/metrics", Perm::Public, || {
+            get(api::misc::metrics)
+        }),
+        r(Method::GET, "/api/openapi.json", Perm::Public, || {
+            get(api::misc::openapi)
+        }),
+        // Session.
+        r(Method::POST, "/api/session", Perm::Public, || {
+            post(api::session::login)
+        }),
+        r(Method::GET, "/api/session", Perm::Public, || {
+            get(api::session::current)
+        }),
+        r(Method::DELETE, "/api/session", Perm::Public, || {
+            delete(api::session::logout)
+        }),
+        // Tags.
+        r(Method::GET, "/api/tags", Perm::LoggedIn, || {
+            get(api::tags::list)
+        }),
+        r(Method::GET, "/api/tags/{name}", Perm::LoggedIn, || {
+            get(api::tags::one)
+        }),
+        // The tag's own write_role is checked in the handler, on the server.
+        r(
+            Method::POST,
+            "/api/tags/{name}/write",
+            Perm::Role(Operator),
+            || post(api::tags::write),
+        ),
+        // Alarms.
+        r(Method::GET, "/api/alarms", Perm::LoggedIn, || {
+            get(api::alarms::summary)
+        }),
+        r(
+            Method::POST,
+            "/api/alarms/ack",
+            Perm::Role(Operator),
+            || post(api::alarms::ack),
+        ),
+        r(
+            Method::POST,
+            "/api/alarms/{id}/shelve",
+            Perm::Role(Supervisor),
+            || post(api::alarms::shelve),
+        ),
+        r(
+            Method::DELETE,
+            "/api/alarms/{id}/shelve",
+            Perm::Role(Supervisor),
+            || delete(api::alarms::unshelve),
+        ),
+        r(
+            Method::GET,
+            "/api/alarms/history",
+            Perm::Screen("alarms"),
+            || get(api::alarms::history),
+        ),
+        r(
+            Method::GET,
+            "/api/alarms/metrics",
+            Perm::Screen("alarms"),
+            || get(api::alarms::metrics),
+        ),
+        // Events and trends.
+        r(Method::GET, "/api/events", Perm::Screen("events"), || {
+            get(api::events::list)
+        }),
+        r(Method::GET, "/api/trends", Perm::Screen("trends"), || {
+            get(api::trends::trend)
+        }),
+        r(
+            Method::GET,
+            "/api/trends.csv",
+            Perm::Screen("trends"),
+            || get(api::trends::csv),
+        ),
+        // Users and groups.
+        r(
+            Method::GET,
+            "/api/users",
+            Perm::RoleScreen(Admin, "users"),
+            || get(api::users::list),
+        ),
+        r(
+            Method::POST,
+            "/api/users",
+            Perm::RoleScreen(Admin, "users"),
+            || post(api::users::create),
+        ),
+        r(
+            Method::PATCH,
+            "/api/users/{name}",
+            Perm::RoleScreen(Admin, "users"),
+            || patch(api::users::update),
+        ),
+        r(
+            Method::DELETE,
+            "/api/users/{name}",
+            Perm::RoleScreen(Admin, "users"),
+            || delete(api::users::remove),
+        ),
+        // Own password for anyone; anyone else's for administrators (checked in the handler).
+        r(
+            Method::POST,
+            "/api/users/{name}/password",
+            Perm::LoggedIn,
+            || post(api::users::password),
+        ),
+        r(
+            Method::GET,
+            "/api/groups/{group}/screens",
+            Perm::RoleScreen(Admin, "users"),
+            || get(api::users::group_screens),
+        ),
+        r(
+            Method::PUT,
+            "/api/groups/{group}/screens",
+            Perm::RoleScreen(Admin, "users"),
+            || put(api::users::set_group_screens),
+        ),
+        // Panels (fault isolation).
+        r(Method::GET, "/api/panels", Perm::LoggedIn, || {
+            get(api::panels::list)
+        }),
+        r(Method::GET, "/api/panels/{id}", Perm::LoggedIn, || {
+            get(api::panels::one)
+        }),
+        r(
+            Method::POST,
+            "/api/panels/{id}/mode",
+            Perm::Role(Supervisor),
+            || post(api::panels::mode),
+        ),
+        r(
+            Method::POST,
+            "/api/panels/{id}/reset",
+            Perm::Role(Operator),
+            || post(api::panels::reset),
+        ),
+        r(
+            Method::POST,
+            "/api/panels/{id}/breakers/{breaker}",
+            Perm::Role(Operator),
+            || post(api::panels::breaker),
+        ),
+        // Dispatch.
+        r(
+            Method::GET,
+            "/api/dispatch",
+            Perm::Screen("microgrid"),
+            || get(api::dispatch::latest),
+        ),
+        r(
+            Method::GET,
+            "/api/dispatch/history",
+            Perm::Screen("microgrid"),
+            || get(api::dispatch::history),
+        ),
+        // Live push.
+        r(Method::GET, "/api/live", Perm::LoggedIn, || {
+            get(api::live::upgrade)
+        }),
+        // Simulation: demo and replay only.
+        sim(Method::POST, "/api/sim/faults", || {
+            post(api::sim::inject_fault)
+        }),
+        sim(Method::DELETE, "/api/sim/faults/{panel}/{zone}", || {
+            delete(api::sim::repair)
+        }),
+        sim(Method::POST, "/api/sim/devices/{device}/offline", || {
+            post(api::sim::offline)
+        }),
+        sim(Method::POST, "/api/sim/devices/{device}/online", || {
+            post(api::sim::online)
+        }),
+    ]
+}
+
+/// Builds the router from the table, each route behind its permission check.
+pub fn build(state: WebState) -> Router {
+    let with_sim = state.sim.is_some();
+    let mut router: Router<WebState> = Router::new();
+    for route in table() {
+        if route.sim_only && !with_sim {
+            continue;
+        }
+        let perm = route.perm;
+        let handler = (route.handler)().route_layer(middleware::from_fn_with_state(
+            state.clone(),
+            move |s: State<WebState>, req: Request, next: Next| authorize(s, perm, req, next),
+        ));
+        router = router.route(route.path, handler);
+    }
+    router
+        .fallback(crate::hmi::serve)
+        .layer(middleware::from_fn(security_headers))
+        .layer(middleware::from_fn(check_origin))
+        .layer(tower_http::compression::CompressionLayer::new())
+        .with_state(state)
+}
+
+/// Resolves the caller and checks the route's permission. The principal goes
+/// into the request's extensions for the handler.
+async fn authorize(
+    State(state): State<WebState>,
+    perm: Perm,
+    mut req: Request,
+    next: Next,
+) -> Response {
+    let principal = state.principal(req.headers()).await;
+    if let Err(e) = perm.check(&principal) {
+        return e.into_response();
+    }
+    req.extensions_mut().insert(principal);
+    next.run(req).await
+}
+
+/// CSRF defence in depth, on top of SameSite=Strict cookies: an unsafe method
+/// or a WebSocket upgrade whose Origin is another site is refused. (Clients
+/// that send no Origin at all are not browsers acting for another site.)
+async fn check_origin(req: Request, next: Next) -> Response {
+    let unsafe_method = !matches!(*req.method(), Method::GET | Method::HEAD | Method::OPTIONS);
+    let upgrade = req
+        .headers()
+        .get(header::UPGRADE)
+        .is_some_and(|v| v.as_bytes().eq_ignore_ascii_case(b"websocket"));
+    if (unsafe_method || upgrade) && !same_origin(req.headers()) {
+        return ApiError::forbidden(
+            "cross-site request refused (Origin does not match this server)",
+        )
+        .into_response();
+    }
+    next.run(req).await
+}
+
+fn same_origin(headers: &HeaderMap) -> bool {
+    let Some(origin) = headers.get(header::ORIGIN) else {
+        return true;
+    };
+    let Some(host) = headers.get(header::HOST).and_then(|h| h.to_str().ok()) else {
+        return false;
+    };
+    let origin = origin.to_str().unwrap_or("");
+    origin
+        .strip_prefix("http://")
+        .or_else(|| origin.strip_prefix("https://"))
+        .is_some_and(|o| o.eq_ignore_ascii_case(host))
+}
+
+/// Security headers on every response.
+async fn security_headers(req: Request, next: Next) -> Response {
+    let mut resp = next.run(req).await;
+    let h = resp.headers_mut();
+    let set = |h: &mut HeaderMap, k: &'static str, v: &'static str| {
+        h.insert(k, HeaderValue::from_static(v));
+    };
+    set(
+        h,
+        "content-security-policy",
+        "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data:; connect-src 'self'; font-src 'self'; object-src 'none'; base-uri 'none'; form-action 'self'; frame-ancestors 'none'",
+    );
+    set(h, "x-content-type-options", "nosniff");
+    set(h, "x-frame-options", "DENY");
+    set(h, "referrer-policy", "same-origin");
+    set(h, "cross-origin-opener-policy", "same-origin");
+    resp
+}
+
+/// The client's address, for throttling.
+pub fn client_ip(req_info: Option<&ConnectInfo<std::net::SocketAddr>>) -> std::net::IpAddr {
+    req_info
+        .map(|c| c.0.ip())
+        .unwrap_or(std::net::IpAddr::from([0, 0, 0, 0]))
+}
+
+/// Resolving the caller from the session cookie.
+impl WebState {
+    pub async fn principal(&self, headers: &HeaderMap) -> Principal {
+        let cookie = headers.get(header::COOKIE).and_then(|v| v.to_str().ok());
+        let Some(token) = token_from_cookies(cookie) else {
+            return Principal::anonymous();
+        };
+        let Some(name) = self.auth.sessions.user(&token) else {
+            return Principal::anonymous();
+        };
+        match self.store.user(&name).await {
+            Ok(Some(u)) if !u.blocked => {
+                let screens = self.screens_of(&u.group, u.role).await;
+                Principal {
+                    user: Some(u.name),
+                    role: u.role,
+                    group: Some(u.group),
+                    screens,
+                }
+            }
+            Ok(_) => {
+                // Deleted or blocked since login: the session ends now.
+                self.auth.sessions.end(&token);
+                Principal::anonymous()
+            }
+            Err(e) => {
+                tracing::error!(error = %e, "reading the session's user");
+                Principal::anonymous()
+            }
+        }
+    }
+
+    /// The screens of a group; a group never configured gets its role's defaults.
+    pub async fn screens_of(&self, group: &str, role: Role) -> Vec<String> {
+        match self.store.group_screens(group).await {
+            Ok(s) if !s.is_empty() => s,
+            _ => crate::auth::default_screens(role),
+        }
+    }
+}
+
+/// 404 for unknown API paths, as JSON.
+pub async fn api_not_found() -> Response {
+    (
+        StatusCode::NOT_FOUND,
+        ApiError::not_found("no such API route"),
+    )
+        .into_response()
+}
