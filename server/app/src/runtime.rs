@@ -183,176 +183,236 @@ impl gridscada_web::api::sim::SimControl for SimAdapter {
     }
 }
 
-async fn run(mut plant: Plant, http: SocketAddr, data: &Path, mode: Mode) -> anyhow::Result<()> {
-    let clock: Arc<dyn Clock> = Arc::new(SystemClock);
-    let store = open_store(&plant, data).await?;
-    let mut tasks = JoinSet::new();
+/// Everything that runs for a plant, started in dependency order: store,
+/// simulators (optional), tag database, alarm engine, historian, field I/O,
+/// fault-isolation sequences and the microgrid outer loop. `demo`, `serve`
+/// and scenario replay all run this same stack.
+pub struct Stack {
+    pub plant: Arc<Plant>,
+    pub clock: Arc<dyn Clock>,
+    pub store: Store,
+    pub db: Arc<TagDb>,
+    pub alarms: Arc<gridscada_alarms::AlarmEngine>,
+    pub writer: Arc<dyn gridscada_tagdb::TagWriter>,
+    pub panels: Vec<PanelHandle>,
+    pub dispatch: Option<watch::Receiver<DispatchStatus>>,
+    pub simulator: Option<gridscada_sim::Simulator>,
+    pub events: mpsc::Sender<NewEvent>,
+    field: gridscada_modbus::FieldIo,
+    historian: gridscada_store::Historian,
+    tasks: JoinSet<()>,
+}
 
-    // Events from every part go through one sink into the store.
-    let (events_tx, events_rx) = mpsc::channel::<NewEvent>(4096);
-    tasks.spawn(sinks::events(store.clone(), events_rx));
+/// How to start a [`Stack`].
+pub struct StackOptions {
+    pub clock: Arc<dyn Clock>,
+    /// Start the simulated plant on ephemeral loopback ports and poll it.
+    pub simulate: bool,
+}
 
-    // Simulators first, so the poller finds its devices (demo only).
-    let simulator = if mode == Mode::Demo {
-        let sim = gridscada_sim::start(&plant, clock.clone(), gridscada_sim::BindMode::Ephemeral)
-            .await
-            .context("starting the simulated plant")?;
-        sim.patch_plant(&mut plant);
-        Some(sim)
-    } else {
-        None
-    };
-    let plant = Arc::new(plant);
+impl Stack {
+    pub async fn start(
+        mut plant: Plant,
+        store: Store,
+        opts: StackOptions,
+    ) -> anyhow::Result<Stack> {
+        let clock = opts.clock;
+        let mut tasks = JoinSet::new();
 
-    let db = Arc::new(TagDb::new(all_tags(&plant)).context("building the tag database")?);
-    tracing::info!(
-        tags = db.len(),
-        devices = plant.devices.len(),
-        mode = mode.label(),
-        "tag database ready"
-    );
+        // Events from every part go through one sink into the store.
+        let (events_tx, events_rx) = mpsc::channel::<NewEvent>(4096);
+        tasks.spawn(sinks::events(store.clone(), events_rx));
 
-    // The alarm engine, restored from the store.
-    let restore = store.alarm_states().await.context("loading alarm states")?;
-    let (transitions_tx, transitions_rx) = mpsc::channel(4096);
-    let (alarm_events_tx, alarm_events_rx) = mpsc::channel(1024);
-    let (states_tx, states_rx) = mpsc::channel(4096);
-    tasks.spawn(sinks::alarm_transitions(store.clone(), transitions_rx));
-    tasks.spawn(sinks::alarm_events(alarm_events_rx, events_tx.clone()));
-    tasks.spawn(sinks::alarm_states(store.clone(), states_rx));
-    let alarms = gridscada_alarms::AlarmEngine::new(
-        &plant,
-        db.clone(),
-        clock.clone(),
-        gridscada_alarms::AlarmChannels {
-            transitions: transitions_tx,
-            events: alarm_events_tx,
-            states: Some(states_tx),
-        },
-        &restore,
-        Default::default(),
-    )
-    .map_err(|e| anyhow!("starting the alarm engine: {e}"))?;
-    tasks.spawn(alarms.clone().run());
+        // Simulators first, so the poller finds its devices.
+        let simulator = if opts.simulate {
+            let sim =
+                gridscada_sim::start(&plant, clock.clone(), gridscada_sim::BindMode::Ephemeral)
+                    .await
+                    .context("starting the simulated plant")?;
+            sim.patch_plant(&mut plant);
+            Some(sim)
+        } else {
+            None
+        };
+        let plant = Arc::new(plant);
 
-    // The historian.
-    let historian = gridscada_store::Historian::spawn(store.clone(), Default::default());
-    tasks.spawn(sinks::historian_feed(
-        plant.clone(),
-        db.clone(),
-        historian.handle(),
-        store.clone(),
-        alarms.clone(),
-        clock.clone(),
-    ));
-
-    let field = gridscada_modbus::FieldIo::start(&plant, db.clone(), clock.clone())
-        .context("starting field I/O")?;
-    let writer = field.writer();
-
-    // One fault-isolation sequence per panel.
-    let (panel_notices_tx, panel_notices_rx) = mpsc::channel::<PanelNotice>(1024);
-    let selections = plant
-        .panels
-        .iter()
-        .map(|p| (p.id.get_ref().clone(), p.prefix.get_ref().clone()))
-        .collect();
-    tasks.spawn(sinks::panel_notices(
-        panel_notices_rx,
-        events_tx.clone(),
-        alarms.clone(),
-        selections,
-        clock.clone(),
-    ));
-    let mut panels = Vec::new();
-    for panel in &plant.panels {
-        let (cmd_tx, cmd_rx) = mpsc::channel(16);
-        let (status_tx, status_rx) = watch::channel(PanelStatus::initial(panel));
-        let id = panel.id.get_ref().clone();
-        let driver = fault_isolation::run_panel(
-            panel.clone(),
-            db.clone(),
-            writer.clone(),
-            clock.clone(),
-            cmd_rx,
-            status_tx,
-            panel_notices_tx.clone(),
+        let db = Arc::new(TagDb::new(all_tags(&plant)).context("building the tag database")?);
+        tracing::info!(
+            tags = db.len(),
+            devices = plant.devices.len(),
+            "tag database ready"
         );
-        let label = id.clone();
-        tasks.spawn(async move {
-            if let Err(e) = driver.await {
-                tracing::error!(panel = %label, error = %e, "fault-isolation sequence stopped");
-            }
-        });
-        panels.push(PanelHandle {
-            id,
-            status: status_rx,
-            commands: cmd_tx,
-        });
-    }
+        // The alarm engine, restored from the store.
+        let restore = store.alarm_states().await.context("loading alarm states")?;
+        let (transitions_tx, transitions_rx) = mpsc::channel(4096);
+        let (alarm_events_tx, alarm_events_rx) = mpsc::channel(1024);
+        let (states_tx, states_rx) = mpsc::channel(4096);
+        tasks.spawn(sinks::alarm_transitions(store.clone(), transitions_rx));
+        tasks.spawn(sinks::alarm_events(alarm_events_rx, events_tx.clone()));
+        tasks.spawn(sinks::alarm_states(store.clone(), states_rx));
+        let alarms = gridscada_alarms::AlarmEngine::new(
+            &plant,
+            db.clone(),
+            clock.clone(),
+            gridscada_alarms::AlarmChannels {
+                transitions: transitions_tx,
+                events: alarm_events_tx,
+                states: Some(states_tx),
+            },
+            &restore,
+            Default::default(),
+        )
+        .map_err(|e| anyhow!("starting the alarm engine: {e}"))?;
+        tasks.spawn(alarms.clone().run());
 
-    // The microgrid's outer loop.
-    let dispatch_rx = match &plant.microgrid {
-        Some(mg) => {
-            let (status_tx, status_rx) = watch::channel(DispatchStatus::default());
-            let (notices_tx, notices_rx) = mpsc::channel(256);
-            tasks.spawn(dispatch::run_dispatch(
-                mg.clone(),
+        // The historian.
+        let historian = gridscada_store::Historian::spawn(store.clone(), Default::default());
+        tasks.spawn(sinks::historian_feed(
+            plant.clone(),
+            db.clone(),
+            historian.handle(),
+            store.clone(),
+            alarms.clone(),
+            clock.clone(),
+        ));
+
+        let field = gridscada_modbus::FieldIo::start(&plant, db.clone(), clock.clone())
+            .context("starting field I/O")?;
+        let writer = field.writer();
+
+        // One fault-isolation sequence per panel.
+        let (panel_notices_tx, panel_notices_rx) = mpsc::channel::<PanelNotice>(1024);
+        let selections = plant
+            .panels
+            .iter()
+            .map(|p| (p.id.get_ref().clone(), p.prefix.get_ref().clone()))
+            .collect();
+        tasks.spawn(sinks::panel_notices(
+            panel_notices_rx,
+            events_tx.clone(),
+            alarms.clone(),
+            selections,
+            clock.clone(),
+        ));
+        let mut panels = Vec::new();
+        for panel in &plant.panels {
+            let (cmd_tx, cmd_rx) = mpsc::channel(16);
+            let (status_tx, status_rx) = watch::channel(PanelStatus::initial(panel));
+            let id = panel.id.get_ref().clone();
+            let driver = fault_isolation::run_panel(
+                panel.clone(),
                 db.clone(),
                 writer.clone(),
                 clock.clone(),
+                cmd_rx,
                 status_tx,
-                notices_tx,
-            ));
-            tasks.spawn(sinks::dispatch_notices(
-                notices_rx,
-                events_tx.clone(),
-                alarms.clone(),
-            ));
-            tasks.spawn(sinks::dispatch_results(
-                store.clone(),
-                db.clone(),
-                status_rx.clone(),
-                clock.clone(),
-            ));
-            Some(status_rx)
+                panel_notices_tx.clone(),
+            );
+            let label = id.clone();
+            tasks.spawn(async move {
+                if let Err(e) = driver.await {
+                    tracing::error!(panel = %label, error = %e, "fault-isolation sequence stopped");
+                }
+            });
+            panels.push(PanelHandle {
+                id,
+                status: status_rx,
+                commands: cmd_tx,
+            });
         }
-        None => None,
-    };
+
+        // The microgrid's outer loop.
+        let dispatch_rx = match &plant.microgrid {
+            Some(mg) => {
+                let (status_tx, status_rx) = watch::channel(DispatchStatus::default());
+                let (notices_tx, notices_rx) = mpsc::channel(256);
+                tasks.spawn(dispatch::run_dispatch(
+                    mg.clone(),
+                    db.clone(),
+                    writer.clone(),
+                    clock.clone(),
+                    status_tx,
+                    notices_tx,
+                ));
+                tasks.spawn(sinks::dispatch_notices(
+                    notices_rx,
+                    events_tx.clone(),
+                    alarms.clone(),
+                ));
+                tasks.spawn(sinks::dispatch_results(
+                    store.clone(),
+                    db.clone(),
+                    status_rx.clone(),
+                    clock.clone(),
+                ));
+                Some(status_rx)
+            }
+            None => None,
+        };
+
+        Ok(Stack {
+            plant,
+            clock,
+            store,
+            db,
+            alarms,
+            writer,
+            panels,
+            dispatch: dispatch_rx,
+            simulator,
+            events: events_tx,
+            field,
+            historian,
+            tasks,
+        })
+    }
+
+    /// Stops in reverse order: the producers first, then what records their
+    /// output, so nothing committed is lost.
+    pub async fn shutdown(mut self) {
+        self.field.shutdown().await;
+        if let Some(sim) = self.simulator.take() {
+            sim.shutdown().await;
+        }
+        let written = self.historian.shutdown().await;
+        tracing::info!(
+            samples = written.samples_written,
+            dropped = written.dropped,
+            "historian flushed"
+        );
+        drop(self.events);
+        // Give the sinks a moment to drain their channels into the store.
+        tokio::time::sleep(std::time::Duration::from_millis(300)).await;
+        self.tasks.abort_all();
+        self.store.close().await;
+    }
+}
+
+async fn run(plant: Plant, http: SocketAddr, data: &Path, mode: Mode) -> anyhow::Result<()> {
+    let store = open_store(&plant, data).await?;
+    let stack = Stack::start(
+        plant,
+        store,
+        StackOptions {
+            clock: Arc::new(SystemClock),
+            simulate: mode == Mode::Demo,
+        },
+    )
+    .await?;
+    let clock = stack.clock.clone();
+    let store = stack.store.clone();
+    let events_tx = stack.events.clone();
 
     // Users.
     let credentials = match mode {
         Mode::Demo => Some(users::demo_credentials(&store, data, clock.as_ref()).await?),
         Mode::Serve => {
-            users::warn_if_no_administrator(&store, &plant.main_path).await?;
+            users::warn_if_no_administrator(&store, &stack.plant.main_path).await?;
             None
         }
     };
 
-    let auth = gridscada_web::Auth {
-        sessions: Arc::new(gridscada_web::auth::Sessions::new(Default::default())),
-        throttle: Arc::new(Default::default()),
-        secure_cookies: false,
-        decoy_hash: gridscada_web::auth::make_decoy_hash().await.into(),
-    };
-    let state = gridscada_web::WebState {
-        db: db.clone(),
-        plant: plant.clone(),
-        store: store.clone(),
-        auth,
-        clock: clock.clone(),
-        writer: Some(writer.clone()),
-        started: Instant::now(),
-        components: gridscada_web::Components {
-            panels,
-            alarms: Some(alarms.clone()),
-            dispatch: dispatch_rx,
-        },
-        sim: simulator.as_ref().map(|s| {
-            Arc::new(SimAdapter(s.handle())) as Arc<dyn gridscada_web::api::sim::SimControl>
-        }),
-    };
-    let (local, server) = gridscada_web::bind(http, gridscada_web::router(state))
+    let (local, server) = gridscada_web::bind(http, gridscada_web::router(web_state(&stack).await))
         .await
         .with_context(|| format!("cannot listen on {http}"))?;
 
@@ -387,7 +447,6 @@ async fn run(mut plant: Plant, http: SocketAddr, data: &Path, mode: Mode) -> any
         }
     };
 
-    // Stop in reverse: the producers first, then what records their output.
     let _ = events_tx
         .send(sinks::system_event(
             clock.as_ref(),
@@ -396,22 +455,36 @@ async fn run(mut plant: Plant, http: SocketAddr, data: &Path, mode: Mode) -> any
             format!("gridscada {} stopping", mode.label()),
         ))
         .await;
-    field.shutdown().await;
-    if let Some(sim) = simulator {
-        sim.shutdown().await;
-    }
-    let written = historian.shutdown().await;
-    tracing::info!(
-        samples = written.samples_written,
-        dropped = written.dropped,
-        "historian flushed"
-    );
     drop(events_tx);
-    // Give the sinks a moment to drain their channels into the store.
-    tokio::time::sleep(std::time::Duration::from_millis(300)).await;
-    tasks.abort_all();
-    store.close().await;
+    stack.shutdown().await;
     outcome
+}
+
+/// The web layer's view of a running stack.
+pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
+    let auth = gridscada_web::Auth {
+        sessions: Arc::new(gridscada_web::auth::Sessions::new(Default::default())),
+        throttle: Arc::new(Default::default()),
+        secure_cookies: false,
+        decoy_hash: gridscada_web::auth::make_decoy_hash().await.into(),
+    };
+    gridscada_web::WebState {
+        db: stack.db.clone(),
+        plant: stack.plant.clone(),
+        store: stack.store.clone(),
+        auth,
+        clock: stack.clock.clone(),
+        writer: Some(stack.writer.clone()),
+        started: Instant::now(),
+        components: gridscada_web::Components {
+            panels: stack.panels.clone(),
+            alarms: Some(stack.alarms.clone()),
+            dispatch: stack.dispatch.clone(),
+        },
+        sim: stack.simulator.as_ref().map(|s| {
+            Arc::new(SimAdapter(s.handle())) as Arc<dyn gridscada_web::api::sim::SimControl>
+        }),
+    }
 }
 
 /// Ctrl-C or SIGTERM (a service manager stopping us).
