@@ -484,6 +484,150 @@ pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
         sim: stack.simulator.as_ref().map(|s| {
             Arc::new(SimAdapter(s.handle())) as Arc<dyn gridscada_web::api::sim::SimControl>
         }),
+        http_metrics: Default::default(),
+        metrics: Some(Arc::new(StackMetrics {
+            poll: stack.field.stats_handle(),
+            historian: stack.historian.handle(),
+        })),
+    }
+}
+
+/// The poller's and the historian's figures for `/metrics`.
+struct StackMetrics {
+    poll: gridscada_modbus::StatsHandle,
+    historian: gridscada_store::HistorianHandle,
+}
+
+impl gridscada_web::metrics::MetricsSource for StackMetrics {
+    fn render(&self, out: &mut gridscada_web::metrics::Prom) {
+        let poll = self.poll.stats();
+        for d in &poll.devices {
+            let l = [("device", d.device.as_str())];
+            out.gauge(
+                "gridscada_device_connected",
+                "1 while the device answers.",
+                &l,
+                f64::from(u8::from(d.connected)),
+            );
+            out.counter(
+                "gridscada_poll_requests_total",
+                "Modbus requests sent.",
+                &l,
+                d.requests as f64,
+            );
+            out.counter(
+                "gridscada_poll_errors_total",
+                "Modbus requests without a good answer.",
+                &l,
+                d.errors as f64,
+            );
+            out.counter(
+                "gridscada_poll_timeouts_total",
+                "Modbus requests that timed out.",
+                &l,
+                d.timeouts as f64,
+            );
+            out.counter(
+                "gridscada_poll_exceptions_total",
+                "Modbus exception responses.",
+                &l,
+                d.exceptions as f64,
+            );
+            out.counter(
+                "gridscada_poll_writes_total",
+                "Confirmed writes.",
+                &l,
+                d.writes as f64,
+            );
+            out.counter(
+                "gridscada_poll_scans_total",
+                "Scans completed.",
+                &l,
+                d.scans as f64,
+            );
+            out.counter(
+                "gridscada_poll_late_scans_total",
+                "Scans started late.",
+                &l,
+                d.late_scans as f64,
+            );
+            out.counter(
+                "gridscada_poll_overruns_total",
+                "Scan periods skipped by overruns.",
+                &l,
+                d.overruns as f64,
+            );
+            out.gauge(
+                "gridscada_poll_response_seconds",
+                "Round trip of the last answered request.",
+                &l,
+                d.last_response_ms / 1000.0,
+            );
+        }
+        for k in &poll.links {
+            let l = [("link", k.link.as_str())];
+            out.counter(
+                "gridscada_link_connects_total",
+                "Connections made.",
+                &l,
+                k.connects as f64,
+            );
+            out.counter(
+                "gridscada_link_late_replies_total",
+                "Late or stray replies discarded.",
+                &l,
+                k.late_replies as f64,
+            );
+            out.counter(
+                "gridscada_link_garbage_bytes_total",
+                "Bytes discarded as garbage.",
+                &l,
+                k.garbage_bytes as f64,
+            );
+        }
+        let h = self.historian.metrics();
+        out.gauge(
+            "gridscada_historian_buffered",
+            "Samples waiting to be written.",
+            &[],
+            h.buffered as f64,
+        );
+        out.gauge(
+            "gridscada_historian_capacity",
+            "Size of the historian buffer.",
+            &[],
+            h.capacity as f64,
+        );
+        out.counter(
+            "gridscada_historian_dropped_total",
+            "Samples dropped because the buffer was full.",
+            &[],
+            h.dropped as f64,
+        );
+        out.counter(
+            "gridscada_historian_samples_written_total",
+            "Samples written.",
+            &[],
+            h.samples_written as f64,
+        );
+        out.counter(
+            "gridscada_historian_batches_written_total",
+            "Batches written.",
+            &[],
+            h.batches_written as f64,
+        );
+        out.counter(
+            "gridscada_historian_write_errors_total",
+            "Failed batch writes (each retried).",
+            &[],
+            h.write_errors as f64,
+        );
+        out.gauge(
+            "gridscada_historian_last_write_seconds",
+            "Duration of the last batch write.",
+            &[],
+            h.last_write_ms / 1000.0,
+        );
     }
 }
 

@@ -213,8 +213,7 @@ struct LinkStatsSource {
 /// The running field I/O: one task per connection or serial port.
 pub struct FieldIo {
     shared: Arc<Shared>,
-    stats: Vec<StatsSource>,
-    link_stats: Vec<LinkStatsSource>,
+    counters: StatsHandle,
     shutdown: watch::Sender<bool>,
     tasks: Vec<JoinHandle<()>>,
 }
@@ -447,8 +446,10 @@ impl FieldIo {
                 links: senders,
                 targets,
             }),
-            stats,
-            link_stats,
+            counters: StatsHandle {
+                stats: Arc::new(stats),
+                link_stats: Arc::new(link_stats),
+            },
             shutdown,
             tasks,
         })
@@ -462,6 +463,34 @@ impl FieldIo {
     }
 
     /// Counters of every device and link, for `/metrics` and benchmarks.
+    pub fn stats(&self) -> PollStats {
+        self.counters.stats()
+    }
+
+    /// A cloneable reader of the same counters, for whoever reports them.
+    pub fn stats_handle(&self) -> StatsHandle {
+        self.counters.clone()
+    }
+
+    /// Stops every task and waits for them. Writes still in flight answer
+    /// [`WriteError::Closed`].
+    pub async fn shutdown(self) {
+        let _ = self.shutdown.send(true);
+        for t in self.tasks {
+            let _ = t.await;
+        }
+    }
+}
+
+/// Reads the poller's counters; cheap to clone, lives past the poller.
+#[derive(Clone)]
+pub struct StatsHandle {
+    stats: Arc<Vec<StatsSource>>,
+    link_stats: Arc<Vec<LinkStatsSource>>,
+}
+
+impl StatsHandle {
+    /// Counters of every device and link.
     pub fn stats(&self) -> PollStats {
         let get = |a: &std::sync::atomic::AtomicU64| a.load(Ordering::Relaxed);
         PollStats {
@@ -498,15 +527,6 @@ impl FieldIo {
                     last_error: s.last_error.lock().clone(),
                 })
                 .collect(),
-        }
-    }
-
-    /// Stops every task and waits for them. Writes still in flight answer
-    /// [`WriteError::Closed`].
-    pub async fn shutdown(self) {
-        let _ = self.shutdown.send(true);
-        for t in self.tasks {
-            let _ = t.await;
         }
     }
 }

@@ -12,6 +12,7 @@ pub mod api;
 pub mod auth;
 pub mod error;
 mod hmi;
+pub mod metrics;
 pub mod routes;
 
 use std::net::SocketAddr;
@@ -41,6 +42,10 @@ pub struct WebState {
     pub components: Components,
     /// Fault injection: only in `demo` and `replay`.
     pub sim: Option<Arc<dyn api::sim::SimControl>>,
+    /// HTTP counters for `/metrics`.
+    pub http_metrics: Arc<metrics::HttpMetrics>,
+    /// The application's own figures for `/metrics` (poller, historian).
+    pub metrics: Option<Arc<dyn metrics::MetricsSource>>,
 }
 
 /// The application's routes.

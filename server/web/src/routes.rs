@@ -308,8 +308,13 @@ pub fn build(state: WebState) -> Router {
         ));
         router = router.route(route.path, handler);
     }
+    let http_metrics = state.http_metrics.clone();
     router
         .fallback(crate::hmi::serve)
+        .layer(middleware::from_fn_with_state(
+            http_metrics,
+            crate::metrics::count,
+        ))
         .layer(middleware::from_fn(security_headers))
         .layer(middleware::from_fn(check_origin))
         .layer(tower_http::compression::CompressionLayer::new())

@@ -20,30 +20,73 @@ pub async fn healthz(State(s): State<WebState>) -> Json<serde_json::Value> {
     }))
 }
 
-/// Prometheus text exposition.
+/// Prometheus text exposition: server, tag database, HTTP, alarms, and the
+/// application's poller and historian figures.
 pub async fn metrics(State(s): State<WebState>) -> impl IntoResponse {
-    let mut out = String::new();
-    let mut gauge = |name: &str, help: &str, value: f64| {
-        out.push_str(&format!(
-            "# HELP {name} {help}\n# TYPE {name} gauge\n{name} {value}\n"
-        ));
-    };
-    gauge(
+    let mut out = crate::metrics::Prom::default();
+    out.gauge(
         "gridscada_uptime_seconds",
         "Seconds since the server started.",
+        &[],
         s.started.elapsed().as_secs_f64(),
     );
-    gauge(
+    out.gauge(
         "gridscada_tags",
         "Tags in the tag database.",
+        &[],
         s.db.len() as f64,
     );
-    gauge(
+    out.counter(
         "gridscada_tagdb_batches_total",
         "Changing batches applied to the tag database.",
+        &[],
         s.db.seq() as f64,
     );
-    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], out)
+    s.http_metrics.render(&mut out);
+    if let Some(a) = &s.components.alarms {
+        let st = a.stats();
+        let g = [
+            ("configured", st.alarms),
+            ("active", st.active),
+            ("unacked", st.unacked),
+            ("shelved", st.shelved),
+            ("suppressed", st.suppressed),
+            ("out_of_service", st.out_of_service),
+        ];
+        for (which, n) in g {
+            out.gauge(
+                "gridscada_alarms",
+                "Alarms by condition.",
+                &[("which", which)],
+                n as f64,
+            );
+        }
+        out.counter(
+            "gridscada_alarm_evaluations_total",
+            "Alarm condition evaluations.",
+            &[],
+            st.evaluations_total as f64,
+        );
+        out.counter(
+            "gridscada_alarm_transitions_total",
+            "Alarm state transitions.",
+            &[],
+            st.transitions_total as f64,
+        );
+        out.gauge(
+            "gridscada_alarm_queued_outputs",
+            "Alarm records waiting for the store.",
+            &[],
+            st.queued_outputs as f64,
+        );
+    }
+    if let Some(m) = &s.metrics {
+        m.render(&mut out);
+    }
+    (
+        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
+        out.finish(),
+    )
 }
 
 /// The OpenAPI document of the API.
