@@ -220,7 +220,11 @@ pub async fn dispatch_notices(
                 reason,
                 ..
             } => {
-                let message = format!("Dispatch {name}: {reason}");
+                // `name` reads as a phrase ("dispatch fallback"); capitalise it.
+                let mut message = format!("{name}: {reason}");
+                if let Some(first) = message.get(..1) {
+                    message = first.to_uppercase() + &message[1..];
+                }
                 system_alarm(
                     &alarms,
                     &format!("dispatch:{name}"),

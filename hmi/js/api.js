@@ -1,0 +1,59 @@
+// The REST client: JSON in and out, errors turned into ApiError with the
+// server's readable `detail`.
+
+export class ApiError extends Error {
+  constructor(status, error, detail) {
+    super(detail || error || `HTTP ${status}`);
+    this.status = status;
+    this.error = error;
+    this.detail = detail || error || `the server answered HTTP ${status}`;
+  }
+}
+
+let onUnauthorized = () => {};
+/** Called when any request answers 401 (the session ended). */
+export function setUnauthorizedHandler(f) { onUnauthorized = f; }
+
+export async function api(method, path, body) {
+  const init = { method, credentials: 'same-origin', headers: { Accept: 'application/json' } };
+  if (body !== undefined) {
+    init.headers['Content-Type'] = 'application/json';
+    init.body = JSON.stringify(body);
+  }
+  let resp;
+  try {
+    resp = await fetch(path, init);
+  } catch (e) {
+    throw new ApiError(0, 'network', `cannot reach the server (${e.message})`);
+  }
+  const text = await resp.text();
+  let data = null;
+  if (text) {
+    try { data = JSON.parse(text); } catch { data = null; }
+  }
+  if (!resp.ok) {
+    if (resp.status === 401 && path !== '/api/session') onUnauthorized();
+    const detail = data && (data.detail || data.error);
+    throw new ApiError(resp.status, data && data.error, detail || `${method} ${path} failed: HTTP ${resp.status}`);
+  }
+  return data;
+}
+
+export const get = (p) => api('GET', p);
+export const post = (p, b = {}) => api('POST', p, b);
+export const put = (p, b) => api('PUT', p, b);
+export const patch = (p, b) => api('PATCH', p, b);
+export const del = (p, b) => api('DELETE', p, b);
+
+/** Builds a query string, skipping empty values. */
+export function qs(params) {
+  const u = new URLSearchParams();
+  for (const [k, v] of Object.entries(params)) {
+    if (v === undefined || v === null || v === '') continue;
+    u.set(k, String(v));
+  }
+  const s = u.toString();
+  return s ? `?${s}` : '';
+}
+
+export const enc = encodeURIComponent;

@@ -1,0 +1,252 @@
+// The HMI's frame: session, toolbar, clock, communication light, the live
+// alarm footer, and the router that mounts one screen at a time.
+
+import { get, del, post, setUnauthorizedHandler, enc } from './api.js';
+import { h, replace } from './dom.js';
+import { fmtTime } from './format.js';
+import { live } from './live.js';
+import { toast, attempt, formDialog } from './ui.js';
+import { AlarmFooter } from './components/alarmfooter.js';
+import login from './screens/login.js';
+import mainScreen from './screens/main.js';
+import { panelScreen } from './screens/panel.js';
+import microgrid from './screens/microgrid.js';
+import units from './screens/units.js';
+import alarms from './screens/alarms.js';
+import events from './screens/events.js';
+import trends from './screens/trends.js';
+import users from './screens/users.js';
+
+/** Every screen the HMI has, in toolbar order; the server says which ones a user may open. */
+const SCREENS = [
+  ['main', 'Main', mainScreen],
+  ['ss1', 'SS1 panel', panelScreen('ss1')],
+  ['css1', 'CSS1 panel', panelScreen('css1')],
+  ['microgrid', 'Microgrid', microgrid],
+  ['units', 'Units', units],
+  ['alarms', 'Alarms', alarms],
+  ['events', 'Events', events],
+  ['trends', 'Trends', trends],
+  ['users', 'Users', users],
+];
+
+const state = {
+  session: { authenticated: false, user: null, role: 'guest', screens: [] },
+  unmount: null,
+  current: null,
+  footer: null,
+  offComm: null,
+  disconnectedAt: null,
+};
+
+const $ = (id) => document.getElementById(id);
+
+function allowed(name) { return state.session.authenticated && state.session.screens.includes(name); }
+
+async function loadSession() {
+  try {
+    state.session = await get('/api/session');
+  } catch (e) {
+    state.session = { authenticated: false, user: null, role: 'guest', screens: [] };
+    toast(`Cannot read the session: ${e.detail}`, 'error');
+  }
+  renderFrame();
+}
+
+function renderFrame() {
+  const s = state.session;
+  const nav = $('toolbar');
+  replace(nav, SCREENS.filter(([id]) => allowed(id)).map(([id, label]) =>
+    h('a', { href: `#/${id}`, class: 'tool', dataset: { screen: id }, text: label })));
+
+  const box = $('user-box');
+  if (s.authenticated) {
+    replace(box,
+      h('span', { class: 'user-name', id: 'current-user', title: `role ${s.role}, group ${s.group}`, text: s.user }),
+      h('span', { class: 'user-role', text: s.role }),
+      h('button', { type: 'button', class: 'btn btn-small', onclick: changeOwnPassword, text: 'Password' }),
+      h('button', { type: 'button', class: 'btn btn-small', id: 'logout', onclick: logout, text: 'Log out' }));
+  } else {
+    replace(box, h('span', { class: 'user-name', id: 'current-user', text: 'Guest' }));
+  }
+
+  if (state.footer) { state.footer.dispose(); state.footer = null; }
+  if (state.offComm) { state.offComm(); state.offComm = null; }
+  const footer = $('alarm-footer');
+  if (s.authenticated) {
+    live.start();
+    footer.hidden = false;
+    state.footer = new AlarmFooter(footer, s);
+    startCommLight();
+  } else {
+    live.stop();
+    state.disconnectedAt = null;
+    $('banner').hidden = true;
+    document.body.classList.remove('disconnected');
+    footer.hidden = true;
+    replace(footer);
+    const light = $('comm-light');
+    light.className = 'comm-light comm-unknown';
+    light.textContent = 'Comm: log in to see';
+  }
+  route();
+}
+
+function route() {
+  const wanted = (location.hash.match(/^#\/([\w-]+)/) || [])[1];
+  let id;
+  if (!state.session.authenticated) id = 'login';
+  else if (wanted && allowed(wanted)) id = wanted;
+  else {
+    id = SCREENS.map(([x]) => x).find(allowed) || 'none';
+    if (wanted && wanted !== 'login') toast(`You may not open the "${wanted}" screen.`, 'error');
+    if (id !== 'none' && location.hash !== `#/${id}`) { history.replaceState(null, '', `#/${id}`); }
+  }
+  mount(id);
+}
+
+function mount(id) {
+  if (state.unmount) { try { state.unmount(); } catch (e) { console.error(e); } }
+  state.unmount = null;
+  state.current = id;
+  const el = $('screen');
+  replace(el);
+  el.className = `screen screen-${id}`;
+  for (const a of document.querySelectorAll('#toolbar a')) {
+    if (a.dataset.screen === id) a.setAttribute('aria-current', 'page');
+    else a.removeAttribute('aria-current');
+  }
+  const entry = SCREENS.find(([x]) => x === id);
+  const screen = id === 'login' ? login : entry && entry[2];
+  document.title = `gridscada — ${entry ? entry[1] : id === 'login' ? 'Log in' : 'No screens'}`;
+  if (!screen) {
+    el.append(h('p', { class: 'empty', text: 'Your group may not open any screen. Ask an administrator.' }));
+    return;
+  }
+  const ctx = { session: state.session, onLogin: loadSession, rerender: () => mount(id) };
+  try {
+    state.unmount = screen.mount(el, ctx) || null;
+  } catch (e) {
+    console.error(e);
+    el.append(h('p', { class: 'error', text: `This screen failed to draw: ${e.message}` }));
+  }
+}
+
+async function logout() {
+  await attempt('Log out', () => del('/api/session'));
+  history.replaceState(null, '', '#/login');
+  await loadSession();
+}
+
+async function changeOwnPassword() {
+  const data = await formDialog('Change my password', (f) => {
+    f.append(
+      h('label', { class: 'field' }, h('span', { class: 'field-label', text: 'Current password' }),
+        h('input', { type: 'password', name: 'current', required: true, autocomplete: 'current-password' })),
+      h('label', { class: 'field' }, h('span', { class: 'field-label', text: 'New password' }),
+        h('input', { type: 'password', name: 'password', required: true, minlength: 8, autocomplete: 'new-password' })));
+  }, { submitLabel: 'Change password' });
+  if (!data) return;
+  const ok = await attempt('Change password', () => post(`/api/users/${enc(state.session.user)}/password`,
+    { password: data.get('password'), current_password: data.get('current') }));
+  if (ok !== undefined) toast('Password changed.', 'ok');
+}
+
+// The communication light names every controller whose Comm.Connected is not true.
+async function startCommLight() {
+  const light = $('comm-light');
+  let tags = [];
+  try {
+    const list = await get('/api/tags');
+    tags = list.tags.map((t) => t.name).filter((n) => n.endsWith('.Comm.Connected'));
+  } catch (e) {
+    light.className = 'comm-light comm-unknown';
+    light.textContent = 'Comm: unknown';
+    light.title = e.detail;
+    return;
+  }
+  const draw = () => {
+    if (!live.connected) {
+      light.className = 'comm-light comm-lost';
+      light.textContent = 'Server connection lost';
+      light.title = 'The live connection to the server is down; reconnecting.';
+      return;
+    }
+    const lost = tags.filter((t) => {
+      const v = live.get(t);
+      return !v || v.value !== true || (v.quality && v.quality.code === 'bad');
+    }).map((t) => t.slice(0, -'.Comm.Connected'.length));
+    if (lost.length === 0) {
+      light.className = 'comm-light comm-ok';
+      light.textContent = 'Comm OK';
+      light.title = `All ${tags.length} controllers reachable`;
+    } else {
+      light.className = 'comm-light comm-lost';
+      light.textContent = `Comm lost: ${lost.join(', ')}`;
+      light.title = `No communication with ${lost.join(', ')}`;
+    }
+  };
+  const offWant = live.want({ tags });
+  const offTags = live.onTags(draw);
+  const offStatus = live.onStatus(draw);
+  draw();
+  state.offComm = () => { offWant(); offTags(); offStatus(); };
+}
+
+function tickClock() {
+  const d = new Date();
+  const el = $('clock');
+  el.textContent = fmtTime(d.getTime());
+  el.setAttribute('datetime', d.toISOString());
+}
+
+// Shows that the live connection was lost, and when it came back.
+function watchConnection() {
+  const banner = $('banner');
+  let hideTimer = null;
+  live.onStatus((connected) => {
+    clearTimeout(hideTimer);
+    document.body.classList.toggle('disconnected', !connected && live.stopped === false);
+    if (!connected && !live.stopped) {
+      if (!state.disconnectedAt) state.disconnectedAt = Date.now();
+      banner.hidden = false;
+      banner.className = 'banner banner-lost';
+      banner.textContent = `Disconnected from the server since ${fmtTime(state.disconnectedAt)}: reconnecting. Values shown are not live.`;
+    } else if (connected && state.disconnectedAt) {
+      const secs = Math.round((Date.now() - state.disconnectedAt) / 1000);
+      state.disconnectedAt = null;
+      banner.hidden = false;
+      banner.className = 'banner banner-ok';
+      banner.textContent = `Reconnected at ${fmtTime(Date.now())} after ${secs} s disconnected; live values resumed.`;
+      hideTimer = setTimeout(() => { banner.hidden = true; }, 10_000);
+    } else {
+      banner.hidden = true;
+    }
+  });
+}
+
+live.onSessionEnded = () => {
+  toast('Your session ended. Please log in again.', 'error');
+  loadSession();
+};
+// While reconnecting, find out whether the session itself is gone.
+live.onConnectFailed = async () => {
+  let s;
+  try { s = await get('/api/session'); } catch { return; } // server still down: keep trying
+  if (state.session.authenticated && s && !s.authenticated) {
+    toast('Your session ended (the server may have restarted). Please log in again.', 'error');
+    loadSession();
+  }
+};
+setUnauthorizedHandler(() => {
+  if (state.session.authenticated) {
+    toast('Your session ended. Please log in again.', 'error');
+    loadSession();
+  }
+});
+
+window.addEventListener('hashchange', () => { if (state.session) route(); });
+tickClock();
+setInterval(tickClock, 1000);
+watchConnection();
+loadSession();

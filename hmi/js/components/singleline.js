@@ -1,0 +1,145 @@
+// Single-line diagram of one substation panel, drawn in SVG and kept live:
+// supply, ELCB, MCCB, busbar, zone breakers and zone loads, with the power
+// analyzer and the communication status of each I/O module. Breakers are
+// green when closed and red when open, and ALSO labelled CLOSED / OPEN /
+// TRIPPED, so colour is never the only signal. Unknown quality shows "?".
+
+import { s } from '../dom.js';
+import { fmtNumber, qualityOf } from '../format.js';
+
+const W = 640;
+const H = 400;
+
+/** Breaker state from its feedback and (if any) its command tag. */
+export function breakerState(closed, cmd, connected, isElcb = false) {
+  const q = qualityOf(closed, connected);
+  if (!q.usable || typeof closed.value !== 'boolean') return { label: 'UNKNOWN', cls: 'bk-unknown', reason: q.reason || 'no value' };
+  if (closed.value) return { label: 'CLOSED', cls: 'bk-closed', reason: '' };
+  // Open while commanded closed means the protection opened it.
+  const cmdClosed = cmd && qualityOf(cmd, connected).usable && cmd.value === true;
+  if (isElcb || cmdClosed) return { label: 'TRIPPED', cls: 'bk-tripped', reason: '' };
+  return { label: 'OPEN', cls: 'bk-open', reason: '' };
+}
+
+/**
+ * Builds the diagram of the panel whose tags start with `prefix`; `binder`
+ * keeps it live. `devices` are the I/O modules and analyzer shown with their
+ * communication status. `onBreaker(name)` (optional) makes breakers clickable.
+ */
+export function singleLine(binder, { prefix, title, zones = 4, devices = [], onBreaker }) {
+  const svg = s('svg', { viewBox: `0 0 ${W} ${H}`, class: 'single-line', role: 'img', 'aria-label': `Single-line diagram of ${title}` });
+  svg.append(s('title', {}, `Single-line diagram of ${title}`));
+  const cx = 130;
+  // Supply.
+  svg.append(
+    s('circle', { cx, cy: 28, r: 14, class: 'sl-source' }),
+    s('text', { x: cx + 22, y: 32, class: 'sl-label' }, 'Supply 400 V'),
+    s('line', { x1: cx, y1: 42, x2: cx, y2: 62, class: 'sl-wire' }));
+
+  const breaker = (x, y, name, label, closedTag, cmdTag, isElcb) => {
+    const g = s('g', { class: 'sl-breaker', dataset: { breaker: name } });
+    const rect = s('rect', { x: x - 13, y: y - 13, width: 26, height: 26, rx: 3 });
+    const stateText = s('text', { x: x + 20, y: y + 15, class: 'sl-state' }, '');
+    const tip = s('title', {}, '');
+    g.append(tip, rect, s('text', { x: x + 20, y: y - 1, class: 'sl-label' }, label), stateText);
+    if (onBreaker) {
+      g.setAttribute('tabindex', '0');
+      g.setAttribute('role', 'button');
+      g.classList.add('sl-clickable');
+      g.addEventListener('click', () => onBreaker(name));
+      g.addEventListener('keydown', (e) => { if (e.key === 'Enter' || e.key === ' ') { e.preventDefault(); onBreaker(name); } });
+    }
+    const draw = (_x, connected) => {
+      const st = breakerState(binder.sample(closedTag), cmdTag ? binder.sample(cmdTag) : null, connected, isElcb);
+      g.setAttribute('class', `sl-breaker ${st.cls}${onBreaker ? ' sl-clickable' : ''}`);
+      stateText.textContent = st.label === 'UNKNOWN' ? '? UNKNOWN' : st.label;
+      tip.textContent = `${label}: ${st.label}${st.reason ? ` (${st.reason})` : ''}`;
+      g.setAttribute('aria-label', tip.textContent);
+    };
+    binder.on(closedTag, draw);
+    if (cmdTag) binder.on(cmdTag, draw);
+    return g;
+  };
+
+  svg.append(breaker(cx, 75, 'elcb', 'ELCB', `${prefix}.ELCB.Closed`, null, true));
+  svg.append(s('line', { x1: cx, y1: 88, x2: cx, y2: 122, class: 'sl-wire' }));
+  svg.append(breaker(cx, 135, 'mccb', 'MCCB', `${prefix}.MCCB.Closed`, `${prefix}.MCCB.Cmd`, false));
+  svg.append(s('line', { x1: cx, y1: 148, x2: cx, y2: 180, class: 'sl-wire' }));
+
+  // Busbar and zones.
+  const left = 50;
+  const right = W - 40;
+  const step = (right - left) / zones;
+  svg.append(s('line', { x1: left, y1: 180, x2: right, y2: 180, class: 'sl-bus' }),
+    s('text', { x: right - 4, y: 172, class: 'sl-label sl-end' }, 'Busbar'));
+  for (let z = 1; z <= zones; z++) {
+    const x = left + step * (z - 0.5);
+    svg.append(
+      s('line', { x1: x, y1: 180, x2: x, y2: 212, class: 'sl-wire' }),
+      breaker(x, 225, `zone${z}`, `Zone ${z}`, `${prefix}.Zone${z}.Closed`, `${prefix}.Zone${z}.Cmd`, false),
+      s('line', { x1: x, y1: 238, x2: x, y2: 268, class: 'sl-wire' }));
+    // The zone's load, green when energised.
+    const load = s('g', { class: 'sl-load' });
+    const tri = s('path', { d: `M ${x - 12} 270 L ${x + 12} 270 L ${x} 290 Z` });
+    const txt = s('text', { x, y: 308, class: 'sl-state sl-middle' }, '');
+    const tip = s('title', {}, '');
+    load.append(tip, tri, txt);
+    binder.on(`${prefix}.Zone${z}.Energised`, (smp, connected) => {
+      const q = qualityOf(smp, connected);
+      const on = q.usable && smp.value === true;
+      load.setAttribute('class', `sl-load ${!q.usable ? 'io-unknown' : on ? 'io-true' : 'io-false'}`);
+      txt.textContent = !q.usable ? '? UNKNOWN' : on ? 'ENERGISED' : 'DEAD';
+      tip.textContent = `Zone ${z} load: ${txt.textContent}${q.reason ? ` (${q.reason})` : ''}`;
+    });
+    svg.append(load);
+  }
+
+  // Power analyzer readings beside the incomer.
+  const pa = s('g', { class: 'sl-pa' });
+  pa.append(s('rect', { x: 260, y: 20, width: 210, height: 140, rx: 4, class: 'sl-box' }),
+    s('text', { x: 270, y: 38, class: 'sl-label sl-bold' }, 'Power analyzer'));
+  const rows = [['V L1', 'V_L1', 'V'], ['V L2', 'V_L2', 'V'], ['V L3', 'V_L3', 'V'], ['I L1', 'I_L1', 'A'], ['I L2', 'I_L2', 'A'], ['I L3', 'I_L3', 'A'], ['P', 'P_kW', 'kW']];
+  rows.forEach(([label, tag, units], i) => {
+    const col = i < 3 ? 0 : i < 6 ? 1 : 2;
+    const row = i < 3 ? i : i < 6 ? i - 3 : 0;
+    const x = 270 + col * 105;
+    const y = 60 + (col === 2 ? 3 : row) * 22;
+    const t = s('text', { x: col === 2 ? 270 : x, y, class: 'sl-value' }, '');
+    const tip = s('title', {}, '');
+    t.append(tip);
+    binder.on(`${prefix}.PA.${tag}`, (smp, connected) => {
+      const q = qualityOf(smp, connected);
+      t.setAttribute('class', `sl-value ${q.cls}`);
+      t.firstChild && t.firstChild.nodeType === 3 && t.firstChild.remove();
+      const text = q.usable && typeof smp.value === 'number' ? `${label} ${fmtNumber(smp.value, 1)} ${units}` : `${label} ?`;
+      t.insertBefore(document.createTextNode(text), tip);
+      tip.textContent = q.reason || `${label} ${text}`;
+    });
+    pa.append(t);
+  });
+  svg.append(pa);
+
+  // Door and communication status of each module.
+  const status = s('g', { class: 'sl-status' });
+  const items = [{ label: 'Door', tag: `${prefix}.Door.Open`, text: (v) => (v ? 'OPEN' : 'CLOSED'), good: (v) => !v }]
+    .concat(devices.map((d) => ({ label: d.replace(`${prefix}.`, ''), tag: `${d}.Comm.Connected`, text: (v) => (v ? 'COMM OK' : 'COMM LOST'), good: (v) => !!v })));
+  items.forEach((it, i) => {
+    const x = 20 + i * 122;
+    const g = s('g', { class: 'sl-io' });
+    const lamp = s('circle', { cx: x + 8, cy: 352, r: 7 });
+    const t = s('text', { x: x + 20, y: 348, class: 'sl-label' }, it.label);
+    const st = s('text', { x: x + 20, y: 366, class: 'sl-state' }, '');
+    const tip = s('title', {}, '');
+    g.append(tip, lamp, t, st);
+    binder.on(it.tag, (smp, connected) => {
+      const q = qualityOf(smp, connected);
+      const ok = q.usable && it.good(smp.value);
+      g.setAttribute('class', `sl-io ${!q.usable ? 'io-unknown' : ok ? 'io-true' : 'io-false'}`);
+      st.textContent = q.usable ? it.text(smp.value) : '? UNKNOWN';
+      tip.textContent = `${it.label}: ${st.textContent}${q.reason ? ` (${q.reason})` : ''}`;
+    });
+    status.append(g);
+  });
+  svg.append(s('line', { x1: 10, y1: 330, x2: W - 10, y2: 330, class: 'sl-sep' }), status);
+  return svg;
+}

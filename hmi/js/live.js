@@ -1,0 +1,134 @@
+// The live connection: one WebSocket to /api/live for the whole app. Screens
+// register interests (tags, prefixes, alarms); the union is sent as the
+// subscription, and sent again after every reconnect. Values are kept in a
+// cache so a screen mounted later sees them at once.
+
+const RETRY_MIN_MS = 500;
+const RETRY_MAX_MS = 10_000;
+
+export class Live {
+  constructor() {
+    this.values = new Map(); // name -> {value, quality, timestamp}
+    this.alarms = [];
+    this.alarmVersion = null;
+    this.connected = false;
+    this.everConnected = false;
+    this.interests = new Set();
+    this.tagListeners = new Set();
+    this.alarmListeners = new Set();
+    this.statusListeners = new Set();
+    this.ws = null;
+    this.retry = RETRY_MIN_MS;
+    this.timer = null;
+    this.stopped = true;
+    this.onSessionEnded = () => {};
+    this.onConnectFailed = () => {};
+  }
+
+  start() {
+    this.stopped = false;
+    this.connect();
+  }
+
+  stop() {
+    this.stopped = true;
+    clearTimeout(this.timer);
+    if (this.ws) { this.ws.onclose = null; this.ws.close(1000); }
+    this.ws = null;
+    this.setConnected(false);
+    this.values.clear();
+    this.alarms = [];
+  }
+
+  connect() {
+    if (this.stopped) return;
+    const url = `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/api/live`;
+    let ws;
+    try { ws = new WebSocket(url); } catch { this.scheduleReconnect(); return; }
+    this.ws = ws;
+    let opened = false;
+    ws.onopen = () => {
+      opened = true;
+      this.retry = RETRY_MIN_MS;
+      this.setConnected(true);
+      this.sendSubscription();
+    };
+    ws.onmessage = (ev) => this.handle(ev.data);
+    ws.onclose = (ev) => {
+      this.ws = null;
+      this.setConnected(false);
+      if (ev.code === 4001) { this.onSessionEnded(); return; }
+      // A refused upgrade (e.g. the session is gone after a server restart) looks like a failed connection.
+      if (!opened) this.onConnectFailed();
+      this.scheduleReconnect();
+    };
+    ws.onerror = () => {}; // onclose follows and reconnects
+  }
+
+  scheduleReconnect() {
+    if (this.stopped) return;
+    clearTimeout(this.timer);
+    this.timer = setTimeout(() => this.connect(), this.retry);
+    this.retry = Math.min(this.retry * 2, RETRY_MAX_MS);
+  }
+
+  setConnected(c) {
+    if (this.connected === c) return;
+    this.connected = c;
+    if (c) this.everConnected = true;
+    for (const f of this.statusListeners) f(c);
+  }
+
+  handle(text) {
+    let msg;
+    try { msg = JSON.parse(text); } catch { return; }
+    if (msg.type === 'tags' && Array.isArray(msg.values)) {
+      if (msg.snapshot) this.values.clear();
+      const changed = [];
+      for (const v of msg.values) {
+        if (!v || typeof v.name !== 'string') continue;
+        this.values.set(v.name, { value: v.value, quality: v.quality, timestamp: v.timestamp });
+        changed.push(v.name);
+      }
+      for (const f of this.tagListeners) f(changed, !!msg.snapshot);
+    } else if (msg.type === 'alarms' && Array.isArray(msg.alarms)) {
+      this.alarms = msg.alarms;
+      this.alarmVersion = msg.version;
+      for (const f of this.alarmListeners) f(this.alarms);
+    } else if (msg.type === 'error') {
+      console.warn('live:', msg.detail);
+    }
+  }
+
+  /** The union of all interests, sent to the server. */
+  sendSubscription() {
+    if (!this.ws || this.ws.readyState !== WebSocket.OPEN) return;
+    const tags = new Set();
+    const prefixes = new Set();
+    let alarms = false;
+    for (const i of this.interests) {
+      (i.tags || []).forEach((t) => tags.add(t));
+      (i.prefixes || []).forEach((p) => prefixes.add(p));
+      alarms = alarms || !!i.alarms;
+    }
+    this.ws.send(JSON.stringify({ subscribe: { tags: [...tags], prefixes: [...prefixes], alarms } }));
+  }
+
+  /**
+   * Registers an interest {tags, prefixes, alarms}; returns a function that
+   * removes it. The subscription is re-sent on every change.
+   */
+  want(interest) {
+    this.interests.add(interest);
+    this.sendSubscription();
+    return () => { this.interests.delete(interest); this.sendSubscription(); };
+  }
+
+  get(name) { return this.values.get(name); }
+
+  onTags(f) { this.tagListeners.add(f); return () => this.tagListeners.delete(f); }
+  onAlarms(f) { this.alarmListeners.add(f); return () => this.alarmListeners.delete(f); }
+  onStatus(f) { this.statusListeners.add(f); return () => this.statusListeners.delete(f); }
+}
+
+export const live = new Live();

@@ -1,0 +1,158 @@
+// Alarm screen: Online (the alarms active now, live, with acknowledge and
+// shelve with a reason) and History (transitions from the database), each
+// with filters.
+
+import { get, post, del, qs } from '../api.js';
+import { h, replace, select, field } from '../dom.js';
+import { fmtTime, fmtValue, roleAtLeast } from '../format.js';
+import { live } from '../live.js';
+import { attempt, formDialog, toast } from '../ui.js';
+import { ALARM_HEADERS, KIND_LABELS, STATE_LABELS, drawAlarmRows, filterAlarms, sortAlarms } from '../components/alarmtable.js';
+import { PRIORITY_LEVELS } from '../components/alarmfooter.js';
+
+const STATES = [['', 'Any state'], ...Object.entries(STATE_LABELS).filter(([k]) => k !== 'normal')];
+
+function localInput(ms) {
+  const d = new Date(ms - new Date(ms).getTimezoneOffset() * 60_000);
+  return d.toISOString().slice(0, 16);
+}
+
+export default {
+  mount(el, ctx) {
+    const role = ctx.session.role;
+    const canAck = roleAtLeast(role, 'operator');
+    const canShelve = roleAtLeast(role, 'supervisor');
+    const offs = [];
+    const onlineTab = h('button', { type: 'button', role: 'tab', class: 'btn', id: 'alarms-tab-online', text: 'Online' });
+    const historyTab = h('button', { type: 'button', role: 'tab', class: 'btn', id: 'alarms-tab-history', text: 'History' });
+    const body = h('div', {});
+    el.append(h('h1', { class: 'screen-title', text: 'Alarms' }), h('div', { class: 'tabs', role: 'tablist' }, onlineTab, historyTab), body);
+
+    let cleanup = () => {};
+    const showTab = (which) => {
+      cleanup();
+      onlineTab.setAttribute('aria-selected', String(which === 'online'));
+      historyTab.setAttribute('aria-selected', String(which === 'history'));
+      onlineTab.setAttribute('aria-pressed', String(which === 'online'));
+      historyTab.setAttribute('aria-pressed', String(which === 'history'));
+      replace(body);
+      cleanup = which === 'online' ? online() : historyView();
+    };
+    onlineTab.addEventListener('click', () => showTab('online'));
+    historyTab.addEventListener('click', () => showTab('history'));
+
+    function online() {
+      const selection = h('input', { id: 'alarms-selection', list: 'alarms-selections', size: 10 });
+      const selList = h('datalist', { id: 'alarms-selections' });
+      const prio = select({ id: 'alarms-priority' }, PRIORITY_LEVELS, '');
+      const state = select({ id: 'alarms-state' }, STATES, '');
+      const text = h('input', { id: 'alarms-text', type: 'search', size: 16 });
+      const count = h('span', { class: 'alarm-count', role: 'status', id: 'alarms-count' });
+      const selected = new Set();
+      const tbody = h('tbody');
+      const ackSel = canAck ? h('button', { type: 'button', class: 'btn', id: 'alarms-ack-selected', text: 'Acknowledge selected' }) : null;
+      body.append(h('div', { class: 'card' },
+        h('div', { class: 'filters' }, field('Selection', selection), selList, field('Priority', prio), field('State', state), field('Text', text), count,
+          h('div', { class: 'btn-row' }, ackSel)),
+        h('div', { class: 'table-wrap' }, h('table', { class: 'data alarms', id: 'alarms-online' },
+          h('thead', {}, h('tr', {}, [h('th', { scope: 'col' }, h('span', { class: 'sr-only', text: 'Select' })), ...ALARM_HEADERS.map((t) => h('th', { scope: 'col', text: t })), h('th', { scope: 'col', text: 'Actions' })])),
+          tbody))));
+
+      const actions = (a) => {
+        const out = [];
+        if (canAck && !a.acked) out.push(h('button', { type: 'button', class: 'btn btn-small', dataset: { ack: String(a.id) }, onclick: () => ack([a.id]), text: 'Ack' }));
+        if (canShelve) {
+          out.push(a.shelved
+            ? h('button', { type: 'button', class: 'btn btn-small', onclick: () => unshelve(a), text: 'Unshelve' })
+            : h('button', { type: 'button', class: 'btn btn-small', dataset: { shelve: String(a.id) }, onclick: () => shelve(a), text: 'Shelve' }));
+        }
+        if (a.shelved && a.shelved.reason) out.push(h('span', { class: 'hint', text: ` shelved: ${a.shelved.reason}` }));
+        return out;
+      };
+      const draw = () => {
+        const list = live.alarms;
+        replace(selList, [...new Set(list.map((a) => a.selection))].sort().map((s) => h('option', { value: s })));
+        let shown = filterAlarms(list, { selection: selection.value.trim(), minPriority: Number(prio.value) || 0, text: text.value.trim() });
+        if (state.value) shown = shown.filter((a) => a.state === state.value);
+        shown = sortAlarms(shown);
+        count.textContent = `${shown.length} of ${list.length} alarms`;
+        drawAlarmRows(tbody, shown, { extra: actions, selectable: canAck, selected });
+      };
+      tbody.addEventListener('change', (e) => {
+        if (!e.target.classList.contains('alarm-select')) return;
+        const id = Number(e.target.value);
+        if (e.target.checked) selected.add(id); else selected.delete(id);
+      });
+      if (ackSel) ackSel.addEventListener('click', () => { if (selected.size) ack([...selected]); else toast('Select alarms to acknowledge first.', 'info'); });
+      for (const i of [selection, text]) i.addEventListener('input', draw);
+      for (const i of [prio, state]) i.addEventListener('change', draw);
+
+      async function ack(ids) {
+        const r = await attempt('Acknowledge', () => post('/api/alarms/ack', { ids }));
+        if (r) { ids.forEach((i) => selected.delete(i)); toast(`${r.count} alarm${r.count === 1 ? '' : 's'} acknowledged.`, 'ok'); }
+      }
+      async function shelve(a) {
+        const data = await formDialog(`Shelve: ${a.message}`, (f) => f.append(
+          h('label', { class: 'field' }, h('span', { class: 'field-label', text: 'Minutes' }), h('input', { type: 'number', name: 'minutes', min: 1, max: 1440, value: 60, required: true })),
+          h('label', { class: 'field' }, h('span', { class: 'field-label', text: 'Reason (required)' }), h('input', { name: 'reason', required: true, minlength: 3, id: 'shelve-reason' }))),
+        { submitLabel: 'Shelve' });
+        if (!data) return;
+        const r = await attempt('Shelve', () => post(`/api/alarms/${a.id}/shelve`, { minutes: Number(data.get('minutes')), reason: String(data.get('reason')) }));
+        if (r) toast(`Shelved until ${fmtTime(r.shelved_until)}.`, 'ok');
+      }
+      async function unshelve(a) {
+        const r = await attempt('Unshelve', () => del(`/api/alarms/${a.id}/shelve`));
+        if (r !== undefined) toast('Unshelved.', 'ok');
+      }
+
+      const off1 = live.onAlarms(draw);
+      draw();
+      return () => off1();
+    }
+
+    function historyView() {
+      const now = Date.now();
+      const from = h('input', { type: 'datetime-local', id: 'hist-from', value: localInput(now - 86_400_000) });
+      const to = h('input', { type: 'datetime-local', id: 'hist-to', value: localInput(now + 60_000) });
+      const selection = h('input', { id: 'hist-selection', size: 10 });
+      const prio = select({ id: 'hist-priority' }, PRIORITY_LEVELS, '');
+      const text = h('input', { type: 'search', id: 'hist-text', size: 16 });
+      const limit = select({ id: 'hist-limit' }, ['100', '500', '2000'], '500');
+      const out = h('div', { class: 'table-wrap' });
+      const form = h('form', { class: 'filters' }, field('From', from), field('To', to), field('Selection', selection), field('Priority', prio),
+        field('Text', text), field('Rows', limit), h('div', { class: 'btn-row' }, h('button', { type: 'submit', class: 'btn btn-primary', id: 'hist-search', text: 'Search' })));
+      body.append(h('div', { class: 'card' }, form, out));
+      const load = async () => {
+        replace(out, h('p', { class: 'loading', text: 'Loading…' }));
+        try {
+          const r = await get(`/api/alarms/history${qs({
+            from: from.value ? new Date(from.value).getTime() : '', to: to.value ? new Date(to.value).getTime() : '',
+            selection: selection.value.trim(), min_priority: prio.value, text: text.value.trim(), limit: limit.value })}`);
+          const rows = r.transitions || [];
+          replace(out, h('p', { class: 'hint', role: 'status', text: `${rows.length} transitions${rows.length >= Number(limit.value) ? ' (limit reached: narrow the filter)' : ''}` }),
+            h('table', { class: 'data', id: 'alarms-history' },
+              h('thead', {}, h('tr', {}, ['Time', 'Alarm', 'Type', 'Transition', 'Value', 'Limit', 'Prio', 'Selection', 'User', 'Message'].map((t) => h('th', { scope: 'col', text: t })))),
+              h('tbody', {}, rows.map((t) => h('tr', {},
+                h('td', { class: 'nowrap', text: fmtTime(t.ts) }),
+                h('td', { text: t.tag || t.alarm_key }),
+                h('td', { text: KIND_LABELS[t.kind] || t.kind }),
+                h('td', { class: 'nowrap', text: `${STATE_LABELS[t.from_state] || t.from_state} → ${STATE_LABELS[t.to_state] || t.to_state}` }),
+                h('td', { class: 'num', text: fmtValue(t.value) }),
+                h('td', { class: 'num', text: fmtValue(t.limit) }),
+                h('td', { class: 'num', text: String(t.priority ?? '') }),
+                h('td', { text: t.selection ?? '' }),
+                h('td', { text: t.user ?? '' }),
+                h('td', { text: t.message ?? '' }))))));
+        } catch (e) {
+          replace(out, h('p', { class: 'error', text: `Cannot load the alarm history: ${e.detail}` }));
+        }
+      };
+      form.addEventListener('submit', (e) => { e.preventDefault(); load(); });
+      load();
+      return () => {};
+    }
+
+    showTab('online');
+    return () => { cleanup(); offs.forEach((f) => f()); };
+  },
+};

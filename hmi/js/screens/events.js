@@ -1,0 +1,57 @@
+// Event screen: operator and system events, filtered by date (or Today),
+// type, user and text.
+
+import { get, qs } from '../api.js';
+import { h, replace, field } from '../dom.js';
+import { fmtTime, pad } from '../format.js';
+
+const KNOWN_TYPES = ['login', 'logout', 'login_failed', 'command', 'command_refused', 'mode', 'reset', 'write', 'write_failed',
+  'ack', 'shelve', 'unshelve', 'sequence', 'dispatch', 'simulation', 'user', 'system'];
+
+const dateValue = (d) => `${d.getFullYear()}-${pad(d.getMonth() + 1)}-${pad(d.getDate())}`;
+
+export default {
+  mount(el) {
+    const today = new Date();
+    const from = h('input', { type: 'date', id: 'events-from', value: dateValue(today) });
+    const to = h('input', { type: 'date', id: 'events-to', value: dateValue(today) });
+    const type = h('input', { id: 'events-type', list: 'events-types', size: 14 });
+    const types = h('datalist', { id: 'events-types' }, KNOWN_TYPES.map((t) => h('option', { value: t })));
+    const user = h('input', { id: 'events-user', size: 12 });
+    const text = h('input', { type: 'search', id: 'events-text', size: 16 });
+    const out = h('div', { class: 'table-wrap' });
+    let todayMode = true;
+    const form = h('form', { class: 'filters' },
+      field('From date', from), field('To date', to), field('Type', type), types, field('User', user), field('Text', text),
+      h('div', { class: 'btn-row' },
+        h('button', { type: 'submit', class: 'btn btn-primary', id: 'events-search', text: 'Search' }),
+        h('button', { type: 'button', class: 'btn', id: 'events-today', text: 'Today', onclick: () => { todayMode = true; const d = dateValue(new Date()); from.value = d; to.value = d; load(); } })));
+    el.append(h('h1', { class: 'screen-title', text: 'Events' }), h('div', { class: 'card' }, form, out));
+    form.addEventListener('submit', (e) => { e.preventDefault(); todayMode = false; load(); });
+
+    async function load() {
+      const params = { type: type.value.trim(), user: user.value.trim(), text: text.value.trim(), limit: 1000 };
+      if (todayMode) {
+        params.today = true;
+        params.tz_offset_min = -new Date().getTimezoneOffset();
+      } else {
+        if (from.value) params.from = new Date(`${from.value}T00:00:00`).getTime();
+        if (to.value) params.to = new Date(`${to.value}T00:00:00`).getTime() + 86_400_000 - 1;
+      }
+      replace(out, h('p', { class: 'loading', text: 'Loading…' }));
+      try {
+        const r = await get(`/api/events${qs(params)}`);
+        const rows = r.events || [];
+        replace(out, h('p', { class: 'hint', role: 'status', id: 'events-count', text: `${rows.length} events${todayMode ? ' today' : ''}` }),
+          h('table', { class: 'data', id: 'events-table' },
+            h('thead', {}, h('tr', {}, ['Time', 'User', 'Source', 'Type', 'Message'].map((t) => h('th', { scope: 'col', text: t })))),
+            h('tbody', {}, rows.map((e) => h('tr', {},
+              h('td', { class: 'nowrap', text: fmtTime(e.ts) }), h('td', { text: e.user ?? '' }), h('td', { text: e.source ?? '' }),
+              h('td', { text: e.kind ?? '' }), h('td', { text: e.message ?? '' }))))));
+      } catch (e) {
+        replace(out, h('p', { class: 'error', text: `Cannot load events: ${e.detail}` }));
+      }
+    }
+    load();
+  },
+};

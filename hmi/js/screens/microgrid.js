@@ -1,0 +1,182 @@
+// Microgrid overview: per unit the actual and daily maximum voltage, current
+// and power, the efficiency ratio (actual / daily maximum), setpoint and
+// state; the demand; and the latest dispatch with its cost and solver.
+// Daily maxima come from today's trend (bucket maxima) and then from live values.
+
+import { get, qs } from '../api.js';
+import { h, replace } from '../dom.js';
+import { fmtNumber, fmtTime, qualityOf } from '../format.js';
+import { Binder, valueEl } from '../ui.js';
+import { tagList } from './common.js';
+
+const DISPATCH_POLL_MS = 5000;
+
+/** Unit prefixes ("MG.PV1", ...) from the tags that have a power reading, the load excluded. */
+export async function microgridUnits() {
+  const tags = await tagList();
+  const byName = new Map(tags.map((t) => [t.name, t]));
+  return tags
+    .map((t) => t.name.match(/^(MG\.[^.]+)\.P_kW$/))
+    .filter((m) => m && m[1] !== 'MG.Load')
+    .map((m) => ({ prefix: m[1], id: m[1].slice(3), description: (byName.get(`${m[1]}.P_kW`) || {}).description || '',
+      stateDescription: (byName.get(`${m[1]}.State`) || {}).description || '', has: (q) => byName.has(`${m[1]}.${q}`) }));
+}
+
+/**
+ * Names the codes of a state tag from its description ("Controller state:
+ * 0 off, 1 running, 2 fault"); unknown codes show as the number.
+ */
+export function stateFormat(description) {
+  const labels = new Map();
+  const list = String(description).split(':').slice(1).join(':');
+  for (const m of list.matchAll(/(\d+)\s+([A-Za-z][A-Za-z _-]*)/g)) labels.set(Number(m[1]), m[2].trim());
+  return (v) => {
+    const n = Number(v);
+    return labels.has(n) ? `${labels.get(n).toUpperCase()} (${n})` : String(v);
+  };
+}
+
+function startOfToday() {
+  const d = new Date();
+  d.setHours(0, 0, 0, 0);
+  return d.getTime();
+}
+
+export default {
+  mount(el, ctx) {
+    const binder = new Binder();
+    let timer = null;
+    let disposed = false;
+    const unitsBox = h('section', { class: 'card', 'aria-labelledby': 'mg-units' });
+    const demandBox = h('section', { class: 'card', 'aria-labelledby': 'mg-demand' });
+    const dispatchBox = h('section', { class: 'card', id: 'dispatch', 'aria-labelledby': 'mg-dispatch' },
+      h('h2', { id: 'mg-dispatch', text: 'Latest dispatch' }), h('p', { class: 'loading', text: 'Loading…' }));
+    el.append(h('h1', { class: 'screen-title', text: 'Microgrid overview' }),
+      h('div', { class: 'mg-layout' }, h('div', {}, unitsBox, demandBox), dispatchBox));
+
+    const maxima = new Map(); // tag -> daily max
+    const maxEls = new Map(); // tag -> element
+
+    function showMax(tag) {
+      const el2 = maxEls.get(tag);
+      if (!el2) return;
+      const m = maxima.get(tag);
+      el2.textContent = m === undefined ? '—' : fmtNumber(m);
+      el2.title = m === undefined ? 'no value recorded today' : `highest value since ${fmtTime(startOfToday())}`;
+    }
+
+    function bump(tag, sample) {
+      if (!sample || typeof sample.value !== 'number' || !qualityOf(sample).usable) return;
+      const m = maxima.get(tag);
+      if (m === undefined || sample.value > m) { maxima.set(tag, sample.value); showMax(tag); }
+    }
+
+    (async () => {
+      let units;
+      try { units = await microgridUnits(); } catch (e) {
+        replace(unitsBox, h('p', { class: 'error', text: `Cannot list the units: ${e.detail}` }));
+        return;
+      }
+      if (disposed) return;
+      const head = ['Unit', 'V', 'V max today', 'I', 'I max today', 'P', 'P max today', 'Ratio P / max', 'Setpoint', 'State'];
+      const rows = units.map((u) => {
+        const cells = [h('th', { scope: 'row' }, ctx.session.screens.includes('units')
+          ? h('a', { href: `#/units/${u.id}`, text: u.id }) : u.id, )];
+        for (const [q, units_] of [['V', 'V'], ['I', 'A'], ['P_kW', 'kW']]) {
+          const tag = `${u.prefix}.${q}`;
+          const mx = h('span', { class: 'value', dataset: { max: tag } });
+          maxEls.set(tag, mx);
+          cells.push(h('td', { class: 'num' }, valueEl(binder, tag, { units: units_ })), h('td', { class: 'num' }, mx));
+          binder.on(tag, (s) => bump(tag, s));
+          showMax(tag);
+        }
+        // Efficiency ratio: actual power over today's maximum.
+        const fill = h('span', { class: 'ratio-fill' });
+        const pct = h('span', { class: 'value' });
+        const ratio = h('span', { class: 'ratio' }, h('span', { class: 'ratio-bar', 'aria-hidden': 'true' }, fill), pct);
+        binder.on(`${u.prefix}.P_kW`, (s, connected) => {
+          const m = maxima.get(`${u.prefix}.P_kW`);
+          const q = qualityOf(s, connected);
+          if (!q.usable || typeof s.value !== 'number' || !m || m <= 0) {
+            pct.textContent = '?'; pct.className = 'value q-bad'; pct.title = q.reason || 'no daily maximum yet';
+            fill.style.width = '0';
+            return;
+          }
+          const r = Math.max(0, s.value / m);
+          pct.textContent = `${(r * 100).toFixed(0)} %`; pct.className = 'value q-good'; pct.title = `${fmtNumber(s.value)} / ${fmtNumber(m)} kW`;
+          fill.style.width = `${Math.min(100, r * 100)}%`;
+        });
+        cells.push(h('td', {}, ratio),
+          h('td', { class: 'num' }, u.has('Setpoint_kW') ? valueEl(binder, `${u.prefix}.Setpoint_kW`, { units: 'kW' }) : '—'),
+          h('td', { class: 'unit-state' }, u.has('State') ? valueEl(binder, `${u.prefix}.State`, { format: stateFormat(u.stateDescription) }) : '—'));
+        return h('tr', { dataset: { unit: u.id } }, cells);
+      });
+      replace(unitsBox, h('h2', { id: 'mg-units', text: 'Units' }),
+        h('div', { class: 'table-wrap' }, h('table', { class: 'data', id: 'mg-units-table' },
+          h('thead', {}, h('tr', {}, head.map((t) => h('th', { scope: 'col', text: t })))), h('tbody', {}, rows))));
+
+      replace(demandBox, h('h2', { id: 'mg-demand', text: 'Demand' }),
+        h('dl', { class: 'kv' },
+          h('dt', { text: 'Active power' }), h('dd', {}, valueEl(binder, 'MG.Load.P_kW', { units: 'kW' })),
+          h('dt', { text: 'Reactive power' }), h('dd', {}, valueEl(binder, 'MG.Load.Q_kvar', { units: 'kvar' })),
+          h('dt', { text: 'Voltage' }), h('dd', {}, valueEl(binder, 'MG.Load.V', { units: 'V' })),
+          h('dt', { text: 'Frequency' }), h('dd', {}, valueEl(binder, 'MG.Load.Hz', { units: 'Hz', digits: 2 }))));
+
+      // Today's maxima from the recorded history (at most 16 pens per request).
+      const tags = [...maxEls.keys()];
+      for (let i = 0; i < tags.length; i += 16) {
+        const part = tags.slice(i, i + 16);
+        try {
+          const r = await get(`/api/trends${qs({ tags: part.join(','), from: startOfToday(), to: Date.now(), points: 96 })}`);
+          for (const s of r.series || []) {
+            for (const b of s.buckets) {
+              if (b.count && typeof b.max === 'number') {
+                const m = maxima.get(s.tag);
+                if (m === undefined || b.max > m) maxima.set(s.tag, b.max);
+              }
+            }
+            showMax(s.tag);
+          }
+        } catch (e) {
+          // Without the trends screen the history is not readable: the maxima start from live values.
+          for (const t of part) { const m = maxEls.get(t); if (m && maxima.get(t) === undefined) m.title = `history not available: ${e.detail}`; }
+        }
+      }
+      binder.update(null);
+    })();
+
+    async function loadDispatch() {
+      try {
+        const d = await get('/api/dispatch');
+        drawDispatch(d);
+      } catch (e) {
+        replace(dispatchBox, h('h2', { id: 'mg-dispatch', text: 'Latest dispatch' }),
+          h('p', { class: 'q-bad', id: 'dispatch-error', text: `? ${e.detail}` }));
+      }
+    }
+
+    function drawDispatch(d) {
+      const sp = Object.entries(d.setpoints_kw || {});
+      const optimal = d.mode === 'optimal';
+      replace(dispatchBox, h('h2', { id: 'mg-dispatch', text: 'Latest dispatch' }),
+        h('dl', { class: 'kv' },
+          h('dt', { text: 'At' }), h('dd', { text: fmtTime(d.at) }),
+          h('dt', { text: 'Mode' }), h('dd', {}, h('span', { class: ['badge', optimal ? 'badge-ok' : 'badge-warn'], text: String(d.mode || '—').toUpperCase() })),
+          h('dt', { text: 'Solver status' }), h('dd', { text: String(d.status ?? '—') }),
+          d.reason ? [h('dt', { text: 'Reason' }), h('dd', { text: String(d.reason) })] : null,
+          h('dt', { text: 'Cost (objective)' }), h('dd', { text: typeof d.objective === 'number' ? fmtNumber(d.objective, 3) : '—' }),
+          h('dt', { text: 'Solve time' }), h('dd', { text: typeof d.solve_ms === 'number' ? `${fmtNumber(d.solve_ms, 1)} ms` : '—' }),
+          h('dt', { text: 'Load shed' }), h('dd', { text: typeof d.shed_kw === 'number' ? `${fmtNumber(d.shed_kw)} kW` : '—' }),
+          d.run_cmd !== undefined && d.run_cmd !== null ? [h('dt', { text: 'Diesel run command' }), h('dd', { text: typeof d.run_cmd === 'object' ? JSON.stringify(d.run_cmd) : String(d.run_cmd) })] : null,
+          d.write_failures && (Array.isArray(d.write_failures) ? d.write_failures.length : d.write_failures)
+            ? [h('dt', { text: 'Write failures' }), h('dd', { class: 'error', text: Array.isArray(d.write_failures) ? d.write_failures.join('; ') : String(d.write_failures) })] : null),
+        h('table', { class: 'data', id: 'dispatch-setpoints' },
+          h('thead', {}, h('tr', {}, h('th', { scope: 'col', text: 'Unit' }), h('th', { scope: 'col', class: 'num', text: 'Setpoint' }))),
+          h('tbody', {}, sp.map(([u, kw]) => h('tr', {}, h('td', { text: u }), h('td', { class: 'num', text: typeof kw === 'number' ? `${fmtNumber(kw)} kW` : String(kw) }))))));
+    }
+
+    loadDispatch();
+    timer = setInterval(loadDispatch, DISPATCH_POLL_MS);
+    return () => { disposed = true; clearInterval(timer); binder.dispose(); };
+  },
+};

@@ -1,0 +1,184 @@
+// Panel screens (ss1, css1): breakers with manual commands, the mode, the
+// fault-isolation sequence (step, count_L_cur_c, count_L_cur_sv, isolated
+// zones), Reset, and the power analyzer readings.
+
+import { get, post, enc } from '../api.js';
+import { h, replace, table } from '../dom.js';
+import { fmtDuration, roleAtLeast } from '../format.js';
+import { Binder, attempt, confirmDialog, toast, valueEl } from '../ui.js';
+import { breakerState, singleLine } from '../components/singleline.js';
+import { devicesUnder, panelPrefix } from './common.js';
+
+const POLL_MS = 1000;
+
+const ANALYZER = [
+  ['Voltage L1', 'V_L1', 'V'], ['Voltage L2', 'V_L2', 'V'], ['Voltage L3', 'V_L3', 'V'],
+  ['Current L1', 'I_L1', 'A'], ['Current L2', 'I_L2', 'A'], ['Current L3', 'I_L3', 'A'],
+  ['Active power', 'P_kW', 'kW'], ['Reactive power', 'Q_kvar', 'kvar'], ['Power factor', 'PF', ''],
+  ['Frequency', 'Hz', 'Hz'], ['Energy', 'kWh', 'kWh'],
+];
+
+const breakerLabel = (name) => (name === 'elcb' ? 'ELCB' : name === 'mccb' ? 'MCCB' : name.replace(/^zone(\d+)$/, 'Zone $1'));
+
+export function panelScreen(id) {
+  return {
+    mount(el, ctx) {
+      const role = ctx.session.role;
+      const canOperate = roleAtLeast(role, 'operator');
+      const canMode = roleAtLeast(role, 'supervisor');
+      const binder = new Binder();
+      let status = null;
+      let timer = null;
+      let disposed = false;
+
+      const title = h('h1', { class: 'screen-title', text: `Panel ${id}` });
+      const diagramBox = h('section', { class: 'card', 'aria-label': 'Single-line diagram' });
+      const seqBox = h('section', { class: 'card seq-card', 'aria-labelledby': `seq-${id}` });
+      const breakersBox = h('section', { class: 'card', 'aria-labelledby': `bk-${id}` });
+      const paBox = h('section', { class: 'card', 'aria-labelledby': `pa-${id}` });
+      el.append(title, h('div', { class: 'panel-layout' },
+        h('div', { class: 'panel-left' }, diagramBox, paBox),
+        h('div', { class: 'panel-right' }, seqBox, breakersBox)));
+      if (!canOperate) el.insertBefore(h('p', { class: 'note', text: `View only: your role (${role}) may not operate this panel.` }), el.children[1]);
+
+      // Sequence and mode, from the panel's status.
+      const f = {};
+      const dd = (k) => (f[k] = h('dd', { id: `${id}-${k}` }));
+      const modeBtns = canMode ? h('div', { class: 'btn-row' },
+        h('button', { type: 'button', class: 'btn', id: `${id}-mode-auto`, onclick: () => setMode('auto'), text: 'Auto' }),
+        h('button', { type: 'button', class: 'btn', id: `${id}-mode-manual`, onclick: () => setMode('manual'), text: 'Manual' })) : null;
+      const resetBtn = canOperate ? h('button', { type: 'button', class: 'btn btn-primary', id: `${id}-reset`, onclick: reset, text: 'Reset' }) : null;
+      replace(seqBox,
+        h('h2', { id: `seq-${id}`, text: 'Fault isolation' }),
+        h('dl', { class: 'kv' },
+          h('dt', { text: 'Mode' }), dd('mode'),
+          h('dt', { text: 'Step' }), dd('step'),
+          h('dt', { text: 'count_L_cur_c' }), dd('count_c'),
+          h('dt', { text: 'count_L_cur_sv' }), dd('count_sv'),
+          h('dt', { text: 'Isolated zones' }), dd('faulty'),
+          h('dt', { text: 'Lockout' }), dd('lockout'),
+          h('dt', { text: 'Communication' }), dd('comm'),
+          h('dt', { text: 'Last sequence' }), dd('last')),
+        modeBtns, resetBtn);
+
+      // Breakers: state and commands.
+      const bkBody = h('tbody');
+      replace(breakersBox, h('h2', { id: `bk-${id}`, text: 'Breakers' }),
+        h('p', { class: 'hint', id: `${id}-bk-hint` }),
+        h('table', { class: 'data breakers' },
+          h('thead', {}, h('tr', {}, ['Breaker', 'State', canOperate ? 'Command' : null].filter(Boolean).map((t) => h('th', { scope: 'col', text: t })))),
+          bkBody));
+
+      async function refresh() {
+        try {
+          status = await get(`/api/panels/${enc(id)}`);
+          seqBox.classList.remove('stale');
+          seqBox.title = '';
+          draw();
+        } catch (e) {
+          // Keep the last status on view, greyed, with the reason.
+          seqBox.classList.add('stale');
+          seqBox.title = `not live: ${e.detail}`;
+          if (f.comm) f.comm.textContent = `? ${e.detail}`;
+        }
+      }
+
+      function draw() {
+        if (!status) return;
+        const manual = status.mode === 'manual';
+        f.mode.textContent = manual ? 'MANUAL' : 'AUTO';
+        f.mode.className = manual ? 'badge badge-warn' : 'badge badge-ok';
+        f.step.textContent = status.step;
+        f.count_c.textContent = String(status.count_L_cur_c);
+        f.count_sv.textContent = String(status.count_L_cur_sv);
+        const faulty = (status.faulty_zones || []).map((z) => `Zone ${z}`);
+        if (status.load0_faulty) faulty.unshift('Busbar (load 0)');
+        f.faulty.textContent = faulty.length ? faulty.join(', ') : 'none';
+        f.faulty.className = faulty.length ? 'badge badge-bad' : '';
+        f.lockout.textContent = status.lockout ? 'LOCKED OUT' : 'no';
+        f.lockout.className = status.lockout ? 'badge badge-bad' : '';
+        f.comm.textContent = status.comm_ok ? 'all signals Good' : 'signals with Bad quality';
+        f.comm.className = status.comm_ok ? '' : 'badge badge-bad';
+        const ls = status.last_sequence || {};
+        f.last.textContent = ls.outcome
+          ? `${ls.outcome}: restored in ${fmtDuration(Number(ls.restore_s))}, ${ls.switching_ops} switching ops, ${ls.trips} trips, ${ls.elcb_resets} ELCB resets`
+          : 'none yet';
+        if (modeBtns) {
+          modeBtns.children[0].setAttribute('aria-pressed', String(!manual));
+          modeBtns.children[1].setAttribute('aria-pressed', String(manual));
+        }
+        const hint = document.getElementById(`${id}-bk-hint`);
+        if (hint) hint.textContent = canOperate ? (manual ? 'Manual mode: breakers may be operated.' : 'Auto mode: the sequence operates the breakers. Switch to Manual to operate them.') : '';
+        for (const b of bkBody.querySelectorAll('button[data-breaker]')) b.disabled = !manual;
+      }
+
+      function drawBreakerRows(prefix, names) {
+        replace(bkBody, names.map((name) => {
+          const st = h('span', { class: 'bk-text' });
+          const closedTag = name === 'elcb' ? `${prefix}.ELCB.Closed` : name === 'mccb' ? `${prefix}.MCCB.Closed` : `${prefix}.Zone${name.slice(4)}.Closed`;
+          const cmdTag = name === 'elcb' ? null : name === 'mccb' ? `${prefix}.MCCB.Cmd` : `${prefix}.Zone${name.slice(4)}.Cmd`;
+          const drawSt = (_s, connected) => {
+            const b = breakerState(binder.sample(closedTag), cmdTag ? binder.sample(cmdTag) : null, connected, name === 'elcb');
+            st.textContent = b.label === 'UNKNOWN' ? '? UNKNOWN' : b.label;
+            st.className = `bk-text ${b.cls}`;
+            st.title = b.reason;
+          };
+          binder.on(closedTag, drawSt);
+          if (cmdTag) binder.on(cmdTag, drawSt);
+          const cells = [h('th', { scope: 'row', text: breakerLabel(name) }), h('td', {}, st)];
+          if (canOperate) {
+            cells.push(h('td', { class: 'actions' },
+              h('button', { type: 'button', class: 'btn btn-small', dataset: { breaker: name, action: 'close' }, onclick: () => command(name, true), text: 'Close' }),
+              h('button', { type: 'button', class: 'btn btn-small', dataset: { breaker: name, action: 'open' }, onclick: () => command(name, false), text: 'Open' })));
+          }
+          return h('tr', { dataset: { breakerRow: name } }, cells);
+        }));
+        draw();
+      }
+
+      async function command(name, closed) {
+        const label = breakerLabel(name);
+        const ok = await confirmDialog(`${closed ? 'Close' : 'Open'} ${label}`,
+          `${closed ? 'Close' : 'Open'} ${label} of ${status ? status.name : id}?`, { submitLabel: closed ? 'Close breaker' : 'Open breaker' });
+        if (!ok) return;
+        const r = await attempt(`${closed ? 'Close' : 'Open'} ${label}`, () => post(`/api/panels/${enc(id)}/breakers/${enc(name)}`, { closed }));
+        if (r) { status = r; draw(); toast(`${label}: ${closed ? 'close' : 'open'} command accepted.`, 'ok'); }
+      }
+
+      async function setMode(mode) {
+        const r = await attempt(`Set ${mode} mode`, () => post(`/api/panels/${enc(id)}/mode`, { mode }));
+        if (r) { status = r; draw(); toast(`Panel ${id} is now in ${mode} mode.`, 'ok'); }
+      }
+
+      async function reset() {
+        const ok = await confirmDialog('Reset panel', `Reset the fault-isolation sequence of ${status ? status.name : id}? It clears the isolated zones and the lockout.`, { submitLabel: 'Reset', danger: false });
+        if (!ok) return;
+        const r = await attempt('Reset', () => post(`/api/panels/${enc(id)}/reset`));
+        if (r) { status = r; draw(); toast('Reset accepted.', 'ok'); }
+      }
+
+      (async () => {
+        try {
+          status = await get(`/api/panels/${enc(id)}`);
+        } catch (e) {
+          replace(el, h('p', { class: 'error', text: `Cannot load panel ${id}: ${e.detail}` }));
+          return;
+        }
+        if (disposed) return;
+        const prefix = panelPrefix(status);
+        title.textContent = status.name;
+        const devices = await devicesUnder(prefix).catch(() => []);
+        replace(diagramBox, singleLine(binder, { prefix, title: status.name, zones: status.zones, devices }));
+        const names = ['elcb', 'mccb'].concat(Array.from({ length: status.zones }, (_, i) => `zone${i + 1}`));
+        drawBreakerRows(prefix, names);
+        replace(paBox, h('h2', { id: `pa-${id}`, text: 'Power analyzer' }),
+          table(['Quantity', 'Value'], ANALYZER.map(([label, tag, units]) =>
+            [label, valueEl(binder, `${prefix}.PA.${tag}`, { units, digits: tag === 'PF' ? 3 : undefined })])));
+        draw();
+        timer = setInterval(refresh, POLL_MS);
+      })();
+
+      return () => { disposed = true; clearInterval(timer); binder.dispose(); };
+    },
+  };
+}

@@ -1,0 +1,255 @@
+// Trend screen: several pens, X range by start date, start time and
+// duration, Y automatic or set, live mode, a reading cursor, Show Tabular
+// with Reload, and CSV export. The server downsamples to about one bucket
+// per pixel, so long ranges stay light.
+
+import { get, qs } from '../api.js';
+import { h, replace, select, field } from '../dom.js';
+import { fmtNumber, fmtTime, pad } from '../format.js';
+import { live } from '../live.js';
+import { toast } from '../ui.js';
+import { TrendChart, PEN_COLORS } from '../components/chart.js';
+import { tagList } from './common.js';
+
+const DURATIONS = [
+  [5 * 60, '5 minutes'], [15 * 60, '15 minutes'], [3600, '1 hour'], [4 * 3600, '4 hours'],
+  [8 * 3600, '8 hours'], [86400, '1 day'], [7 * 86400, '1 week'],
+];
+const LIVE_RELOAD_MS = 5000;
+const MAX_PENS = 8;
+const DEFAULT_PENS = ['SS1.PA.V_L1', 'SS1.PA.I_L1'];
+
+const dateValue = (d) => `${d.getFullYear()}-${pad(d.getMonth() + 1)}-${pad(d.getDate())}`;
+const timeValue = (d) => `${pad(d.getHours())}:${pad(d.getMinutes())}:${pad(d.getSeconds())}`;
+
+export default {
+  mount(el) {
+    const pens = []; // {tag, color, units}
+    let meta = new Map();
+    let data = null; // {from, to, series}
+    let liveTimer = null;
+    let offTags = null;
+    let offWant = null;
+    let disposed = false;
+    let loadSeq = 0;
+
+    const now = new Date(Date.now() - 15 * 60_000);
+    const startDate = h('input', { type: 'date', id: 'trend-start-date', value: dateValue(now) });
+    const startTime = h('input', { type: 'time', id: 'trend-start-time', step: 1, value: timeValue(now) });
+    const duration = select({ id: 'trend-duration' }, DURATIONS.map(([s, l]) => [String(s), l]), String(15 * 60));
+    const liveBox = h('input', { type: 'checkbox', id: 'trend-live', checked: true });
+    const yAuto = h('input', { type: 'checkbox', id: 'trend-y-auto', checked: true });
+    const yMin = h('input', { type: 'number', id: 'trend-y-min', step: 'any', disabled: true, size: 6 });
+    const yMax = h('input', { type: 'number', id: 'trend-y-max', step: 'any', disabled: true, size: 6 });
+    const penInput = h('input', { id: 'trend-pen-input', list: 'trend-tag-list', placeholder: 'Tag name, e.g. SS1.PA.V_L2', size: 24 });
+    const datalist = h('datalist', { id: 'trend-tag-list' });
+    const penList = h('ul', { class: 'pen-list', id: 'trend-pens', 'aria-label': 'Pens' });
+    const readout = h('dl', { class: 'kv cursor-readout', id: 'trend-cursor', 'aria-live': 'polite' });
+    const canvas = h('canvas', { id: 'trend-canvas' });
+    const tableBox = h('div', { class: 'table-wrap', id: 'trend-table', hidden: true });
+    const tableBtn = h('button', { type: 'button', class: 'btn', id: 'trend-show-table', 'aria-pressed': 'false', text: 'Show Tabular' });
+    const reloadBtn = h('button', { type: 'button', class: 'btn', id: 'trend-reload', text: 'Reload' });
+    const csvLink = h('a', { class: 'btn', id: 'trend-csv', href: '#', download: 'trend.csv', text: 'Export CSV' });
+    const status = h('p', { class: 'hint', id: 'trend-status', role: 'status' });
+
+    const chart = new TrendChart(canvas, { onCursor: drawReadout });
+
+    el.append(
+      h('h1', { class: 'screen-title', text: 'Trends' }),
+      h('div', { class: 'card' },
+        h('div', { class: 'filters' },
+          field('Start date', startDate), field('Start time', startTime), field('Duration', duration),
+          h('label', { class: 'field field-inline' }, liveBox, 'Live'),
+          h('label', { class: 'field field-inline' }, yAuto, 'Y automatic'),
+          field('Y min', yMin), field('Y max', yMax),
+          h('div', { class: 'btn-row' }, h('button', { type: 'button', class: 'btn btn-primary', id: 'trend-apply', onclick: () => load(), text: 'Apply' }), reloadBtn, tableBtn, csvLink))),
+      h('div', { class: 'trend-layout' },
+        h('div', { class: 'card' }, h('div', { class: 'trend-canvas-wrap' }, canvas), status, tableBox),
+        h('div', { class: 'card' },
+          h('h2', { text: 'Pens' }), penList,
+          h('form', { class: 'btn-row', id: 'trend-add-pen' }, h('label', { class: 'field' }, h('span', { class: 'field-label', text: 'Add pen' }), penInput), datalist,
+            h('button', { type: 'submit', class: 'btn btn-small', text: 'Add' })),
+          h('h2', { text: 'Cursor' }), readout)));
+
+    el.querySelector('#trend-add-pen').addEventListener('submit', (e) => {
+      e.preventDefault();
+      const name = penInput.value.trim();
+      if (!name) return;
+      if (!meta.has(name)) { toast(`No numeric tag named "${name}".`, 'error'); return; }
+      if (pens.some((p) => p.tag === name)) return;
+      if (pens.length >= MAX_PENS) { toast(`At most ${MAX_PENS} pens.`, 'error'); return; }
+      addPen(name);
+      penInput.value = '';
+      load();
+    });
+    yAuto.addEventListener('change', () => {
+      yMin.disabled = yMax.disabled = yAuto.checked;
+      if (!yAuto.checked && data) {
+        const r = chart.yRange();
+        yMin.value = fmtNumber(r.min); yMax.value = fmtNumber(r.max);
+      }
+      applyY();
+    });
+    for (const i of [yMin, yMax]) i.addEventListener('change', applyY);
+    liveBox.addEventListener('change', () => { setLive(liveBox.checked); load(); });
+    for (const i of [startDate, startTime, duration]) i.addEventListener('change', () => { if (i !== duration) { liveBox.checked = false; setLive(false); } load(); });
+    reloadBtn.addEventListener('click', () => load());
+    tableBtn.addEventListener('click', () => {
+      tableBox.hidden = !tableBox.hidden;
+      tableBtn.setAttribute('aria-pressed', String(!tableBox.hidden));
+      tableBtn.textContent = tableBox.hidden ? 'Show Tabular' : 'Hide Tabular';
+      drawTable();
+    });
+
+    function applyY() {
+      const lo = Number(yMin.value);
+      const hi = Number(yMax.value);
+      if (yAuto.checked) chart.setY(null);
+      else if (yMin.value !== '' && yMax.value !== '' && lo < hi) chart.setY({ min: lo, max: hi });
+      else toast('Y range: the minimum must be below the maximum.', 'error');
+    }
+
+    function addPen(tag) {
+      const used = new Set(pens.map((p) => p.color));
+      const color = PEN_COLORS.find((c) => !used.has(c)) || PEN_COLORS[pens.length % PEN_COLORS.length];
+      pens.push({ tag, color, units: (meta.get(tag) || {}).units || '' });
+      drawPens();
+    }
+
+    function drawPens() {
+      replace(penList, pens.map((p) => {
+        const sw = h('span', { class: 'pen-swatch' });
+        sw.style.background = p.color;
+        return h('li', { dataset: { pen: p.tag } }, sw, h('span', { class: 'pen-name', title: p.tag, text: `${p.tag}${p.units ? ` (${p.units})` : ''}` }),
+          h('button', { type: 'button', class: 'btn btn-small', 'aria-label': `Remove pen ${p.tag}`, text: '×',
+            onclick: () => { pens.splice(pens.indexOf(p), 1); drawPens(); load(); } }));
+      }));
+      if (!pens.length) penList.append(h('li', { class: 'empty', text: 'No pens: add a tag below.' }));
+      resubscribe();
+    }
+
+    function range() {
+      const dur = Number(duration.value) * 1000;
+      if (liveBox.checked) {
+        const to = Date.now();
+        return { from: to - dur, to };
+      }
+      const from = new Date(`${startDate.value}T${startTime.value || '00:00:00'}`).getTime();
+      return { from, to: from + dur };
+    }
+
+    async function load() {
+      const { from, to } = range();
+      if (!Number.isFinite(from)) { status.textContent = 'Set a valid start date and time.'; return; }
+      csvLink.href = pens.length ? `/api/trends.csv${qs({ tags: pens.map((p) => p.tag).join(','), from, to })}` : '#';
+      if (!pens.length) { data = { from, to, series: [] }; chart.setData([], from, to); drawTable(); return; }
+      const points = Math.max(50, Math.min(2000, Math.round(canvas.clientWidth || 800)));
+      const seq = ++loadSeq;
+      status.textContent = 'Loading…';
+      try {
+        const r = await get(`/api/trends${qs({ tags: pens.map((p) => p.tag).join(','), from, to, points })}`);
+        if (disposed || seq !== loadSeq) return;
+        const series = pens.map((p) => {
+          const s = (r.series || []).find((x) => x.tag === p.tag);
+          return { ...p, buckets: s ? s.buckets : [] };
+        });
+        data = { from, to, series };
+        chart.setData(series, from, to);
+        const n = series.reduce((a, s) => a + s.buckets.reduce((b, k) => b + (k.count || 0), 0), 0);
+        status.textContent = `${fmtTime(from)} to ${fmtTime(to)}: ${n} samples in ${points} buckets per pen${liveBox.checked ? ' (live)' : ''}.`;
+        drawTable();
+      } catch (e) {
+        if (seq === loadSeq) status.textContent = `Cannot load the trend: ${e.detail}`;
+      }
+    }
+
+    // Live mode: between reloads, the newest live values extend the pens.
+    function resubscribe() {
+      if (offWant) offWant();
+      offWant = live.want({ tags: pens.map((p) => p.tag) });
+    }
+    function onLiveTags(names) {
+      if (!liveBox.checked || !data) return;
+      let changed = false;
+      for (const s of data.series) {
+        if (!names.includes(s.tag)) continue;
+        const v = live.get(s.tag);
+        if (!v || typeof v.value !== 'number' || !v.quality || v.quality.code === 'bad') continue;
+        const t = v.timestamp;
+        const last = s.buckets[s.buckets.length - 1];
+        if (last && t < last.end) continue;
+        s.buckets.push({ start: t, end: t + 1, count: 1, min: v.value, max: v.value, avg: v.value, last: v.value, last_ts: t });
+        changed = true;
+      }
+      if (changed) {
+        const span = data.to - data.from;
+        data.to = Date.now();
+        data.from = data.to - span;
+        chart.setData(data.series, data.from, data.to);
+      }
+    }
+    function setLive(on) {
+      clearInterval(liveTimer);
+      liveTimer = on ? setInterval(load, LIVE_RELOAD_MS) : null;
+      if (!on) {
+        // Freeze the window where it is, so the fields say what is shown.
+        const d = new Date(data ? data.from : Date.now() - Number(duration.value) * 1000);
+        startDate.value = dateValue(d);
+        startTime.value = timeValue(d);
+      }
+    }
+
+    function drawReadout({ t, values }) {
+      replace(readout, h('dt', { text: 'Time' }), h('dd', { id: 'trend-cursor-time', text: fmtTime(t) }),
+        values.map((v) => {
+          const sw = h('span', { class: 'pen-swatch' });
+          sw.style.background = v.color;
+          const b = v.bucket;
+          // Inside a bucket its average; after it, the value held since its last sample.
+          const val = b ? (t >= b.end && typeof b.last === 'number' ? b.last : b.avg) : null;
+          const text = b ? `${fmtNumber(val)}${v.units ? ` ${v.units}` : ''}` : '? no data';
+          return [h('dt', {}, sw, v.tag), h('dd', { class: ['value', b ? 'q-good' : 'q-bad'], dataset: { pen: v.tag },
+            title: b ? `min ${fmtNumber(b.min)}, max ${fmtNumber(b.max)}, ${b.count} samples, ${fmtTime(b.start)} to ${fmtTime(b.end)}` : 'no samples at this time',
+            text })];
+        }));
+    }
+
+    function drawTable() {
+      if (tableBox.hidden || !data) return;
+      const series = data.series;
+      const times = series.length ? series[0].buckets.map((b) => b.start) : [];
+      const rows = times.map((t, i) => h('tr', {}, h('td', { class: 'nowrap', text: fmtTime(t) }),
+        series.map((s) => {
+          const b = s.buckets[i];
+          return h('td', { class: 'num', title: b && b.count ? `min ${fmtNumber(b.min)}, max ${fmtNumber(b.max)}, ${b.count} samples` : '', text: b && b.count ? fmtNumber(b.avg) : '—' });
+        })));
+      const withData = rows.filter((_, i) => series.some((s) => s.buckets[i] && s.buckets[i].count));
+      replace(tableBox, h('table', { class: 'data', id: 'trend-data-table' },
+        h('thead', {}, h('tr', {}, h('th', { scope: 'col', text: 'Bucket start' }), series.map((s) => h('th', { scope: 'col', class: 'num', text: `${s.tag}${s.units ? ` (${s.units})` : ''} avg` })))),
+        h('tbody', {}, withData.length ? withData : h('tr', {}, h('td', { colspan: series.length + 1, class: 'empty', text: 'No data in this range.' })))));
+    }
+
+    offTags = live.onTags(onLiveTags);
+    (async () => {
+      try {
+        const tags = await tagList();
+        meta = new Map(tags.filter((t) => t.kind === 'float' || t.kind === 'int' || t.kind === 'bool').map((t) => [t.name, t]));
+        replace(datalist, [...meta.keys()].sort().map((n) => h('option', { value: n })));
+      } catch (e) {
+        status.textContent = `Cannot list tags: ${e.detail}`;
+      }
+      if (disposed) return;
+      for (const t of DEFAULT_PENS) if (meta.has(t)) addPen(t);
+      setLive(true);
+      load();
+    })();
+
+    return () => {
+      disposed = true;
+      clearInterval(liveTimer);
+      if (offTags) offTags();
+      if (offWant) offWant();
+      chart.dispose();
+    };
+  },
+};
