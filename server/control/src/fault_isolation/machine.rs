@@ -7,7 +7,8 @@
 //! **Must not touch:** I/O or time. Inputs are snapshots of the panel's I/O
 //! (value + quality), timer expiries and operator commands; outputs are breaker
 //! commands, timer requests, events and alarm conditions. Every decision waits
-//! on a timer expiry; the `now_s` argument only time-stamps the metrics.
+//! on a timer expiry; the `now_s` argument time-stamps the metrics and ages
+//! the confirmation window of commands (see "Asynchronous status inputs").
 //!
 //! ## The sequence (automatic mode)
 //! Loads are numbered as in the seed: load 0 is the main MCCB, loads 1..=N are
@@ -68,7 +69,9 @@
 //! Restoration time for a permanent fault on zone k of N (instantaneous I/O):
 //! 2 × reclose + N × dwell for every k, within the seed's bound
 //! 2 × reclose + (N + 1) × dwell (was 2 × reclose + (N + k − 1) × dwell when
-//! every pass dwelled on every load).
+//! every pass dwelled on every load). Over real I/O each status confirmation
+//! on the critical path adds up to a scan period plus the breaker's operating
+//! time, which the seed's bound does not count.
 //!
 //! ## Limits, faults and takeover
 //! - More than `max_trips` ELCB trips in one sequence: lockout.
@@ -78,14 +81,15 @@
 //! - Interlock: the MCCB or a zone is never commanded closed unless the last
 //!   good snapshot shows the ELCB closed.
 //! - During a sequence, a breaker that changes without having been commanded
-//!   (someone operating the panel locally) locks out.
+//!   within the confirm window (someone operating the panel locally) locks
+//!   out (see "Asynchronous status inputs").
 //! - **Communication loss rule.** Any signal of the panel with non-Good quality
 //!   during a sequence suspends it (`suspended`): timers are cancelled, nothing
 //!   is switched, an alarm is raised. The sequence resumes only on the next
 //!   snapshot in which every signal is Good again (a fresh re-read), and only if
 //!   that state is consistent with what the machine knew: every MCCB/zone status
-//!   equals its last known value, or the target of a command still awaiting
-//!   confirmation; the ELCB has not closed unless a reset was pending. An ELCB
+//!   equals its last known value, or is explained by a command (awaiting
+//!   confirmation or within the confirm window); the ELCB has not closed unless a reset was pending. An ELCB
 //!   that opened while blind is a trip and is handled as one at the step in
 //!   progress. Anything else locks out. On resume the step in progress is
 //!   restarted from its beginning (its timer runs again in full, an unconfirmed
@@ -93,6 +97,28 @@
 //! - Switching to manual mode stops the sequence at once (nothing further is
 //!   switched); manual breaker commands are refused in automatic mode.
 //!   In manual mode nothing switches by itself.
+//!
+//! ## Asynchronous status inputs
+//! Over real I/O the panel's signals sit on different modules, each scanned on
+//! its own: a status input lags its breaker by up to a scan period plus the
+//! breaker's operating time, and readings of different modules arrive in any
+//! order (the ELCB trip of a faulty zone is often read before that zone's
+//! "closed" status). Readings of one input arrive in order. Hence:
+//! - **Explained change.** A status change to `v` is explained by a command
+//!   to `v` awaiting confirmation, or by *any* command to `v` issued within the
+//!   last `confirm_timeout_s` (the confirm window), even one since superseded:
+//!   a zone commanded closed, then open after the trip was read, may still be
+//!   read closed once. Only a change with no such command is local operation.
+//! - **Confirmation.** After every good snapshot, a breaker whose last command
+//!   lies within the confirm window and whose status differs from it awaits
+//!   confirmation (again): a late reading of the superseded state re-arms the
+//!   check. A mismatch is raised only when the confirm timeout runs out with
+//!   the status not at the *last* commanded state. A step that waits on
+//!   confirmations waits on all of them, so OLUC never closes a load while an
+//!   earlier opening is still unconfirmed.
+//! - **Attribution** is unchanged: a trip is pinned on the load being closed
+//!   or dwelling, so `dwell_s` must exceed the time from closing a load to
+//!   reading the ELCB (scan period of the ELCB's module plus margins).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
@@ -495,6 +521,15 @@ pub struct Metrics {
     pub outcome: Outcome,
 }
 
+/// The commands last sent to one breaker.
+#[derive(Debug, Clone, Copy, Default)]
+struct CommandLog {
+    /// The value of the last command.
+    last: bool,
+    /// When it was last commanded open (`[0]`) and closed (`[1]`).
+    at: [Option<f64>; 2],
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Cause {
     Trip,
@@ -541,6 +576,11 @@ pub struct Sequence {
     comm_good: bool,
     /// Commands awaiting confirmation by their status input.
     pending: Vec<(Breaker, bool)>,
+    /// When each breaker was last commanded open / closed, and its last
+    /// command (for the ELCB: reset pulses only).
+    commanded: BTreeMap<Breaker, CommandLog>,
+    /// The time of the input being handled.
+    now_s: f64,
     timers: [Option<u64>; 3],
     next_token: u64,
     /// Active alarm keys and their priorities.
@@ -589,6 +629,8 @@ impl Sequence {
             known: None,
             comm_good: false,
             pending: Vec::new(),
+            commanded: BTreeMap::new(),
+            now_s: 0.0,
             timers: [None; 3],
             next_token: 0,
             active_alarms: BTreeMap::new(),
@@ -642,10 +684,11 @@ impl Sequence {
         self.comm_good
     }
 
-    /// Feeds a plant input. `now_s` (any monotonic origin) only time-stamps
-    /// the metrics.
+    /// Feeds a plant input. `now_s` (plant seconds, any monotonic origin)
+    /// time-stamps the metrics and ages the confirm window of commands.
     pub fn handle(&mut self, input: Input, now_s: f64) -> Vec<Output> {
         let mut out = Vec::new();
+        self.set_now(now_s);
         match input {
             Input::Snapshot(s) => self.on_snapshot(&s, now_s, &mut out),
             Input::TimerExpired { timer, token } => {
@@ -671,6 +714,7 @@ impl Sequence {
         now_s: f64,
     ) -> Result<Vec<Output>, CommandError> {
         let mut out = Vec::new();
+        self.set_now(now_s);
         match cmd {
             OperatorCommand::SetMode(Mode::Manual) => self.enter_manual_mode(&mut out),
             OperatorCommand::SetMode(Mode::Auto) => self.enter_auto_mode(now_s, &mut out),
@@ -722,7 +766,7 @@ impl Sequence {
             );
             return;
         }
-        self.pending.retain(|(b, v)| state.closed(*b) != *v);
+        self.reconcile_pending(&state, out);
         let elcb = state.elcb;
         self.known = Some(state);
         if self.step.expects_elcb_closed() && !elcb {
@@ -761,11 +805,14 @@ impl Sequence {
     }
 
     fn on_confirm_timeout(&mut self, out: &mut Vec<Output>) {
-        let unmet = std::mem::take(&mut self.pending);
+        let mut unmet = std::mem::take(&mut self.pending);
         if unmet.is_empty() {
             return;
         }
-        if self.step == Step::ElcbReset {
+        let reset_failed =
+            self.step == Step::ElcbReset && unmet.iter().any(|(b, _)| *b == Breaker::Elcb);
+        if reset_failed {
+            unmet.retain(|(b, _)| *b != Breaker::Elcb);
             self.raise(
                 "elcb.reset_failed",
                 priority::LOCKOUT,
@@ -775,8 +822,6 @@ impl Sequence {
                 ),
                 out,
             );
-            self.lock_out("ELCB reset failed", out);
-            return;
         }
         let mut names = Vec::new();
         for (b, v) in &unmet {
@@ -791,6 +836,10 @@ impl Sequence {
                 out,
             );
             names.push(b.to_string());
+        }
+        if reset_failed {
+            self.lock_out("ELCB reset failed", out);
+            return;
         }
         if self.mode == Mode::Auto && self.step != Step::Lockout {
             self.lock_out(
@@ -1048,16 +1097,10 @@ impl Sequence {
             return;
         };
         // The reset output must not stay set either: "while true" recloses.
-        out.push(Output::Command {
-            breaker: Breaker::Elcb,
-            value: false,
-        });
+        self.emit(Breaker::Elcb, false, out);
         for b in known.loads().collect::<Vec<_>>() {
             // Written even when already open, so no command output stays set.
-            out.push(Output::Command {
-                breaker: b,
-                value: false,
-            });
+            self.emit(b, false, out);
             self.pending.retain(|(p, _)| *p != b);
             if known.closed(b) {
                 self.metrics.switching_ops += 1;
@@ -1145,14 +1188,8 @@ impl Sequence {
     }
 
     fn pulse_reset(&mut self, out: &mut Vec<Output>) {
-        out.push(Output::Command {
-            breaker: Breaker::Elcb,
-            value: true,
-        });
-        out.push(Output::Command {
-            breaker: Breaker::Elcb,
-            value: false,
-        });
+        self.emit(Breaker::Elcb, true, out);
+        self.emit(Breaker::Elcb, false, out);
         self.metrics.switching_ops += 1;
         self.metrics.elcb_resets += 1;
         self.pending.retain(|(b, _)| *b != Breaker::Elcb);
@@ -1498,7 +1535,7 @@ impl Sequence {
             self.lock_out(&format!("{why} while communication was lost"), out);
             return;
         }
-        self.pending.retain(|(b, v)| state.closed(*b) != *v);
+        self.reconcile_pending(&state, out);
         let elcb = state.elcb;
         self.known = Some(state.clone());
         self.set_step(
@@ -1521,8 +1558,12 @@ impl Sequence {
             }
             Step::ElcbReset => {
                 if elcb {
-                    self.pending.clear();
-                    self.on_confirmed(now_s, out);
+                    // Confirmed; a re-armed check of another breaker, if
+                    // any, must confirm first.
+                    self.pending.retain(|(b, _)| *b != Breaker::Elcb);
+                    if !self.start_confirm_if_pending(out) {
+                        self.on_confirmed(now_s, out);
+                    }
                 } else {
                     self.pulse_reset(out);
                     self.start_confirm_if_pending(out);
@@ -1539,12 +1580,14 @@ impl Sequence {
                     (Breaker::Zone(self.oldc), Step::Oldc, Step::OldcDwell)
                 };
                 if state.closed(b) {
-                    self.pending.clear();
+                    self.pending.retain(|(p, _)| *p != b);
                     self.step = closing;
-                    let proven = self.closing_proven;
-                    // Dwell again in full, or (a proven load) go on with the pass.
-                    self.on_confirmed(now_s, out);
-                    debug_assert!(proven || self.step == dwell);
+                    if !self.start_confirm_if_pending(out) {
+                        let proven = self.closing_proven;
+                        // Dwell again in full, or (a proven load) go on with the pass.
+                        self.on_confirmed(now_s, out);
+                        debug_assert!(proven || self.step == dwell);
+                    }
                 } else {
                     self.step = closing;
                     self.switch(b, true, out);
@@ -1555,28 +1598,98 @@ impl Sequence {
         }
     }
 
-    /// A breaker status that differs from what the machine knows and is not
-    /// the target of a pending command, as a description.
+    /// A breaker status that differs from what the machine knows and that no
+    /// command of the machine explains (see "Asynchronous status inputs"), as
+    /// a description.
     fn unexplained_change(&self, state: &PanelState) -> Option<String> {
         let known = self.known.as_ref()?;
         for b in known.loads() {
             let now = state.closed(b);
-            if now != known.closed(b) && !self.pending.contains(&(b, now)) {
+            if now != known.closed(b) && !self.explained(b, now) {
                 let how = if now { "closed" } else { "opened" };
                 return Some(format!("{b} {how} without a command"));
             }
         }
-        if state.elcb && !known.elcb && !self.pending.contains(&(Breaker::Elcb, true)) {
+        if state.elcb && !known.elcb && !self.explained(Breaker::Elcb, true) {
             return Some("ELCB closed without a reset".into());
         }
         None
+    }
+
+    // ---- asynchronous status inputs ------------------------------------------
+
+    /// Takes the time of the input being handled. A non-finite time is
+    /// ignored (the previous one stays), so it cannot poison the windows.
+    fn set_now(&mut self, now_s: f64) {
+        if now_s.is_finite() {
+            self.now_s = now_s;
+        }
+    }
+
+    /// Sends a command and logs it for the confirm window. For the ELCB only
+    /// reset pulses count as commands (releasing the reset output does not
+    /// open it).
+    fn emit(&mut self, b: Breaker, value: bool, out: &mut Vec<Output>) {
+        out.push(Output::Command { breaker: b, value });
+        if b == Breaker::Elcb && !value {
+            return;
+        }
+        let log = self.commanded.entry(b).or_default();
+        log.last = value;
+        log.at[usize::from(value)] = Some(self.now_s);
+    }
+
+    /// Whether `b` was commanded to `value` within the confirm window.
+    fn commanded_recently(&self, b: Breaker, value: bool) -> bool {
+        self.commanded
+            .get(&b)
+            .and_then(|log| log.at[usize::from(value)])
+            .is_some_and(|t| self.now_s - t <= self.settings.confirm_timeout_s + 1e-9)
+    }
+
+    /// Whether a reading of `b` as `value` is explained by the machine's own
+    /// commands: one awaiting confirmation, or any (even superseded) within
+    /// the confirm window.
+    fn explained(&self, b: Breaker, value: bool) -> bool {
+        self.pending.contains(&(b, value)) || self.commanded_recently(b, value)
+    }
+
+    /// Drops confirmed commands, then re-arms the check of every breaker whose
+    /// last command lies within the confirm window and whose status differs
+    /// from it (a late reading of a superseded command). Starts the confirm
+    /// timer for what it re-arms, for the rest of that command's window.
+    fn reconcile_pending(&mut self, state: &PanelState, out: &mut Vec<Output>) {
+        self.pending.retain(|(b, v)| state.closed(*b) != *v);
+        let mut rearmed_at: Option<f64> = None;
+        for b in state.loads() {
+            let Some(log) = self.commanded.get(&b).copied() else {
+                continue;
+            };
+            let Some(at) = log.at[usize::from(log.last)] else {
+                continue;
+            };
+            if state.closed(b) != log.last
+                && self.commanded_recently(b, log.last)
+                && !self.pending.contains(&(b, log.last))
+            {
+                self.pending.retain(|(p, _)| *p != b);
+                self.pending.push((b, log.last));
+                rearmed_at = Some(rearmed_at.map_or(at, |a: f64| a.max(at)));
+            }
+        }
+        if let Some(at) = rearmed_at {
+            if self.timers[Timer::Confirm.index()].is_none() {
+                let left = (at + self.settings.confirm_timeout_s - self.now_s).max(0.001);
+                self.start(Timer::Confirm, left, out);
+            }
+        }
     }
 
     // ---- helpers ------------------------------------------------------------
 
     /// Commands `b` to `value`, expecting its status to follow.
     fn switch(&mut self, b: Breaker, value: bool, out: &mut Vec<Output>) {
-        out.push(Output::Command { breaker: b, value });
+        self.emit(b, value, out);
         self.pending.retain(|(p, _)| *p != b);
         if self.known.as_ref().is_some_and(|k| k.closed(b) != value) {
             self.metrics.switching_ops += 1;
@@ -1663,10 +1776,7 @@ impl Sequence {
     /// Commands awaiting confirmation outside a running sequence (manual mode,
     /// lockout): drop those the status now confirms.
     fn settle_pending(&mut self, state: &PanelState, out: &mut Vec<Output>) {
-        if self.pending.is_empty() {
-            return;
-        }
-        self.pending.retain(|(b, v)| state.closed(*b) != *v);
+        self.reconcile_pending(state, out);
         if self.pending.is_empty() {
             self.cancel(Timer::Confirm, out);
         }

@@ -12,28 +12,28 @@
 use super::machine::*;
 
 #[derive(Debug, Clone)]
-struct Panel {
-    n: u8,
-    fault: Vec<bool>,
-    elcb: bool,
-    mccb: bool,
-    zones: Vec<bool>,
+pub(super) struct Panel {
+    pub(super) n: u8,
+    pub(super) fault: Vec<bool>,
+    pub(super) elcb: bool,
+    pub(super) mccb: bool,
+    pub(super) zones: Vec<bool>,
     /// The ELCB does not reclose on reset (a failed ELCB).
-    elcb_stuck: bool,
+    pub(super) elcb_stuck: bool,
     /// These breakers ignore their commands.
-    stuck: Vec<Breaker>,
-    energised: Vec<bool>,
-    energise_count: Vec<u32>,
-    closes_while_elcb_open: u32,
-    trips: u32,
-    comm_ok: bool,
-    late_trip: bool,
+    pub(super) stuck: Vec<Breaker>,
+    pub(super) energised: Vec<bool>,
+    pub(super) energise_count: Vec<u32>,
+    pub(super) closes_while_elcb_open: u32,
+    pub(super) trips: u32,
+    pub(super) comm_ok: bool,
+    pub(super) late_trip: bool,
     /// A faulty load is energised; the ELCB trips at the next `fire_late_trip`.
-    trip_armed: bool,
+    pub(super) trip_armed: bool,
 }
 
 impl Panel {
-    fn new(n: u8) -> Panel {
+    pub(super) fn new(n: u8) -> Panel {
         let loads = usize::from(n) + 1;
         Panel {
             n,
@@ -53,11 +53,11 @@ impl Panel {
         }
     }
 
-    fn load_closed(&self, l: usize) -> bool {
+    pub(super) fn load_closed(&self, l: usize) -> bool {
         self.mccb && (l == 0 || self.zones[l - 1])
     }
 
-    fn update(&mut self) {
+    pub(super) fn update(&mut self) {
         for l in 0..=usize::from(self.n) {
             let en = self.elcb && self.load_closed(l);
             if en && !self.energised[l] && self.fault[l] {
@@ -93,7 +93,7 @@ impl Panel {
         true
     }
 
-    fn apply(&mut self, b: Breaker, v: bool) {
+    pub(super) fn apply(&mut self, b: Breaker, v: bool) {
         if self.stuck.contains(&b) {
             return;
         }
@@ -130,13 +130,13 @@ impl Panel {
     }
 
     /// Exactly the healthy loads closed, ELCB closed.
-    fn healthy_on(&self) -> bool {
+    pub(super) fn healthy_on(&self) -> bool {
         self.elcb
             && self.mccb
             && (1..=usize::from(self.n)).all(|z| self.zones[z - 1] != self.fault[z])
     }
 
-    fn all_off(&self) -> bool {
+    pub(super) fn all_off(&self) -> bool {
         !self.mccb && self.zones.iter().all(|z| !z)
     }
 }

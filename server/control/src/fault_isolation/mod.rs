@@ -18,6 +18,8 @@ mod machine;
 #[cfg(test)]
 mod driver_tests;
 #[cfg(test)]
+mod machine_async_tests;
+#[cfg(test)]
 mod machine_tests;
 
 pub use driver::{
