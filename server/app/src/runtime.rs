@@ -263,6 +263,17 @@ impl Stack {
             Default::default(),
         )
         .map_err(|e| anyhow!("starting the alarm engine: {e}"))?;
+        // System alarms belong to the parts that raise them (panel sequences,
+        // dispatch, historian), which all start afresh: clear the restored
+        // ones and let their owners raise again whatever still holds.
+        for r in restore
+            .iter()
+            .filter(|r| r.kind == gridscada_alarms::AlarmKind::System && r.active)
+        {
+            if let Err(e) = alarms.clear(&r.key) {
+                tracing::warn!(key = %r.key, error = %e, "clearing a restored system alarm");
+            }
+        }
         tasks.spawn(alarms.clone().run());
 
         // The historian.

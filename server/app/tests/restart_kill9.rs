@@ -272,11 +272,10 @@ fn committed_alarm_states_events_and_history_survive_kill_9_under_load() {
 }
 
 /// The strict reading of "committed": once the API has answered a shelve
-/// (or an acknowledgement), the change is durable. Today the alarm engine
-/// persists states asynchronously (outbox -> channel -> batched upsert), so a
-/// kill right after the answer loses about half of them (measured 4 of 8).
+/// (or an acknowledgement), the change is durable. The handlers write the
+/// new alarm state before answering; before that, a kill right after the
+/// answer lost about half of them (measured 4 of 8).
 #[test]
-#[ignore = "product gap: alarm operations are answered before their state is persisted"]
 fn a_shelve_the_api_confirmed_survives_an_immediate_kill_9() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");

@@ -135,6 +135,8 @@ fn ts(v: Option<i64>) -> Option<Timestamp> {
 
 impl Store {
     /// Inserts or replaces the persisted state of alarms, in one transaction.
+    /// A record older (by `last_change`) than the stored one is ignored, so two
+    /// writers of the same state never roll it back.
     pub async fn upsert_alarm_states(&self, states: &[AlarmStateRecord]) -> Result<()> {
         for s in states {
             check_text("alarm key", &s.key, 512)?;
@@ -170,7 +172,8 @@ impl Store {
                        out_of_service = excluded.out_of_service, \
                        out_of_service_by = excluded.out_of_service_by, \
                        out_of_service_since = excluded.out_of_service_since, \
-                       out_of_service_reason = excluded.out_of_service_reason",
+                       out_of_service_reason = excluded.out_of_service_reason \
+                     WHERE excluded.last_change >= alarm_states.last_change",
                 )
                 .bind(&s.key)
                 .bind(s.kind.as_str())

@@ -134,8 +134,11 @@ impl Recorder {
         if !t.policy.enabled || matches!(sample.value, Value::Str(_)) {
             return None;
         }
+        // A Bad value is not a measurement: it is logged as a gap, so that
+        // trend minima and averages never include it.
+        let bad = sample.quality.code == gridscada_tagdb::QualityCode::Bad;
         let now = Seen {
-            value: sample.value.as_f64().filter(|v| v.is_finite()),
+            value: sample.value.as_f64().filter(|v| v.is_finite() && !bad),
             quality: sample.quality.code,
             ts: sample.timestamp,
         };
@@ -235,6 +238,20 @@ mod tests {
         assert!(r.offer(id, &at(0, 1.0)).is_some());
         assert!(r.offer(id, &at(1, 1.0)).is_none());
         assert!(r.offer(id, &at(2, 1.0000001)).is_some());
+    }
+
+    #[test]
+    fn a_bad_sample_is_logged_as_a_gap() {
+        let mut r = rec(0.0, None);
+        let id = TagId(0);
+        assert!(r.offer(id, &at(0, 230.0)).is_some());
+        let bad = Sample {
+            value: 230.0.into(),
+            quality: Quality::bad("device offline"),
+            timestamp: Timestamp::from_millis(1000),
+        };
+        let logged = r.offer(id, &bad).unwrap();
+        assert_eq!(logged.value, None, "a Bad value must never reach trend minima or averages");
     }
 
     #[test]

@@ -398,9 +398,16 @@ impl Driver {
         let result = parsed.and_then(|c| self.seq.command(c, self.now_s()));
         match result {
             Ok(out) => {
+                // The audit record of the operator's action (the web layer
+                // does not log panel commands again).
+                let kind = match &kind {
+                    PanelCommandKind::SetMode(_) => "mode",
+                    PanelCommandKind::Reset => "reset",
+                    PanelCommandKind::Breaker { .. } => "command",
+                };
                 self.notice(PanelNotice::Event {
                     panel: self.panel_id.clone(),
-                    kind: "command".into(),
+                    kind: kind.into(),
                     message: format!("operator command: {desc}"),
                     user: Some(user.clone()),
                 })

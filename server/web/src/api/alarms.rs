@@ -25,6 +25,23 @@ fn engine(s: &WebState) -> ApiResult<&Arc<AlarmEngine>> {
         .ok_or_else(|| ApiError::unavailable("the alarm engine is not running"))
 }
 
+/// Writes the new state of `ids` to the store before the API answers, so
+/// an acknowledgement or shelving the operator was told about survives even
+/// an immediate crash. (The engine's own state sink writes the same records
+/// later; the store keeps whichever is newest.)
+async fn persist(s: &WebState, e: &AlarmEngine, ids: &[AlarmId]) -> ApiResult<()> {
+    let keys: Vec<String> = ids.iter().filter_map(|id| e.view(*id)).map(|v| v.key).collect();
+    let records: Vec<_> = e
+        .persisted_states()
+        .into_iter()
+        .filter(|r| keys.contains(&r.key))
+        .collect();
+    if !records.is_empty() {
+        s.store.upsert_alarm_states(&records).await?;
+    }
+    Ok(())
+}
+
 fn alarm_error(e: AlarmError) -> ApiError {
     let text = e.to_string();
     if text.contains("no alarm") || text.contains("unknown") {
@@ -109,6 +126,7 @@ pub async fn ack(
             ))
         }
     };
+    persist(&s, e, &acked).await?;
     Ok(Json(json!({ "acknowledged": acked, "count": acked.len() })))
 }
 
@@ -126,9 +144,11 @@ pub async fn shelve(
     body: Result<Json<ShelveBody>, axum::extract::rejection::JsonRejection>,
 ) -> ApiResult<Json<Value>> {
     let Json(b) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
-    let until = engine(&s)?
+    let e = engine(&s)?;
+    let until = e
         .shelve(AlarmId(id), &who.audit_name(), b.minutes, &b.reason)
         .map_err(alarm_error)?;
+    persist(&s, e, &[AlarmId(id)]).await?;
     Ok(Json(json!({ "id": id, "shelved_until": until })))
 }
 
@@ -137,9 +157,9 @@ pub async fn unshelve(
     Extension(who): Extension<Principal>,
     Path(id): Path<u32>,
 ) -> ApiResult<StatusCode> {
-    engine(&s)?
-        .unshelve(AlarmId(id), &who.audit_name())
-        .map_err(alarm_error)?;
+    let e = engine(&s)?;
+    e.unshelve(AlarmId(id), &who.audit_name()).map_err(alarm_error)?;
+    persist(&s, e, &[AlarmId(id)]).await?;
     Ok(StatusCode::NO_CONTENT)
 }
 
@@ -191,16 +211,27 @@ pub struct MetricsQuery {
     pub to: Option<String>,
 }
 
+/// The widest range the alarm metrics cover in one request.
+const MAX_METRICS_RANGE_MS: i64 = 366 * 24 * 3_600_000;
+
 pub async fn metrics(
     State(s): State<WebState>,
     Query(q): Query<MetricsQuery>,
 ) -> ApiResult<Json<Value>> {
     let e = engine(&s)?;
     let to = opt_time("to", &q.to)?.unwrap_or_else(|| s.clock.now());
-    let from = opt_time("from", &q.from)?
-        .unwrap_or(Timestamp::from_millis(to.as_millis() - 24 * 3_600_000));
+    let from = opt_time("from", &q.from)?.unwrap_or(Timestamp::from_millis(
+        to.as_millis().saturating_sub(24 * 3_600_000),
+    ));
     if from > to {
         return Err(ApiError::bad_request("from must not be after to"));
+    }
+    // The metrics hold one count per 10-minute interval of the range: an
+    // unbounded range would allocate without limit.
+    if to.as_millis().saturating_sub(from.as_millis()) > MAX_METRICS_RANGE_MS {
+        return Err(ApiError::bad_request(
+            "the metrics range may span at most 366 days",
+        ));
     }
     let rows = s.store.alarm_activations(from, to).await?;
     let activations: Vec<gridscada_alarms::Activation> = rows

@@ -10,7 +10,6 @@ use serde::Deserialize;
 use serde_json::{json, Value};
 use tokio::sync::{mpsc, oneshot, watch};
 
-use crate::api::audit;
 use crate::auth::Principal;
 use crate::error::{ApiError, ApiResult};
 use crate::WebState;
@@ -109,19 +108,9 @@ pub async fn mode(
     body: JsonBody<ModeBody>,
 ) -> ApiResult<Json<PanelStatus>> {
     let Json(b) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
+    // The panel's sequence records each command with its user (one audit
+    // record per action, refusals included).
     send(&s, &who, &id, PanelCommandKind::SetMode(b.mode)).await?;
-    let label = match b.mode {
-        Mode::Auto => "auto",
-        Mode::Manual => "manual",
-    };
-    audit(
-        &s,
-        &who,
-        "mode",
-        &id,
-        format!("{} set panel {id} to {label} mode", who.audit_name()),
-    )
-    .await;
     current(&s, &id).await
 }
 
@@ -131,14 +120,6 @@ pub async fn reset(
     Path(id): Path<String>,
 ) -> ApiResult<Json<PanelStatus>> {
     send(&s, &who, &id, PanelCommandKind::Reset).await?;
-    audit(
-        &s,
-        &who,
-        "reset",
-        &id,
-        format!("{} pressed Reset on panel {id}", who.audit_name()),
-    )
-    .await;
     current(&s, &id).await
 }
 
@@ -156,41 +137,11 @@ pub async fn breaker(
 ) -> ApiResult<Json<PanelStatus>> {
     let Json(b) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
     let kind = PanelCommandKind::Breaker {
-        breaker: breaker.clone(),
+        breaker,
         close: b.closed,
     };
-    let what = if b.closed { "close" } else { "open" };
-    match send(&s, &who, &id, kind).await {
-        Ok(()) => {
-            audit(
-                &s,
-                &who,
-                "command",
-                &id,
-                format!(
-                    "{} commanded {breaker} of panel {id} to {what}",
-                    who.audit_name()
-                ),
-            )
-            .await;
-            current(&s, &id).await
-        }
-        Err(e) => {
-            audit(
-                &s,
-                &who,
-                "command_refused",
-                &id,
-                format!(
-                    "{}'s command to {what} {breaker} of panel {id} was refused: {}",
-                    who.audit_name(),
-                    e.detail
-                ),
-            )
-            .await;
-            Err(e)
-        }
-    }
+    send(&s, &who, &id, kind).await?;
+    current(&s, &id).await
 }
 
 /// The status after a command, once the sequence has published it.
