@@ -302,13 +302,10 @@ async fn surplus_is_served_without_shedding_or_the_diesel() {
     surplus(false).await;
 }
 
-/// Issue 8: "Surplus charges the battery." The live loop solves the
-/// single-period LP, which gives stored energy no value, so charging only
-/// costs cycle wear and the LP curtails PV instead (see
-/// `control/src/dispatch/single.rs`, test
-/// `surplus_is_curtailed_and_diesel_minimum_charges_storage`).
+/// Issue 8: "Surplus charges the battery." The live loop values a kWh left
+/// in store at the diesel energy it displaces later (`stored_value_per_kwh`),
+/// so the single-period LP stores a renewable surplus instead of curtailing it.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-#[ignore = "product gap: the single-period dispatch LP never charges storage from a renewable surplus"]
 async fn surplus_charges_the_battery() {
     surplus(true).await;
 }

@@ -22,6 +22,7 @@ fn storage(id: &str) -> StorageUnit {
         eff_charge: 0.95,
         eff_discharge: 0.95,
         cycle_cost_per_kwh: 0.02,
+        stored_value_per_kwh: 0.0,
     }
 }
 

@@ -108,9 +108,44 @@ pub async fn run_dispatch(
     status: watch::Sender<DispatchStatus>,
     notices: mpsc::Sender<DispatchNotice>,
 ) {
+    run_dispatch_with(
+        cfg,
+        db,
+        writer,
+        clock,
+        status,
+        notices,
+        DispatchPolicy::Optimal,
+    )
+    .await
+}
+
+/// How the outer loop chooses setpoints.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DispatchPolicy {
+    /// The LP, with the rule as fallback (the live plant).
+    #[default]
+    Optimal,
+    /// The rule-based dispatch only, never the LP: the baseline that scenario
+    /// replay compares the optimal dispatch's cost against. Running on the
+    /// rule by choice raises no fallback alarm.
+    Rule,
+}
+
+/// [`run_dispatch`] with an explicit [`DispatchPolicy`].
+pub async fn run_dispatch_with(
+    cfg: MicrogridConfig,
+    db: Arc<TagDb>,
+    writer: Arc<dyn TagWriter>,
+    clock: Arc<dyn Clock>,
+    status: watch::Sender<DispatchStatus>,
+    notices: mpsc::Sender<DispatchNotice>,
+    policy: DispatchPolicy,
+) {
     let period = Duration::from_secs_f64(period_s(&cfg));
     wait_for_first_reading(&cfg, &db, &*clock).await;
-    let mut d = Dispatcher::new(cfg, clock.now());
+    let mut d = Dispatcher::new(cfg, clock.now()).with_policy(policy);
     // Notices the channel had no room for; sent first next period, never dropped.
     let mut backlog: VecDeque<DispatchNotice> = VecDeque::new();
     loop {
@@ -136,6 +171,31 @@ pub async fn run_dispatch(
         }
         clock.sleep(period).await;
     }
+}
+
+/// What a kWh left in `unit` is worth to the single-period LP: the cheapest
+/// diesel energy it will displace later, discounted by the round trip and a
+/// margin. That makes storing a renewable surplus (or a running diesel's
+/// minimum-load excess) worth more than curtailing it, while charging from a
+/// diesel that could be turned down never pays (value·eff_c < diesel cost),
+/// and discharging stays cheaper than starting the diesel. Without a diesel,
+/// stored energy displaces shedding later: a small share of the value of
+/// lost load.
+fn stored_energy_value(mg: &MicrogridConfig, unit: &UnitConfig) -> f64 {
+    const MARGIN: f64 = 0.9;
+    let round_trip = *unit.eff_charge.get_ref() * *unit.eff_discharge.get_ref();
+    let displaced = mg
+        .units
+        .iter()
+        .filter(|u| u.kind == UnitKind::Diesel)
+        .map(|u| u.cost_per_kwh)
+        .fold(f64::INFINITY, f64::min);
+    let displaced = if displaced.is_finite() {
+        displaced
+    } else {
+        0.05 * mg.voll_per_kwh
+    };
+    (MARGIN * displaced * round_trip).max(0.0)
 }
 
 /// Lets the field I/O read the plant once before the first decision: acting
@@ -192,6 +252,7 @@ pub struct Dispatcher {
     first: bool,
     /// Run commands the field confirmed.
     run_written: HashMap<String, bool>,
+    policy: DispatchPolicy,
 }
 
 /// One measurement: the value, or why it cannot be used.
@@ -233,7 +294,14 @@ impl Dispatcher {
             alarm_active: false,
             first: true,
             run_written: HashMap::new(),
+            policy: DispatchPolicy::Optimal,
         }
+    }
+
+    /// Chooses how setpoints are made (the LP by default).
+    pub fn with_policy(mut self, policy: DispatchPolicy) -> Self {
+        self.policy = policy;
+        self
     }
 
     fn read(&self, db: &TagDb, name: &str, now: Timestamp) -> Meas {
@@ -346,6 +414,7 @@ impl Dispatcher {
                         eff_charge: *cfg.eff_charge.get_ref(),
                         eff_discharge: *cfg.eff_discharge.get_ref(),
                         cycle_cost_per_kwh: cfg.cycle_cost_per_kwh,
+                        stored_value_per_kwh: stored_energy_value(&self.cfg, &cfg),
                     };
                     if !good {
                         soc_known = false;
@@ -442,7 +511,9 @@ impl Dispatcher {
             ..DispatchStatus::default()
         };
         let mut reason: Option<String> = None;
-        if problems.is_empty() {
+        if self.policy == DispatchPolicy::Rule {
+            st.status = "rule".into();
+        } else if problems.is_empty() {
             match problem.solve() {
                 Ok(sol) => {
                     st.mode = DispatchMode::Optimal;
@@ -507,8 +578,12 @@ impl Dispatcher {
         st.reason = reason.clone();
         st.inputs = Some(problem);
 
-        // Alarm and events on transitions.
-        match (st.mode, self.alarm_active) {
+        // Alarm and events on transitions (none when the rule is the policy).
+        let mode = match self.policy {
+            DispatchPolicy::Rule => DispatchMode::Optimal,
+            DispatchPolicy::Optimal => st.mode,
+        };
+        match (mode, self.alarm_active) {
             (DispatchMode::Fallback, false) => {
                 let r = reason.unwrap_or_default();
                 tracing::warn!("dispatch fallback: {r}");
@@ -819,6 +894,24 @@ cost_per_kwh = 0.35
         let (st, _) = d.step(&db, &w, t1).await;
         assert!(st.setpoints_kw.get("dg1").unwrap() > 100.0);
         assert!(st.shed_kw < 1e-6);
+    }
+
+    #[tokio::test]
+    async fn rule_policy_never_solves_and_raises_no_alarm() {
+        let (cfg, db, w) = fixture();
+        let now = Timestamp::from_millis(1_000_000);
+        plant(&db, now, 150.0, 60.0, 100.0, true);
+        let mut d = Dispatcher::new(cfg, now).with_policy(DispatchPolicy::Rule);
+        let (st, notices) = d.step(&db, &w, now).await;
+        assert_eq!(st.status, "rule");
+        assert_eq!(st.mode, DispatchMode::Fallback);
+        assert!(st.objective.is_none());
+        assert!(st.reason.is_none(), "{:?}", st.reason);
+        assert!(notices
+            .iter()
+            .all(|n| !matches!(n, DispatchNotice::Alarm { .. })));
+        let total: f64 = st.setpoints_kw.0.iter().map(|(_, v)| v).sum::<f64>() + st.shed_kw;
+        assert!((total - 150.0).abs() < 1e-6);
     }
 
     /// A plant clock for the loop: sleeping advances plant time at once.

@@ -246,6 +246,7 @@ impl HorizonStorage {
             eff_charge: o.num("eff_charge")?,
             eff_discharge: o.num("eff_discharge")?,
             cycle_cost_per_kwh: o.num("cycle_cost_per_kwh")?,
+            stored_value_per_kwh: 0.0,
         };
         let u = HorizonStorage {
             unit,
@@ -929,6 +930,7 @@ mod tests {
                     eff_charge: 0.95,
                     eff_discharge: 0.95,
                     cycle_cost_per_kwh: 0.02,
+                    stored_value_per_kwh: 0.0,
                 },
                 ramp_kw_per_s: 0.0,
                 initial_kw: Some(0.0),

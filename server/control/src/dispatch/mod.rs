@@ -24,7 +24,9 @@ pub mod tags;
 use serde::ser::{Serialize, SerializeMap, Serializer};
 use serde_json::Value;
 
-pub use driver::{run_dispatch, DispatchMode, DispatchNotice, DispatchStatus};
+pub use driver::{
+    run_dispatch, run_dispatch_with, DispatchMode, DispatchNotice, DispatchPolicy, DispatchStatus,
+};
 pub use horizon::{
     HorizonOil, HorizonProblem, HorizonRenewable, HorizonSolution, HorizonStorage, PeriodForecast,
     PeriodResult, ReserveRule,

@@ -71,6 +71,17 @@ pub struct StorageUnit {
     pub eff_discharge: f64,
     /// Wear cost per kWh charged or discharged.
     pub cycle_cost_per_kwh: f64,
+    /// Optional (JSON `stored_value_per_kwh`, default 0): what a kWh left in
+    /// store is worth at the end of the period, e.g. the diesel energy it
+    /// will displace later. It adds `−value·ΔSoC` to the objective, so a
+    /// single-period dispatch stores a renewable surplus instead of
+    /// curtailing it. Zero gives exactly the contract's objective.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub stored_value_per_kwh: f64,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 /// One dispatch period.
@@ -205,6 +216,7 @@ impl StorageUnit {
             eff_charge: o.num("eff_charge")?,
             eff_discharge: o.num("eff_discharge")?,
             cycle_cost_per_kwh: o.num("cycle_cost_per_kwh")?,
+            stored_value_per_kwh: o.opt_num("stored_value_per_kwh")?.unwrap_or(0.0),
         };
         o.finish()?;
         Ok(u)
@@ -221,6 +233,10 @@ impl StorageUnit {
         nonneg(
             format!("{path}.cycle_cost_per_kwh"),
             self.cycle_cost_per_kwh,
+        )?;
+        nonneg(
+            format!("{path}.stored_value_per_kwh"),
+            self.stored_value_per_kwh,
         )?;
         if self.soc_max_kwh < self.soc_min_kwh {
             return Err(bad(
@@ -452,13 +468,20 @@ impl DispatchProblem {
         }
         let mut storage = Vec::new();
         for s in &self.storage {
+            // ΔSoC = dt·(eff_c·ch − dis/eff_d), valued at stored_value.
             let c = dt * s.cycle_cost_per_kwh;
-            let ch = m.var(format!("{} charge", s.id), 0.0, s.charge_limit_kw(dt), c);
+            let v = dt * s.stored_value_per_kwh;
+            let ch = m.var(
+                format!("{} charge", s.id),
+                0.0,
+                s.charge_limit_kw(dt),
+                c - v * s.eff_charge,
+            );
             let dis = m.var(
                 format!("{} discharge", s.id),
                 0.0,
                 s.discharge_limit_kw(dt),
-                c,
+                c + v / s.eff_discharge,
             );
             storage.push((ch, dis));
             bal.push((ch, -1.0));
@@ -558,6 +581,7 @@ mod tests {
                 eff_charge: 0.95,
                 eff_discharge: 0.95,
                 cycle_cost_per_kwh: 0.02,
+                stored_value_per_kwh: 0.0,
             }],
         }
     }
@@ -695,5 +719,36 @@ mod tests {
         let mut p = example();
         p.demand_kw = f64::NAN;
         assert_eq!(p.validate("").unwrap_err().path, "demand_kw");
+    }
+
+    #[test]
+    fn a_value_for_stored_energy_stores_a_surplus_instead_of_curtailing() {
+        let mut p = DispatchProblem::from_value(
+            &serde_json::json!({
+                "dt_h": 0.25, "demand_kw": 20.0, "voll_per_kwh": 5.0,
+                "pv": [{"id": "pv1", "available_kw": 60.0, "cost_per_kwh": 0.0}],
+                "storage": [{"id": "bess1", "soc_kwh": 80.0, "soc_min_kwh": 20.0, "soc_max_kwh": 200.0,
+                             "max_charge_kw": 30.0, "max_discharge_kw": 60.0,
+                             "eff_charge": 0.95, "eff_discharge": 0.95, "cycle_cost_per_kwh": 0.02}]
+            }),
+            "",
+        )
+        .unwrap();
+        // Without a value, charging only costs wear: the PV is curtailed.
+        let s = p.solve().unwrap();
+        assert!(s.setpoints_kw.get("bess1").unwrap().abs() < 1e-6);
+        // Valued at 0.3/kWh, the surplus goes into the battery, up to its limit.
+        p.storage[0].stored_value_per_kwh = 0.3;
+        let s = p.solve().unwrap();
+        assert!((s.setpoints_kw.get("bess1").unwrap() + 30.0).abs() < 1e-6);
+        assert!((s.setpoints_kw.get("pv1").unwrap() - 50.0).abs() < 1e-6);
+        // The objective carries the value of the energy stored.
+        let stored = 0.95 * 30.0 * 0.25;
+        let expect = 0.25 * 0.02 * 30.0 - 0.3 * stored;
+        assert!(
+            (s.objective - expect).abs() < 1e-6,
+            "{} vs {expect}",
+            s.objective
+        );
     }
 }
