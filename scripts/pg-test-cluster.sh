@@ -70,6 +70,13 @@ if [ -z "$BINDIR" ]; then
     [ -n "$BINDIR" ] || { log "PostgreSQL installed but initdb not found"; exit 1; }
 fi
 
+# Installing the package may have created and started Debian's own cluster on
+# 5432 (where an init system runs): our throwaway cluster then takes another port.
+if listening; then
+    PORT=55432
+    log "5432 was taken during the install; the throwaway cluster uses port $PORT"
+fi
+
 # initdb and postgres refuse to run as root: run them as the `postgres` system
 # user (created by the Debian package), or a dedicated user if it is missing.
 RUNAS=postgres
