@@ -65,7 +65,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use super::input::{index, join, kind, InputError, Obj};
-use super::lp::{Model, Sense, SolveFailure, FEAS_TOL};
+use super::lp::{Model, Sense, FEAS_TOL};
 use super::single::{bad, dt_h_valid, nonneg, parse_list, rebalance, unique_ids, StorageUnit};
 use super::{DispatchError, Setpoints};
 
@@ -510,10 +510,7 @@ impl HorizonProblem {
             return Err(DispatchError::Infeasible(reason));
         }
         let (model, v) = self.build();
-        let mut x = model.solve().map_err(|e| match e {
-            SolveFailure::Infeasible(r) => DispatchError::Infeasible(r),
-            SolveFailure::Solver(r) => DispatchError::Solver(r),
-        })?;
+        let mut x = model.solve()?;
         // Repair: state of charge exactly from the (clipped) flows, then the
         // power balance of each period by moving non-storage variables.
         for (k, s) in self.storage.iter().enumerate() {

@@ -72,6 +72,15 @@ pub enum DispatchError {
     Solver(String),
 }
 
+impl From<lp::SolveFailure> for DispatchError {
+    fn from(e: lp::SolveFailure) -> Self {
+        match e {
+            lp::SolveFailure::Infeasible(r) => DispatchError::Infeasible(r),
+            lp::SolveFailure::Solver(r) => DispatchError::Solver(r),
+        }
+    }
+}
+
 impl DispatchError {
     pub fn exit_code(&self) -> i32 {
         match self {

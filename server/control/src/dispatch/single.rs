@@ -35,7 +35,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use super::input::{index, InputError, Obj};
-use super::lp::{Model, Sense, SolveFailure, FEAS_TOL};
+use super::lp::{Model, Sense, FEAS_TOL};
 use super::{DispatchError, Setpoints};
 
 /// A PV array or wind turbine.
@@ -410,10 +410,7 @@ impl DispatchProblem {
             return Err(DispatchError::Infeasible(reason));
         }
         let (model, vars) = self.build();
-        let mut x = model.solve().map_err(|e| match e {
-            SolveFailure::Infeasible(r) => DispatchError::Infeasible(r),
-            SolveFailure::Solver(r) => DispatchError::Solver(r),
-        })?;
+        let mut x = model.solve()?;
         model.snap(&mut x);
         // Charging and discharging at once only burns cycle cost here: keep the net.
         for &(ch, dis) in &vars.storage {
