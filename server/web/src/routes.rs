@@ -311,6 +311,7 @@ pub fn build(state: WebState) -> Router {
     let http_metrics = state.http_metrics.clone();
     router
         .fallback(crate::hmi::serve)
+        .layer(middleware::from_fn(json_errors))
         .layer(middleware::from_fn_with_state(
             http_metrics,
             crate::metrics::count,
@@ -367,6 +368,54 @@ fn same_origin(headers: &HeaderMap) -> bool {
         .strip_prefix("http://")
         .or_else(|| origin.strip_prefix("https://"))
         .is_some_and(|o| o.eq_ignore_ascii_case(host))
+}
+
+/// Axum's own rejections (a path segment or query string that does not
+/// parse, a method the route lacks) answer in plain text; the API answers
+/// every error as JSON `{error, detail}`, so they are rewrapped here. Their
+/// text names only the offending input, never internals.
+async fn json_errors(req: Request, next: Next) -> Response {
+    let resp = next.run(req).await;
+    let status = resp.status();
+    let is_json = resp
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|c| c.starts_with("application/json"));
+    if !(status.is_client_error() || status.is_server_error()) || is_json {
+        return resp;
+    }
+    let (parts, body) = resp.into_parts();
+    let reason = || {
+        status
+            .canonical_reason()
+            .unwrap_or("request failed")
+            .to_lowercase()
+    };
+    let detail = match axum::body::to_bytes(body, 4096).await {
+        Ok(b) if !b.is_empty() && !status.is_server_error() => {
+            String::from_utf8_lossy(&b).trim().to_string()
+        }
+        _ => reason(),
+    };
+    let code = match status {
+        StatusCode::BAD_REQUEST | StatusCode::UNPROCESSABLE_ENTITY => "bad_request",
+        StatusCode::NOT_FOUND => "not_found",
+        StatusCode::METHOD_NOT_ALLOWED => "method_not_allowed",
+        StatusCode::PAYLOAD_TOO_LARGE => "payload_too_large",
+        StatusCode::UNSUPPORTED_MEDIA_TYPE => "unsupported_media_type",
+        StatusCode::UPGRADE_REQUIRED => "upgrade_required",
+        s if s.is_server_error() => "internal",
+        _ => "request_failed",
+    };
+    let mut out = ApiError::new(status, code, detail).into_response();
+    // Keep headers such as `Allow` on a 405; the body's own headers are new.
+    for (name, value) in parts.headers.iter() {
+        if name != header::CONTENT_TYPE && name != header::CONTENT_LENGTH {
+            out.headers_mut().insert(name.clone(), value.clone());
+        }
+    }
+    out
 }
 
 /// Security headers on every response.

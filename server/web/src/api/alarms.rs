@@ -30,7 +30,11 @@ fn engine(s: &WebState) -> ApiResult<&Arc<AlarmEngine>> {
 /// an immediate crash. (The engine's own state sink writes the same records
 /// later; the store keeps whichever is newest.)
 async fn persist(s: &WebState, e: &AlarmEngine, ids: &[AlarmId]) -> ApiResult<()> {
-    let keys: Vec<String> = ids.iter().filter_map(|id| e.view(*id)).map(|v| v.key).collect();
+    let keys: Vec<String> = ids
+        .iter()
+        .filter_map(|id| e.view(*id))
+        .map(|v| v.key)
+        .collect();
     let records: Vec<_> = e
         .persisted_states()
         .into_iter()
@@ -158,7 +162,8 @@ pub async fn unshelve(
     Path(id): Path<u32>,
 ) -> ApiResult<StatusCode> {
     let e = engine(&s)?;
-    e.unshelve(AlarmId(id), &who.audit_name()).map_err(alarm_error)?;
+    e.unshelve(AlarmId(id), &who.audit_name())
+        .map_err(alarm_error)?;
     persist(&s, e, &[AlarmId(id)]).await?;
     Ok(StatusCode::NO_CONTENT)
 }

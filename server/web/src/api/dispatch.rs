@@ -39,7 +39,7 @@ pub async fn history(
     };
     let from = match q.from.as_deref().filter(|v| !v.is_empty()) {
         Some(v) => parse_time("from", v)?,
-        None => Timestamp::from_millis(to.as_millis() - 3_600_000),
+        None => Timestamp::from_millis(to.as_millis().saturating_sub(3_600_000)),
     };
     if from > to {
         return Err(ApiError::bad_request("from must not be after to"));

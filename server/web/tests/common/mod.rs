@@ -1,0 +1,381 @@
+//! A small web stack for the integration tests: a three-tag plant, a temp
+//! SQLite store, one user per role, a fake field writer and (optionally) a fake
+//! simulator, driven in-process through `tower::ServiceExt::oneshot`.
+//!
+//! Owns nothing outside the tests; it builds `WebState` exactly as the app does
+//! (`server/app/src/runtime.rs::web_state`) but with fakes behind it.
+
+#![allow(dead_code)] // each test binary uses a different part
+
+use std::net::SocketAddr;
+use std::path::Path;
+use std::sync::Arc;
+use std::time::Instant;
+
+use axum::body::Body;
+use axum::extract::ConnectInfo;
+use axum::http::{header, HeaderMap, Method, Request, StatusCode};
+use axum::Router;
+use gridscada_alarms::{AlarmChannels, AlarmEngine, EngineOptions};
+use gridscada_config::Role;
+use gridscada_store::{NewUser, OpenOptions, Store};
+use gridscada_tagdb::{
+    Quality, Sample, SystemClock, TagDb, TagWriter, Timestamp, Value, WriteError, WriteFuture,
+};
+use gridscada_web::api::sim::{FaultKind, SimControl};
+use gridscada_web::auth::{self, SessionPolicy, Sessions, Throttle};
+use gridscada_web::{Auth, Components, WebState};
+use http_body_util::BodyExt;
+use parking_lot::Mutex;
+use serde_json::Value as Json;
+use tower::ServiceExt;
+
+/// The password of every test user (meets the strength rule).
+pub const PASSWORD: &str = "correct horse battery";
+/// The Host every request carries, and so the only same origin.
+pub const HOST: &str = "scada.test";
+
+/// Test tags: one read-only measurement, one setpoint an operator may write,
+/// one a supervisor must write.
+pub const TAG_RO: &str = "T.Feeder1.P_kW";
+pub const TAG_OP: &str = "T.Zone1.Reset";
+pub const TAG_SUP: &str = "T.BESS.Setpoint_kW";
+
+const MAIN: &str = "tag_files = [\"tags.toml\"]\n";
+const TAGS: &str = r#"
+[[device]]
+name = "D1"
+protocol = "tcp"
+address = "127.0.0.1:1502"
+
+[[tag]]
+name = "T.Feeder1.P_kW"
+description = "Feeder 1 active power"
+device = "D1"
+kind = "input_register"
+address = 0
+type = "f32"
+units = "kW"
+
+[[tag]]
+name = "T.Zone1.Reset"
+description = "Zone 1 reset coil"
+device = "D1"
+kind = "coil"
+address = 0
+writable = true
+write_role = "operator"
+
+[[tag]]
+name = "T.BESS.Setpoint_kW"
+description = "Battery power setpoint"
+device = "D1"
+kind = "holding_register"
+address = 0
+type = "f32"
+units = "kW"
+writable = true
+write_role = "supervisor"
+"#;
+
+/// A writer that takes every write and reports it back as confirmed.
+#[derive(Default)]
+pub struct FakeWriter {
+    pub writes: Mutex<Vec<(String, Value)>>,
+}
+
+impl TagWriter for FakeWriter {
+    fn write<'a>(&'a self, name: &'a str, value: Value) -> WriteFuture<'a> {
+        Box::pin(async move {
+            if name.is_empty() {
+                return Err(WriteError::UnknownTag(name.into()));
+            }
+            self.writes.lock().push((name.to_string(), value.clone()));
+            Ok(Sample::good(value, Timestamp::now_utc()))
+        })
+    }
+}
+
+/// A simulator with one panel "ss1" (zones 1..=4) and one device "D1".
+#[derive(Default)]
+pub struct FakeSim {
+    pub calls: Mutex<Vec<String>>,
+}
+
+impl SimControl for FakeSim {
+    fn inject_fault(&self, panel: &str, zone: u8, kind: FaultKind) -> Result<(), String> {
+        if panel != "ss1" {
+            return Err(format!("unknown panel '{panel}'"));
+        }
+        if !(1..=4).contains(&zone) {
+            return Err(format!("zone {zone} is out of range 1..=4"));
+        }
+        self.calls
+            .lock()
+            .push(format!("fault {panel} {zone} {kind:?}"));
+        Ok(())
+    }
+    fn repair(&self, panel: &str, zone: u8) -> Result<(), String> {
+        if panel != "ss1" {
+            return Err(format!("unknown panel '{panel}'"));
+        }
+        self.calls.lock().push(format!("repair {panel} {zone}"));
+        Ok(())
+    }
+    fn set_offline(&self, device: &str, offline: bool) -> Result<(), String> {
+        if device != "D1" {
+            return Err(format!("unknown device '{device}'"));
+        }
+        self.calls
+            .lock()
+            .push(format!("offline {device} {offline}"));
+        Ok(())
+    }
+}
+
+pub struct Options {
+    pub sim: bool,
+    pub policy: SessionPolicy,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            sim: true,
+            policy: SessionPolicy::default(),
+        }
+    }
+}
+
+pub struct Harness {
+    pub app: Router,
+    pub state: WebState,
+    pub writer: Arc<FakeWriter>,
+    pub sim: Arc<FakeSim>,
+    _alarm_outputs: Box<dyn std::any::Any + Send + Sync>,
+    _dir: tempfile::TempDir,
+}
+
+/// A response, read whole.
+#[derive(Debug)]
+pub struct Resp {
+    pub status: StatusCode,
+    pub headers: HeaderMap,
+    pub body: Vec<u8>,
+}
+
+impl Resp {
+    pub fn json(&self) -> Json {
+        serde_json::from_slice(&self.body).unwrap_or_else(|e| {
+            panic!(
+                "not JSON ({e}): {} {:?}",
+                self.status,
+                String::from_utf8_lossy(&self.body)
+            )
+        })
+    }
+    pub fn text(&self) -> String {
+        String::from_utf8_lossy(&self.body).into_owned()
+    }
+    pub fn content_type(&self) -> &str {
+        self.headers
+            .get(header::CONTENT_TYPE)
+            .and_then(|v| v.to_str().ok())
+            .unwrap_or("")
+    }
+    /// The session cookie this response sets, as a `Cookie` header value.
+    pub fn session_cookie(&self) -> Option<String> {
+        let set = self.headers.get(header::SET_COOKIE)?.to_str().ok()?;
+        let pair = set.split(';').next()?.trim();
+        (pair.starts_with(auth::COOKIE) && pair.len() > auth::COOKIE.len() + 1)
+            .then(|| pair.to_string())
+    }
+}
+
+/// The test plant, loaded through the real configuration loader.
+pub fn plant() -> gridscada_config::Plant {
+    let read = |p: &Path| -> std::io::Result<String> {
+        match p.file_name().and_then(|f| f.to_str()) {
+            Some("gridscada.toml") => Ok(MAIN.into()),
+            Some("tags.toml") => Ok(TAGS.into()),
+            _ => Err(std::io::ErrorKind::NotFound.into()),
+        }
+    };
+    gridscada_config::load_with(Path::new("/test/gridscada.toml"), &read)
+        .unwrap_or_else(|d| panic!("test plant does not load: {d:?}"))
+}
+
+impl Harness {
+    pub async fn new(opts: Options) -> Harness {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let store = Store::open("sqlite://test.db", &OpenOptions::new(dir.path()))
+            .await
+            .expect("open store");
+        store.migrate().await.expect("migrate");
+        let plant = plant();
+        let db = Arc::new(TagDb::new(plant.tag_metas()).expect("tag db"));
+        let now = Timestamp::now_utc();
+        for (id, _) in db.all_meta().collect::<Vec<_>>() {
+            db.apply([(
+                id,
+                Sample {
+                    value: Value::Float(1.5),
+                    quality: Quality::GOOD,
+                    timestamp: now,
+                },
+            )]);
+        }
+        // The alarm engine (no alarms configured): its channels' receivers
+        // live as long as the harness.
+        let (ttx, trx) = tokio::sync::mpsc::channel(1024);
+        let (etx, erx) = tokio::sync::mpsc::channel(1024);
+        let alarms = AlarmEngine::new(
+            &plant,
+            db.clone(),
+            Arc::new(SystemClock),
+            AlarmChannels {
+                transitions: ttx,
+                events: etx,
+                states: None,
+            },
+            &[],
+            EngineOptions::default(),
+        )
+        .expect("alarm engine");
+        let writer = Arc::new(FakeWriter::default());
+        let sim = Arc::new(FakeSim::default());
+        let state = WebState {
+            db,
+            plant: Arc::new(plant),
+            store,
+            auth: Auth {
+                sessions: Arc::new(Sessions::new(opts.policy)),
+                throttle: Arc::new(Throttle::default()),
+                secure_cookies: false,
+                decoy_hash: auth::make_decoy_hash().await.into(),
+            },
+            clock: Arc::new(SystemClock),
+            writer: Some(writer.clone() as Arc<dyn TagWriter>),
+            started: Instant::now(),
+            components: Components {
+                alarms: Some(alarms),
+                ..Components::default()
+            },
+            sim: opts.sim.then(|| sim.clone() as Arc<dyn SimControl>),
+            http_metrics: Default::default(),
+            metrics: None,
+        };
+        let h = Harness {
+            app: gridscada_web::router(state.clone()),
+            state,
+            writer,
+            sim,
+            _alarm_outputs: Box::new((trx, erx)),
+            _dir: dir,
+        };
+        for role in [
+            Role::Guest,
+            Role::Operator,
+            Role::Supervisor,
+            Role::Administrator,
+        ] {
+            h.add_user(role.label(), role, role.label()).await;
+        }
+        h
+    }
+
+    /// Creates a user directly in the store (as `gridscada demo` does).
+    pub async fn add_user(&self, name: &str, role: Role, group: &str) {
+        let hash = auth::hash_password(PASSWORD.into()).await.expect("hash");
+        self.state
+            .store
+            .create_user(&NewUser {
+                name: name.into(),
+                role,
+                password_hash: hash,
+                group: group.into(),
+                created_at: Timestamp::now_utc(),
+            })
+            .await
+            .expect("create user");
+    }
+
+    /// Sends a request from 127.0.0.1 and reads the whole answer.
+    pub async fn send(&self, req: Request<Body>) -> Resp {
+        self.send_from(req, "127.0.0.1:40000".parse().unwrap())
+            .await
+    }
+
+    pub async fn send_from(&self, mut req: Request<Body>, peer: SocketAddr) -> Resp {
+        req.extensions_mut().insert(ConnectInfo(peer));
+        let resp = self.app.clone().oneshot(req).await.expect("infallible");
+        let (parts, body) = resp.into_parts();
+        let body = body.collect().await.expect("body").to_bytes().to_vec();
+        Resp {
+            status: parts.status,
+            headers: parts.headers,
+            body,
+        }
+    }
+
+    /// A JSON call as a browser on the same origin would make it.
+    pub async fn call(
+        &self,
+        method: Method,
+        path: &str,
+        cookie: Option<&str>,
+        body: Option<Json>,
+    ) -> Resp {
+        self.send(request(method, path, cookie, body)).await
+    }
+
+    /// Logs in and returns the `Cookie` header value.
+    pub async fn login(&self, user: &str, password: &str) -> String {
+        let r = self
+            .call(
+                Method::POST,
+                "/api/session",
+                None,
+                Some(serde_json::json!({"username": user, "password": password})),
+            )
+            .await;
+        assert_eq!(r.status, StatusCode::OK, "login as {user}: {}", r.text());
+        r.session_cookie().expect("login sets the session cookie")
+    }
+}
+
+/// Builds a request with the test Host, an optional cookie and JSON body.
+pub fn request(
+    method: Method,
+    path: &str,
+    cookie: Option<&str>,
+    body: Option<Json>,
+) -> Request<Body> {
+    let mut b = Request::builder()
+        .method(method)
+        .uri(path)
+        .header(header::HOST, HOST);
+    if let Some(c) = cookie {
+        b = b.header(header::COOKIE, c);
+    }
+    match body {
+        Some(j) => b
+            .header(header::CONTENT_TYPE, "application/json")
+            .body(Body::from(j.to_string()))
+            .unwrap(),
+        None => b.body(Body::empty()).unwrap(),
+    }
+}
+
+/// Percent-encodes one path segment (everything but unreserved characters).
+pub fn seg(s: &str) -> String {
+    s.bytes()
+        .map(|b| {
+            if b.is_ascii_alphanumeric() || b"-._~".contains(&b) {
+                (b as char).to_string()
+            } else {
+                format!("%{b:02X}")
+            }
+        })
+        .collect()
+}

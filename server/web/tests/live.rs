@@ -1,0 +1,115 @@
+//! `/api/live` over a real socket: hello, subscription snapshot, pushed
+//! changes in the documented shape, closing when the session ends, and
+//! refusing a foreign Origin at the handshake.
+
+mod common;
+
+use std::time::Duration;
+
+use axum::http::Method;
+use common::*;
+use futures::{SinkExt, StreamExt};
+use gridscada_tagdb::{Sample, Timestamp};
+use serde_json::{json, Value};
+use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+use tokio_tungstenite::tungstenite::Message;
+
+type Ws =
+    tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+async fn next_json(ws: &mut Ws) -> Option<Value> {
+    loop {
+        let msg = tokio::time::timeout(Duration::from_secs(5), ws.next())
+            .await
+            .expect("a message within 5 s")?
+            .ok()?;
+        match msg {
+            Message::Text(t) => return Some(serde_json::from_str(&t).expect("JSON message")),
+            Message::Close(frame) => {
+                return Some(json!({"closed": frame.map(|f| u16::from(f.code))}));
+            }
+            _ => continue,
+        }
+    }
+}
+
+#[tokio::test]
+async fn live_push_follows_the_session() {
+    let h = Harness::new(Options::default()).await;
+    let (addr, server) = gridscada_web::bind("127.0.0.1:0".parse().unwrap(), h.app.clone())
+        .await
+        .unwrap();
+    tokio::spawn(server);
+    let cookie = h.login("guest", PASSWORD).await;
+    let connect = |origin: Option<String>| {
+        let mut req = format!("ws://{addr}/api/live")
+            .into_client_request()
+            .unwrap();
+        req.headers_mut().insert("cookie", cookie.parse().unwrap());
+        if let Some(o) = origin {
+            req.headers_mut().insert("origin", o.parse().unwrap());
+        }
+        tokio_tungstenite::connect_async(req)
+    };
+
+    // A foreign page cannot open the socket.
+    let err = connect(Some("http://evil.test".into())).await.unwrap_err();
+    assert!(err.to_string().contains("403"), "{err}");
+
+    let (mut ws, _) = connect(Some(format!("http://{addr}"))).await.unwrap();
+    let hello = next_json(&mut ws).await.unwrap();
+    assert_eq!(hello["type"], "hello");
+    assert_eq!(hello["user"], "guest");
+    assert_eq!(hello["role"], "guest");
+
+    ws.send(Message::Text(
+        json!({"subscribe": {"tags": [TAG_RO, "No.Such.Tag"]}})
+            .to_string()
+            .into(),
+    ))
+    .await
+    .unwrap();
+    let snap = next_json(&mut ws).await.unwrap();
+    assert_eq!(snap["type"], "tags");
+    assert_eq!(snap["snapshot"], true);
+    assert_eq!(
+        snap["values"],
+        json!([{"name": TAG_RO, "value": 1.5, "quality": {"code": "good"}, "timestamp": snap["values"][0]["timestamp"]}])
+    );
+
+    // A change is pushed; changes to tags not subscribed are not.
+    let t = Timestamp::from_millis(1_800_000_000_000);
+    let ro = h.state.db.id(TAG_RO).unwrap();
+    let other = h.state.db.id(TAG_SUP).unwrap();
+    h.state.db.apply([(other, Sample::good(99.0, t))]);
+    h.state.db.apply([(ro, Sample::good(42.25, t))]);
+    let push = next_json(&mut ws).await.unwrap();
+    assert_eq!(
+        push,
+        json!({"type": "tags", "snapshot": false, "values": [
+            {"name": TAG_RO, "value": 42.25, "quality": {"code": "good"}, "timestamp": 1_800_000_000_000i64}
+        ]})
+    );
+
+    // A bad message gets an error, and the socket stays open.
+    ws.send(Message::Text("{\"subscribe\": 5}".into()))
+        .await
+        .unwrap();
+    let err = next_json(&mut ws).await.unwrap();
+    assert_eq!(err["type"], "error");
+
+    // Logging out closes the socket with 4001.
+    let r = h
+        .call(Method::DELETE, "/api/session", Some(&cookie), None)
+        .await;
+    assert_eq!(r.status, axum::http::StatusCode::NO_CONTENT);
+    let closed = next_json(&mut ws).await.unwrap();
+    assert_eq!(closed, json!({"closed": 4001}));
+
+    // Anonymous clients cannot open it at all.
+    let req = format!("ws://{addr}/api/live")
+        .into_client_request()
+        .unwrap();
+    let err = tokio_tungstenite::connect_async(req).await.unwrap_err();
+    assert!(err.to_string().contains("401"), "{err}");
+}

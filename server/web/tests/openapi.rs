@@ -1,0 +1,123 @@
+//! The OpenAPI document and the route table cannot drift: every route is
+//! documented with its method, nothing else is, path parameters are declared,
+//! and public and protected routes say so.
+
+mod common;
+
+use std::collections::BTreeSet;
+
+use axum::http::{Method, StatusCode};
+use common::*;
+use gridscada_web::routes::{table, Perm};
+use serde_json::Value;
+
+fn document() -> Value {
+    serde_json::from_str(include_str!("../openapi.json")).expect("openapi.json is JSON")
+}
+
+#[test]
+fn every_route_is_documented_and_nothing_else() {
+    let doc = document();
+    assert_eq!(doc["openapi"], "3.1.0");
+    let paths = doc["paths"].as_object().expect("paths");
+    let documented: BTreeSet<(String, String)> = paths
+        .iter()
+        .flat_map(|(path, item)| {
+            item.as_object()
+                .unwrap()
+                .keys()
+                .filter(|k| {
+                    [
+                        "get", "put", "post", "delete", "patch", "head", "options", "trace",
+                    ]
+                    .contains(&k.as_str())
+                })
+                .map(move |m| (m.to_uppercase(), path.clone()))
+        })
+        .collect();
+    let routed: BTreeSet<(String, String)> = table()
+        .iter()
+        .map(|r| (r.method.to_string(), r.path.to_string()))
+        .collect();
+    let missing: Vec<_> = routed.difference(&documented).collect();
+    let extra: Vec<_> = documented.difference(&routed).collect();
+    assert!(
+        missing.is_empty(),
+        "routes missing from openapi.json: {missing:?}"
+    );
+    assert!(
+        extra.is_empty(),
+        "openapi.json documents routes that do not exist: {extra:?}"
+    );
+}
+
+#[test]
+fn parameters_security_and_errors_match_the_table() {
+    let doc = document();
+    for route in table() {
+        let what = format!("{} {}", route.method, route.path);
+        let op = &doc["paths"][route.path][route.method.as_str().to_lowercase()];
+        // Every `{param}` of the path is declared as a required path parameter.
+        let declared: BTreeSet<String> = op["parameters"]
+            .as_array()
+            .map(|ps| {
+                ps.iter()
+                    .filter(|p| p["in"] == "path" && p["required"] == true)
+                    .map(|p| p["name"].as_str().unwrap().to_string())
+                    .collect()
+            })
+            .unwrap_or_default();
+        let in_path: BTreeSet<String> = route
+            .path
+            .split('/')
+            .filter_map(|s| s.strip_prefix('{')?.strip_suffix('}'))
+            .map(String::from)
+            .collect();
+        assert_eq!(declared, in_path, "{what}: path parameters");
+        // Public routes may be called without the cookie; others need it and
+        // document 401 and 403.
+        let security = op["security"]
+            .as_array()
+            .unwrap_or_else(|| panic!("{what}: no security"));
+        let anonymous_ok = security
+            .iter()
+            .any(|s| s.as_object().is_some_and(|o| o.is_empty()));
+        assert_eq!(anonymous_ok, route.perm == Perm::Public, "{what}: security");
+        if route.perm != Perm::Public {
+            for code in ["401", "403"] {
+                assert_eq!(
+                    op["responses"][code]["content"]["application/json"]["schema"]["$ref"],
+                    "#/components/schemas/Error",
+                    "{what}: {code}"
+                );
+            }
+        }
+        // A success answer is documented.
+        let responses = op["responses"].as_object().unwrap();
+        assert!(
+            responses.keys().any(|k| k.starts_with('2') || k == "101"),
+            "{what}: no success response"
+        );
+        // Request bodies are closed objects where the handler refuses unknown fields.
+        if let Some(schema) = op["requestBody"]["content"]["application/json"]["schema"].as_object()
+        {
+            assert_eq!(
+                schema["additionalProperties"], false,
+                "{what}: request body"
+            );
+        }
+    }
+    assert_eq!(
+        doc["components"]["securitySchemes"]["session"]["name"],
+        gridscada_web::auth::COOKIE
+    );
+}
+
+#[tokio::test]
+async fn the_served_document_is_the_file() {
+    let h = Harness::new(Options::default()).await;
+    let r = h.call(Method::GET, "/api/openapi.json", None, None).await;
+    assert_eq!(r.status, StatusCode::OK);
+    assert!(r.content_type().starts_with("application/json"));
+    assert_eq!(r.json(), document());
+}
