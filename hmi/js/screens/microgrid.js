@@ -11,15 +11,34 @@ import { tagList } from './common.js';
 
 const DISPATCH_POLL_MS = 5000;
 
-/** Unit prefixes ("MG.PV1", ...) from the tags that have a power reading, the load excluded. */
+/**
+ * The microgrid's units: the configured ones (names, kinds) from
+ * /api/microgrid/units, matched to their tags by prefix; units found only in
+ * the tag list (a unit with a power reading) are shown by their prefix.
+ */
 export async function microgridUnits() {
   const tags = await tagList();
   const byName = new Map(tags.map((t) => [t.name, t]));
+  let configured = [];
+  try {
+    configured = (await get('/api/microgrid/units')).units || [];
+  } catch {
+    // No configured list (no microgrid, or no access): discover from the tags.
+  }
+  const byPrefix = new Map(configured.map((u) => [u.prefix, u]));
   return tags
     .map((t) => t.name.match(/^(MG\.[^.]+)\.P_kW$/))
     .filter((m) => m && m[1] !== 'MG.Load')
-    .map((m) => ({ prefix: m[1], id: m[1].slice(3), description: (byName.get(`${m[1]}.P_kW`) || {}).description || '',
-      stateDescription: (byName.get(`${m[1]}.State`) || {}).description || '', has: (q) => byName.has(`${m[1]}.${q}`) }));
+    .map((m) => {
+      const id = m[1].slice(3);
+      const c = byPrefix.get(m[1]);
+      return {
+        prefix: m[1], id, label: c ? `${c.name} (${id})` : id, kind: c ? c.kind : '',
+        description: (byName.get(`${m[1]}.P_kW`) || {}).description || '',
+        stateDescription: (byName.get(`${m[1]}.State`) || {}).description || '',
+        has: (q) => byName.has(`${m[1]}.${q}`),
+      };
+    });
 }
 
 /**
@@ -81,7 +100,7 @@ export default {
       const head = ['Unit', 'V', 'V max today', 'I', 'I max today', 'P', 'P max today', 'Ratio P / max', 'Setpoint', 'State'];
       const rows = units.map((u) => {
         const cells = [h('th', { scope: 'row' }, ctx.session.screens.includes('units')
-          ? h('a', { href: `#/units/${u.id}`, text: u.id }) : u.id, )];
+          ? h('a', { href: `#/units/${u.id}`, text: u.label }) : u.label, )];
         for (const [q, units_] of [['V', 'V'], ['I', 'A'], ['P_kW', 'kW']]) {
           const tag = `${u.prefix}.${q}`;
           const mx = h('span', { class: 'value', dataset: { max: tag } });
@@ -167,7 +186,9 @@ export default {
           h('dt', { text: 'Cost (objective)' }), h('dd', { text: typeof d.objective === 'number' ? fmtNumber(d.objective, 3) : '—' }),
           h('dt', { text: 'Solve time' }), h('dd', { text: typeof d.solve_ms === 'number' ? `${fmtNumber(d.solve_ms, 1)} ms` : '—' }),
           h('dt', { text: 'Load shed' }), h('dd', { text: typeof d.shed_kw === 'number' ? `${fmtNumber(d.shed_kw)} kW` : '—' }),
-          d.run_cmd !== undefined && d.run_cmd !== null ? [h('dt', { text: 'Diesel run command' }), h('dd', { text: typeof d.run_cmd === 'object' ? JSON.stringify(d.run_cmd) : String(d.run_cmd) })] : null,
+          d.run_cmd !== undefined && d.run_cmd !== null ? [h('dt', { text: 'Diesel run command' }), h('dd', { text: typeof d.run_cmd === 'object'
+            ? Object.entries(d.run_cmd).map(([id, run]) => `${id}: ${run ? 'RUN' : 'STOP'}`).join(', ') || 'none'
+            : String(d.run_cmd) })] : null,
           d.write_failures && (Array.isArray(d.write_failures) ? d.write_failures.length : d.write_failures)
             ? [h('dt', { text: 'Write failures' }), h('dd', { class: 'error', text: Array.isArray(d.write_failures) ? d.write_failures.join('; ') : String(d.write_failures) })] : null),
         h('table', { class: 'data', id: 'dispatch-setpoints' },

@@ -32,14 +32,14 @@ export default {
       chart = new TrendChart(canvas);
       const trendTags = [`${u.prefix}.P_kW`, `${u.prefix}.Setpoint_kW`].filter((n) => tags.some((t) => t.name === n));
       replace(body, h('div', { class: 'mg-layout' },
-        h('section', { class: 'card', 'aria-label': `${u.id} power` }, h('h2', { text: `${u.id}: power and setpoint, last hour` }),
+        h('section', { class: 'card', 'aria-label': `${u.id} power` }, h('h2', { text: `${u.label}: power and setpoint, last hour` }),
           h('div', { class: 'trend-canvas-wrap' }, canvas),
           h('p', { class: 'hint' }, trendTags.map((t, i) => {
             const sw = h('span', { class: 'pen-swatch' });
             sw.style.background = PEN_COLORS[i];
             return h('span', { class: 'ratio legend-item' }, sw, t);
           }))),
-        h('section', { class: 'card', 'aria-label': `${u.id} values` }, h('h2', { text: `${u.id} ${u.description ? `(${u.description})` : ''}` }),
+        h('section', { class: 'card', 'aria-label': `${u.id} values` }, h('h2', { text: u.label }),
           h('table', { class: 'data' }, h('tbody', {}, tags.map((t) => h('tr', {},
             h('th', { scope: 'row', title: t.name, text: t.description || t.name.slice(u.prefix.length + 1) }),
             h('td', { class: 'num' }, valueEl(binder, t.name, { units: t.units, format: t.name.endsWith('.State') ? stateFormat(t.description) : undefined })))))))));
@@ -65,7 +65,7 @@ export default {
       if (disposed) return;
       const wanted = (location.hash.match(/^#\/units\/([\w.-]+)/) || [])[1];
       replace(tabs, units.map((u) => h('button', { type: 'button', role: 'tab', class: 'btn', dataset: { unit: u.id },
-        onclick: () => show(units, u), text: u.id })));
+        onclick: () => show(units, u), text: u.label })));
       const first = units.find((u) => u.id === wanted) || units[0];
       if (first) show(units, first); else replace(body, h('p', { class: 'empty', text: 'No microgrid units are configured.' }));
     })();

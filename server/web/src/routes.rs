@@ -273,6 +273,12 @@ pub fn table() -> Vec<Route> {
             Perm::Screen("microgrid"),
             || get(api::dispatch::history),
         ),
+        r(
+            Method::GET,
+            "/api/microgrid/units",
+            Perm::Screen("microgrid"),
+            || get(api::dispatch::units),
+        ),
         // Live push.
         r(Method::GET, "/api/live", Perm::LoggedIn, || {
             get(api::live::upgrade)

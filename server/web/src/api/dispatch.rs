@@ -50,3 +50,14 @@ pub async fn history(
         .await?;
     Ok(Json(json!({ "dispatches": rows, "count": rows.len() })))
 }
+
+/// The microgrid's units as configured (names, kinds, ratings), for the
+/// overview and per-unit screens.
+pub async fn units(State(s): State<WebState>) -> ApiResult<Json<Value>> {
+    let mg = s
+        .plant
+        .microgrid
+        .as_ref()
+        .ok_or_else(|| ApiError::unavailable("this plant has no microgrid"))?;
+    Ok(Json(json!({ "units": mg.units })))
+}

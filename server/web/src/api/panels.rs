@@ -22,6 +22,16 @@ pub struct PanelHandle {
     pub commands: mpsc::Sender<PanelCommand>,
 }
 
+/// A panel's status as the API shows it: the sequence's status plus the
+/// panel's tag prefix, so a screen can find the panel's tags.
+fn view(s: &WebState, status: &PanelStatus) -> Value {
+    let mut v = serde_json::to_value(status).unwrap_or_default();
+    if let Some(p) = s.plant.panels.iter().find(|p| *p.id.get_ref() == status.id) {
+        v["prefix"] = json!(p.prefix.get_ref());
+    }
+    v
+}
+
 fn find<'a>(s: &'a WebState, id: &str) -> ApiResult<&'a PanelHandle> {
     s.components
         .panels
@@ -42,12 +52,12 @@ fn may_view(who: &Principal, id: &str) -> ApiResult<()> {
 }
 
 pub async fn list(State(s): State<WebState>, Extension(who): Extension<Principal>) -> Json<Value> {
-    let panels: Vec<PanelStatus> = s
+    let panels: Vec<Value> = s
         .components
         .panels
         .iter()
         .filter(|p| may_view(&who, &p.id).is_ok())
-        .map(|p| p.status.borrow().clone())
+        .map(|p| view(&s, &p.status.borrow()))
         .collect();
     Json(json!({ "panels": panels }))
 }
@@ -56,10 +66,10 @@ pub async fn one(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
     Path(id): Path<String>,
-) -> ApiResult<Json<PanelStatus>> {
+) -> ApiResult<Json<Value>> {
     let p = find(&s, &id)?;
     may_view(&who, &id)?;
-    let status = p.status.borrow().clone();
+    let status = view(&s, &p.status.borrow());
     Ok(Json(status))
 }
 
@@ -106,7 +116,7 @@ pub async fn mode(
     Extension(who): Extension<Principal>,
     Path(id): Path<String>,
     body: JsonBody<ModeBody>,
-) -> ApiResult<Json<PanelStatus>> {
+) -> ApiResult<Json<Value>> {
     let Json(b) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
     // The panel's sequence records each command with its user (one audit
     // record per action, refusals included).
@@ -118,7 +128,7 @@ pub async fn reset(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
     Path(id): Path<String>,
-) -> ApiResult<Json<PanelStatus>> {
+) -> ApiResult<Json<Value>> {
     send(&s, &who, &id, PanelCommandKind::Reset).await?;
     current(&s, &id).await
 }
@@ -134,7 +144,7 @@ pub async fn breaker(
     Extension(who): Extension<Principal>,
     Path((id, breaker)): Path<(String, String)>,
     body: JsonBody<BreakerBody>,
-) -> ApiResult<Json<PanelStatus>> {
+) -> ApiResult<Json<Value>> {
     let Json(b) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
     let kind = PanelCommandKind::Breaker {
         breaker,
@@ -145,8 +155,8 @@ pub async fn breaker(
 }
 
 /// The status after a command, once the sequence has published it.
-async fn current(s: &WebState, id: &str) -> ApiResult<Json<PanelStatus>> {
+async fn current(s: &WebState, id: &str) -> ApiResult<Json<Value>> {
     let p = find(s, id)?;
-    let status = p.status.borrow().clone();
+    let status = view(s, &p.status.borrow());
     Ok(Json(status))
 }
