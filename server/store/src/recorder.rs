@@ -251,7 +251,10 @@ mod tests {
             timestamp: Timestamp::from_millis(1000),
         };
         let logged = r.offer(id, &bad).unwrap();
-        assert_eq!(logged.value, None, "a Bad value must never reach trend minima or averages");
+        assert_eq!(
+            logged.value, None,
+            "a Bad value must never reach trend minima or averages"
+        );
     }
 
     #[test]
