@@ -15,7 +15,7 @@ as_root() {
 }
 
 # --- 1. Debian packages the tests use ------------------------------------
-debian_packages=(postgresql socat mbpoll libmodbus-dev pkg-config)
+debian_packages=(postgresql socat mbpoll libmodbus-dev pkg-config curl)
 missing=()
 for p in "${debian_packages[@]}"; do
     dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
@@ -52,7 +52,7 @@ cargo test --workspace
 # --- 5. End-to-end tests against third-party peers ------------------------
 step "building the gridscada binary for end-to-end tests"
 cargo build -p gridscada
-export GRIDSCADA_BIN="$root/target/debug/gridscada"
+export GRIDSCADA_BIN="${CARGO_TARGET_DIR:-$root/target}/debug/gridscada"
 for t in tests/e2e/*.sh; do
     [ -e "$t" ] || continue
     step "end-to-end: $t"
