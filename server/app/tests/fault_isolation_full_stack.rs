@@ -2,15 +2,19 @@
 //! demo plant (`tags/`), the simulators serving it over Modbus TCP, the
 //! poller (`FieldIo`) filling the tag database, and one `run_panel` sequence
 //! per panel. The panel's signals sit on separate Modbus devices behind one
-//! gateway, each scanned every 500 ms (plant time), so status readings arrive
-//! asynchronously and out of order; the simulator's breakers follow their
-//! commands after 50 ms and the ELCB trips the instant a faulty zone is
-//! energised.
+//! gateway, each scanned as the demo plant says (100-200 ms, plant time), so
+//! status readings arrive asynchronously and out of order; the simulator's
+//! breakers follow their commands after 50 ms and the ELCB trips the instant
+//! a faulty zone is energised.
 //!
 //! The plant runs on a `ScaledClock` (scan periods, sim steps, panel timers
 //! and Modbus timeouts all scale), with the seed's panel timings (reclose 3 s,
-//! dwell 1 s, confirm 2 s). Tests wait on conditions with generous wall-time
-//! limits, never on fixed sleeps, except where nothing must happen.
+//! dwell 1 s, confirm 2 s). Restore times are asserted against the seed's
+//! bound 2 × reclose + (N + 1) × dwell with no I/O allowance: the sequence
+//! overlaps its status confirmations with the reclose delay and the dwells, so
+//! only about four status latencies (scan + breaker time) stay on the
+//! critical path. Tests wait on conditions with generous wall-time limits,
+//! never on fixed sleeps, except where nothing must happen.
 
 use std::path::Path;
 use std::sync::{Arc, Mutex};
@@ -18,17 +22,20 @@ use std::time::{Duration, Instant};
 
 use gridscada_config::{PanelMode, Plant};
 use gridscada_control::fault_isolation::{
-    self, PanelCommand, PanelCommandKind, PanelNotice, PanelStatus,
+    self, Metrics, PanelCommand, PanelCommandKind, PanelNotice, PanelStatus,
 };
 use gridscada_sim::{BindMode, FaultKind, PanelSnapshot, SimHandle, Simulator};
 use gridscada_tagdb::{Clock, ScaledClock, TagDb, Timestamp};
 use tokio::sync::{mpsc, oneshot, watch};
 
 /// Plant seconds per wall second. Kept low: a stall of the test process
-/// counts `SPEED` times over in plant time, and the ELCB must still be read
-/// within the dwell (1 s) after a load is energised: scan 0.5 s + breaker
-/// 0.05 s leaves 0.45 s of plant time, i.e. 225 ms of wall time at speed 2.
-const SPEED: f64 = 2.0;
+/// counts `SPEED` times over in plant time. The ELCB must be read within the
+/// dwell (1 s) after a load is energised (scan 0.1 s + breaker 0.05 s), a
+/// device not answering for two scan periods (0.2 s) turns its signals Bad
+/// (the sequence suspends and restarts its step, which costs a dwell), and
+/// the restore time has about 0.6 s of margin to the bound. At 1.5 a stall
+/// of up to ~130 ms of wall time goes unnoticed.
+const SPEED: f64 = 1.5;
 /// Wall-time limit on any one wait.
 const WAIT: Duration = Duration::from_secs(45);
 
@@ -47,6 +54,7 @@ struct Stack {
     ss1: Panel,
     css1: Panel,
     notices: Arc<Mutex<Vec<PanelNotice>>>,
+    panels: Vec<gridscada_config::PanelConfig>,
     // Kept alive for the test; dropped (stopped) at its end.
     _simulator: Simulator,
     _field: gridscada_modbus::FieldIo,
@@ -62,9 +70,9 @@ impl Stack {
             .await
             .expect("simulator starts");
         simulator.patch_plant(&mut plant);
-        // Generous request timeouts (plant time; 500 ms of wall time at this
-        // speed), so a loaded CI machine does not turn into a comm fault.
-        // Scan periods stay as configured (500 ms for the panel I/O).
+        // Generous request timeouts (plant time), so a loaded CI machine does
+        // not turn into a comm fault. Scan periods stay as configured (100 ms
+        // for the panel's status modules, 200 ms for the zone command module).
         for d in &mut plant.devices {
             *d.timeout_ms.get_mut() = 1000;
         }
@@ -122,6 +130,7 @@ impl Stack {
             ss1,
             css1,
             notices,
+            panels: plant.panels.clone(),
             _simulator: simulator,
             _field: field,
         };
@@ -149,6 +158,14 @@ impl Stack {
             "css1" => &self.css1,
             _ => panic!("no panel {id}"),
         }
+    }
+
+    fn plant_panel(&self, id: &str) -> gridscada_config::PanelConfig {
+        self.panels
+            .iter()
+            .find(|p| p.id.get_ref() == id)
+            .unwrap_or_else(|| panic!("demo plant has no panel '{id}'"))
+            .clone()
     }
 
     fn status(&self, id: &str) -> PanelStatus {
@@ -249,98 +266,137 @@ fn operations(p: &PanelSnapshot) -> Vec<u64> {
         .collect()
 }
 
-/// Status inputs lag by up to a scan period (500 ms) plus the breaker delay,
-/// and the seed's bound counts only reclose delays and dwells. Allowance: one
-/// scan plus margin for each status confirmation on the critical path (the
-/// opens and the ELCB reset after each trip, each close, each trip read).
-fn io_allowance_s(zones: u8, trips: u32) -> f64 {
-    let confirmations = f64::from(zones) + 1.0 + 3.0 * f64::from(trips);
-    confirmations * 0.6
+/// Whether the sequence suspended on a communication gap. The seed's bound is
+/// for an uninterrupted sequence; a test machine stalled long enough for the
+/// poller to mark the panel's signals Bad (two 100 ms scans) makes the
+/// sequence suspend and restart its step, as it must. Then the outcome is
+/// still asserted in full, and the restore time is reported, not asserted.
+fn was_suspended(events: &[(String, String)]) -> bool {
+    events
+        .iter()
+        .any(|(k, m)| k == "step" && m.starts_with("suspended"))
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn permanent_fault_on_zone_2_is_isolated_then_restored_after_repair() {
-    let _one = ONE_AT_A_TIME.lock().await;
-    let s = Stack::start().await;
-    let css1_before = s.snap("css1");
-    let ss1_trips_before = s.snap("ss1").elcb_trips;
-    let wall = Instant::now();
-    s.sim
-        .inject_zone_fault("ss1", 2, FaultKind::Permanent)
-        .unwrap();
-    s.wait_sequence_end("ss1").await;
-    let st = s.status("ss1");
-    let m = &st.last_sequence;
-    println!(
-        "full stack, permanent fault on zone 2 of ss1: restore_s = {:.2}, bound_s = {:.1} \
-         (trips {}, switching ops {}, wall {:.1} s at speed {SPEED})",
+/// Asserts `restore_s <= bound` unless the sequence was suspended.
+fn assert_within(what: &str, restore_s: f64, bound: f64, events: &[(String, String)]) {
+    if was_suspended(events) {
+        println!("{what}: restore {restore_s:.2} s vs bound {bound:.1} s not asserted: the sequence suspended on a communication gap (machine stalled)");
+        return;
+    }
+    assert!(
+        restore_s <= bound,
+        "{what}: restore {restore_s:.2} s over the bound {bound:.1} s\n{events:#?}"
+    );
+}
+
+/// The healthy zones are back, the faulty one isolated: step, faulty set,
+/// re-energisations, trips, and restore time within the seed's bound.
+fn check_isolated(s: &Stack, id: &str, zone: u8) -> Metrics {
+    let st = s.status(id);
+    let m = st.last_sequence.clone();
+    let ctx = format!("{id} zone {zone}: {st:#?}\n{:#?}", s.events(id));
+    assert_eq!(st.step, "isolated", "{ctx}");
+    assert!(!st.lockout, "{ctx}");
+    assert_eq!(st.faulty_zones, vec![zone], "{ctx}");
+    assert_eq!(m.reenergisations, 1, "{ctx}");
+    assert_eq!(m.trips, 2, "{ctx}");
+    assert!(m.restore_s > 0.0, "{ctx}");
+    assert_within(
+        &format!("{id} zone {zone}"),
         m.restore_s,
         m.bound_s,
-        m.trips,
-        m.switching_ops,
-        wall.elapsed().as_secs_f64()
+        &s.events(id),
     );
-    assert_eq!(st.step, "isolated", "{st:#?}\n{:#?}", s.events("ss1"));
-    assert!(!st.lockout);
-    assert_eq!(st.faulty_zones, vec![2]);
-    assert_eq!(m.reenergisations, 1);
-    assert_eq!(m.trips, 2);
-    assert!(m.restore_s > 0.0);
-    assert!(
-        m.restore_s <= m.bound_s + io_allowance_s(4, m.trips),
-        "restore {} vs bound {} + I/O allowance",
-        m.restore_s,
-        m.bound_s
-    );
-    // The plant agrees: zone 2 open, the rest on, ELCB closed.
-    s.wait("ss1 breakers as isolated", |s| {
-        let p = s.snap("ss1");
-        p.elcb_closed && p.mccb.closed && closed_zones(&p) == [1, 3, 4]
-    })
-    .await;
-    let p = s.snap("ss1");
-    assert_eq!(energised_zones(&p), [1, 3, 4]);
-    assert_eq!(
-        p.elcb_trips - ss1_trips_before,
-        2,
-        "the injection trip and one re-energisation of zone 2"
-    );
-    let events = s.events("ss1");
-    assert!(events
-        .iter()
-        .any(|(k, m)| k == "fault_found" && m.contains("zone 2")));
-    assert!(
-        !events.iter().any(|(k, _)| k == "transient_fault"),
-        "{events:#?}"
-    );
-    // The other panel was not touched.
-    let css1 = s.snap("css1");
-    assert_eq!(css1.elcb_trips, css1_before.elcb_trips);
-    assert_eq!(operations(&css1), operations(&css1_before));
-    assert!(css1.elcb_closed && closed_zones(&css1) == [1, 2, 3, 4]);
-    let st = s.status("css1");
-    assert_eq!((st.step.as_str(), st.lockout), ("idle", false));
-    assert!(s.events("css1").iter().all(|(k, _)| k != "trip"));
+    m
+}
 
-    // Repair, then Reset: zone 2 comes back, healthy zones are not touched.
-    let ops_before = operations(&s.snap("ss1"));
-    s.sim.repair_zone("ss1", 2).unwrap();
-    s.command("ss1", PanelCommandKind::Reset).await;
-    s.wait("ss1 zone 2 back after Reset", |s| {
-        let st = s.status("ss1");
-        let p = s.snap("ss1");
+/// Repairs `zone` of `id` and presses Reset: the zone comes back, closed
+/// once, and no other breaker is switched.
+async fn repair_and_reset(s: &Stack, id: &str, zone: u8) {
+    let ops_before = operations(&s.snap(id));
+    s.sim.repair_zone(id, zone).unwrap();
+    s.command(id, PanelCommandKind::Reset).await;
+    s.wait(&format!("{id} zone {zone} back after Reset"), |s| {
+        let st = s.status(id);
+        let p = s.snap(id);
         st.step == "idle"
             && st.faulty_zones.is_empty()
             && p.elcb_closed
             && closed_zones(&p) == [1, 2, 3, 4]
+            && st.breakers.values().all(|b| b.closed && b.good)
     })
     .await;
-    let st = s.status("ss1");
-    assert!(!st.lockout && st.breakers.values().all(|b| b.closed && b.good));
-    let ops = operations(&s.snap("ss1"));
-    assert_eq!(ops[0], ops_before[0], "MCCB not switched on Reset");
-    assert_eq!(ops[1], ops_before[1], "zone 1 not switched on Reset");
-    assert_eq!(ops[2], ops_before[2] + 1, "zone 2 closed once");
+    assert!(!s.status(id).lockout);
+    let ops = operations(&s.snap(id));
+    for (i, (now, before)) in ops.iter().zip(&ops_before).enumerate() {
+        let want = before + u64::from(i == usize::from(zone));
+        assert_eq!(
+            *now, want,
+            "{id}: load {i} switched on Reset after repairing zone {zone}"
+        );
+    }
+}
+
+/// The acceptance criterion: a permanent fault on any zone of either panel
+/// is isolated and the healthy zones come back within the seed's bound
+/// 2 × reclose + (N + 1) × dwell, over the real I/O path. Both panels run
+/// their sequences at the same time (ss1 zone k, css1 zone 5 − k), then are
+/// repaired and Reset for the next round.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn permanent_fault_on_any_zone_is_isolated_within_the_bound() {
+    let _one = ONE_AT_A_TIME.lock().await;
+    let s = Stack::start().await;
+    let mut table = Vec::new();
+    for k in 1..=4u8 {
+        let faults = [("ss1", k), ("css1", 5 - k)];
+        let trips_before: Vec<u64> = faults.iter().map(|(id, _)| s.snap(id).elcb_trips).collect();
+        let wall = Instant::now();
+        for (id, zone) in faults {
+            s.sim
+                .inject_zone_fault(id, zone, FaultKind::Permanent)
+                .unwrap();
+        }
+        for (id, _) in faults {
+            s.wait_sequence_end(id).await;
+        }
+        let wall_s = wall.elapsed().as_secs_f64();
+        for ((id, zone), trips_before) in faults.into_iter().zip(trips_before) {
+            let m = check_isolated(&s, id, zone);
+            table.push((id, zone, m.restore_s, m.bound_s, m.switching_ops, wall_s));
+            let healthy: Vec<u8> = (1..=4).filter(|z| *z != zone).collect();
+            s.wait(&format!("{id} breakers as isolated"), |s| {
+                let p = s.snap(id);
+                p.elcb_closed && p.mccb.closed && closed_zones(&p) == healthy
+            })
+            .await;
+            let p = s.snap(id);
+            assert_eq!(energised_zones(&p), healthy, "{id} zone {zone}");
+            assert_eq!(
+                p.elcb_trips - trips_before,
+                2,
+                "{id} zone {zone}: the injection trip and one re-energisation"
+            );
+            let found = format!("zone {zone} MCB");
+            let events = s.events(id);
+            assert!(
+                events
+                    .iter()
+                    .any(|(k, m)| k == "fault_found" && m.contains(&found)),
+                "{events:#?}"
+            );
+        }
+        for (id, zone) in faults {
+            repair_and_reset(&s, id, zone).await;
+        }
+    }
+    println!("panel | faulty zone | restore_s | bound_s | switching_ops | wall_s (speed {SPEED})");
+    for (id, zone, restore, bound, ops, wall) in &table {
+        println!("{id} | {zone} | {restore:.2} | {bound:.1} | {ops} | {wall:.1}");
+    }
+    // Every sequence found its fault: none ended as a transient fault.
+    for id in ["ss1", "css1"] {
+        assert!(s.events(id).iter().all(|(k, _)| k != "transient_fault"));
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -365,9 +421,9 @@ async fn manual_mode_switches_nothing_by_itself() {
             .is_some_and(|b| b.good && !b.closed)
     })
     .await;
-    // Longer than a whole automatic sequence would need to act (reclose
-    // delay + confirmation), in plant time: nothing may happen.
-    s.clock.sleep(Duration::from_secs(8)).await;
+    // Longer than an automatic sequence would need to act (reclose delay +
+    // confirmation), in plant time: nothing may happen.
+    s.clock.sleep(Duration::from_secs(5)).await;
     let p = s.snap("ss1");
     assert!(!p.elcb_closed, "ELCB must stay tripped in manual mode");
     assert_eq!(operations(&p), operations(&before), "no breaker switched");
@@ -399,10 +455,8 @@ async fn transient_fault_restores_every_zone() {
     assert_eq!(st.step, "idle", "{st:#?}\n{:#?}", s.events("ss1"));
     assert!(!st.lockout && st.faulty_zones.is_empty());
     assert_eq!(m.trips, 1);
-    assert!(
-        m.restore_s <= m.bound_s + io_allowance_s(4, m.trips),
-        "{m:?}"
-    );
+    assert!(m.restore_s > 0.0, "{m:?}");
+    assert_within("transient fault", m.restore_s, m.bound_s, &s.events("ss1"));
     let events = s.events("ss1");
     assert!(
         events.iter().any(|(k, _)| k == "transient_fault"),
@@ -420,6 +474,7 @@ async fn two_faulty_zones_leave_exactly_the_healthy_ones_on() {
     let _one = ONE_AT_A_TIME.lock().await;
     let s = Stack::start().await;
     let trips_before = s.snap("ss1").elcb_trips;
+    let css1_before = s.snap("css1");
     // Zone 4 develops its fault too (it is de-energised by zone 2's trip).
     s.sim
         .inject_zone_fault("ss1", 2, FaultKind::Permanent)
@@ -440,6 +495,11 @@ async fn two_faulty_zones_leave_exactly_the_healthy_ones_on() {
     assert_eq!(st.faulty_zones, vec![2, 4]);
     assert_eq!(m.reenergisations, 2, "each faulty zone re-energised once");
     assert_eq!(m.trips, 3);
+    // The seed's bound is for one fault; each further fault costs one more
+    // reclose delay and at most one more dwell.
+    let settings = fault_isolation::Settings::from_panel(&s.plant_panel("ss1"));
+    let bound = m.bound_s + settings.reclose_delay_s + settings.dwell_s;
+    assert_within("two faulty zones", m.restore_s, bound, &s.events("ss1"));
     s.wait("ss1 exactly zones 1 and 3 on", |s| {
         let p = s.snap("ss1");
         p.elcb_closed && p.mccb.closed && closed_zones(&p) == [1, 3]
@@ -448,5 +508,12 @@ async fn two_faulty_zones_leave_exactly_the_healthy_ones_on() {
     let p = s.snap("ss1");
     assert_eq!(energised_zones(&p), [1, 3]);
     assert_eq!(p.elcb_trips - trips_before, 3);
-    assert_eq!(s.snap("css1").elcb_trips, 0);
+    // The other panel was not touched.
+    let css1 = s.snap("css1");
+    assert_eq!(css1.elcb_trips, css1_before.elcb_trips);
+    assert_eq!(operations(&css1), operations(&css1_before));
+    assert!(css1.elcb_closed && closed_zones(&css1) == [1, 2, 3, 4]);
+    let st = s.status("css1");
+    assert_eq!((st.step.as_str(), st.lockout), ("idle", false));
+    assert!(s.events("css1").iter().all(|(k, _)| k != "trip"));
 }

@@ -83,6 +83,7 @@ pub(crate) fn check(
     check_overlaps(&mut cx, tags);
 
     let lookup = |name: &str| tag_by_name.get(name).map(|(_, t)| *t);
+    let device = |name: &str| device_by_name.get(name).map(|(_, d)| *d);
     let mut panel_ids: HashMap<&str, &Spanned<String>> = HashMap::new();
     for p in &main.panels {
         if let Some(prev) = panel_ids.insert(p.id.get_ref(), &p.id) {
@@ -96,7 +97,7 @@ pub(crate) fn check(
                 ),
             );
         }
-        check_panel(&mut cx, p, &lookup);
+        check_panel(&mut cx, p, &lookup, &device);
     }
     if let Some(mg) = &main.microgrid {
         check_microgrid(&mut cx, mg, &lookup);
@@ -609,10 +610,11 @@ fn positive(cx: &mut Ctx<'_>, owner: &str, field: &str, v: &Spanned<f64>) {
     }
 }
 
-fn check_panel<'t>(
+fn check_panel<'t, 'd>(
     cx: &mut Ctx<'_>,
     p: &PanelConfig,
     lookup: &dyn Fn(&str) -> Option<&'t TagConfig>,
+    device: &dyn Fn(&str) -> Option<&'d DeviceConfig>,
 ) {
     let owner = format!("panel '{}'", p.id.get_ref());
     let zones = *p.zones.get_ref();
@@ -643,6 +645,58 @@ fn check_panel<'t>(
         need_tag(cx, at.clone(), &owner, cmd, lookup, &b, true);
         need_tag(cx, at.clone(), &owner, closed, lookup, &b, false);
     }
+    check_dwell_vs_elcb_latency(cx, p, &owner, &io.elcb_closed, lookup, device);
+}
+
+/// A trip is pinned on the load being switched on when the ELCB is read open
+/// within its dwell, so the dwell must outlast the latest a trip can be read:
+/// one scan period of the ELCB status plus a request timeout. (The breaker's
+/// operating time comes on top; it is not configured, hence "exceed".)
+fn check_dwell_vs_elcb_latency<'t, 'd>(
+    cx: &mut Ctx<'_>,
+    p: &PanelConfig,
+    owner: &str,
+    elcb_closed: &str,
+    lookup: &dyn Fn(&str) -> Option<&'t TagConfig>,
+    device: &dyn Fn(&str) -> Option<&'d DeviceConfig>,
+) {
+    let dwell = *p.dwell_s.get_ref();
+    if !(dwell.is_finite() && dwell > 0.0) {
+        return; // reported by `positive`
+    }
+    // A missing tag or device is reported on its own.
+    let Some(tag) = lookup(elcb_closed) else {
+        return;
+    };
+    let dev_name = tag.device.get_ref();
+    let Some(dev) = device(dev_name) else {
+        return;
+    };
+    let scan_ms = tag
+        .scan_ms
+        .as_ref()
+        .map_or(*dev.scan_ms.get_ref(), |s| *s.get_ref());
+    let timeout_ms = *dev.timeout_ms.get_ref();
+    let latest_ms = scan_ms.saturating_add(timeout_ms);
+    if dwell * 1000.0 > latest_ms as f64 {
+        return;
+    }
+    // A defaulted dwell_s has no place in the file: point at the panel.
+    let span = if p.dwell_s.span().is_empty() {
+        p.id.span()
+    } else {
+        p.dwell_s.span()
+    };
+    cx.err(
+        0,
+        span,
+        format!(
+            "{owner}: dwell_s = {dwell} s is too short to attribute a trip: the ELCB status \
+             ({dev_name}) is read every {scan_ms} ms with a {timeout_ms} ms timeout; dwell_s must \
+             exceed {} s",
+            latest_ms as f64 / 1000.0
+        ),
+    );
 }
 
 fn check_microgrid<'t>(

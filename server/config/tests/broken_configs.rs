@@ -238,3 +238,65 @@ fn the_demo_plant_is_valid() {
     assert_eq!(plant.panels.len(), 2);
     assert!(plant.microgrid.is_some());
 }
+
+#[test]
+fn panel_dwell_shorter_than_the_elcb_status_latency() {
+    let main = "tag_files = [\"tags.toml\"]\n\n[[panel]]\nid = \"ss1\"\nname = \"Panel\"\nkind = \"service\"\nprefix = \"SS1\"\nzones = 1\ndwell_s = 0.3\n";
+    let tags = r#"[[device]]
+name = "SS1.IO1"
+protocol = "tcp"
+address = "127.0.0.1:1502"
+scan_ms = 200
+timeout_ms = 150
+
+[[tag]]
+name = "SS1.ELCB.Closed"
+device = "SS1.IO1"
+kind = "discrete_input"
+address = 0
+
+[[tag]]
+name = "SS1.MCCB.Closed"
+device = "SS1.IO1"
+kind = "discrete_input"
+address = 1
+
+[[tag]]
+name = "SS1.Zone1.Closed"
+device = "SS1.IO1"
+kind = "discrete_input"
+address = 2
+
+[[tag]]
+name = "SS1.ELCB.Reset"
+device = "SS1.IO1"
+kind = "coil"
+address = 0
+writable = true
+write_role = "operator"
+
+[[tag]]
+name = "SS1.MCCB.Cmd"
+device = "SS1.IO1"
+kind = "coil"
+address = 1
+writable = true
+write_role = "operator"
+
+[[tag]]
+name = "SS1.Zone1.Cmd"
+device = "SS1.IO1"
+kind = "coil"
+address = 2
+writable = true
+write_role = "operator"
+"#;
+    assert_problems(
+        main,
+        tags,
+        &["DIR/gridscada.toml:9:11: error: panel 'ss1': dwell_s = 0.3 s is too short to attribute a trip: the ELCB status (SS1.IO1) is read every 200 ms with a 150 ms timeout; dwell_s must exceed 0.35 s"],
+    );
+    // Longer than scan + timeout: accepted.
+    let ok = main.replace("dwell_s = 0.3", "dwell_s = 0.4");
+    assert_problems(&ok, tags, &[]);
+}

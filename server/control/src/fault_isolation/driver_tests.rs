@@ -37,6 +37,9 @@ max_trips = 8
 name = "IO"
 protocol = "tcp"
 address = "127.0.0.1:1502"
+# The ELCB status must be read well within the dwell (validation).
+scan_ms = 100
+timeout_ms = 200
 "#,
     );
     let mut n = 0;

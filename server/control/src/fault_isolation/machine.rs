@@ -14,12 +14,18 @@
 //! Loads are numbered as in the seed: load 0 is the main MCCB, loads 1..=N are
 //! the zone MCBs.
 //! 1. `tripped`: the ELCB opened. Open the MCCB and every zone, wait for the
-//!    status inputs to confirm.
-//! 2. `reclose_wait`: wait `reclose_delay_s`.
+//!    status inputs to confirm. The reclose delay (`reclose_delay_s`) starts
+//!    at the trip, concurrently with the opens.
+//! 2. `reclose_wait`: every open confirmed, the delay still running. The ELCB
+//!    is reset only when BOTH the delay has run out AND every open is
+//!    confirmed (interlock: never reclose onto closed loads).
 //! 3. `elcb_reset`: pulse the ELCB reset output; its status input must confirm
-//!    within `confirm_timeout_s`, else lockout.
+//!    within `confirm_timeout_s`, else lockout. Nothing is closed before it
+//!    reads closed (interlock).
 //! 4. `oluc` / `oluc_dwell`: close loads 0, 1, 2, ... one at a time
-//!    (`count_L_cur_c` is the load being switched), waiting `dwell_s` after each.
+//!    (`count_L_cur_c` is the load being switched). Each dwell counts from the
+//!    close command: the next load is closed only when the dwell has run out
+//!    AND the close is confirmed AND the ELCB still reads closed.
 //!    A load already closed is skipped. OLUC stops at the first zone known to be
 //!    faulty. A trip while load `c` is being switched on or dwelling marks `c`
 //!    faulty (`count_L_cur_sv = c`) and goes back to step 1. A fault on load 0
@@ -38,9 +44,14 @@
 //! ## Proven loads: re-closing without dwell
 //! A load is *proven* once, in the current sequence, it was switched on and
 //! its full dwell ran out without a trip. After the next trip every load is
-//! opened again, and the next pass re-closes proven loads with command/feedback
-//! confirmation only (`oluc` / `oldc` with no dwell of their own), one at a
-//! time and each confirmed before the next.
+//! opened again, and the next pass re-closes the proven loads with no dwell of
+//! their own. When the MCCB (load 0) is among them (always after a trip) they
+//! are closed together as one `oluc` step: the proven zone MCBs first, dead
+//! because the MCCB is open (so no zone is closed onto a live bus and nothing
+//! can trip yet), then the MCCB, which energises the batch at once, as a
+//! return of supply would. Every close is checked by its status input. A
+//! proven load reached with the MCCB already closed (only after a Reset,
+//! which skips closed loads) is closed on its own, confirmed before the next.
 //!
 //! **Attribution rule.** Why a dwell at all: a trip may be seen late (after
 //! the status input confirmed the close), and a trip must be pinned on one
@@ -66,12 +77,29 @@
 //!   for a fault the plain algorithm can isolate. Cost: the newly faulty load
 //!   is energised once more than a fault present from the start.
 //!
-//! Restoration time for a permanent fault on zone k of N (instantaneous I/O):
-//! 2 × reclose + N × dwell for every k, within the seed's bound
-//! 2 × reclose + (N + 1) × dwell (was 2 × reclose + (N + k − 1) × dwell when
-//! every pass dwelled on every load). Over real I/O each status confirmation
-//! on the critical path adds up to a scan period plus the breaker's operating
-//! time, which the seed's bound does not count.
+//! The batch's settle dwell counts from its last close command (the MCCB),
+//! like any dwell.
+//!
+//! ## Timing
+//! Restore time (`restore_s`: from the first trip read to all healthy loads
+//! confirmed closed) for a permanent fault on zone k of N: 2 × reclose +
+//! N × dwell + 4 × ℓ for every k, where ℓ is one status latency (breaker
+//! operating time + up to one scan period of the status module + a request).
+//! The seed's bound is 2 × reclose + (N + 1) × dwell, so it holds when
+//! 4 × ℓ < dwell. Only four latencies stay on the critical path, because the
+//! reclose delay overlaps the opens, each dwell overlaps its close
+//! confirmation, and the proven batch is confirmed during its settle dwell.
+//! The four that stay are needed:
+//! - the ELCB reset must read closed before the first close (interlock), after
+//!   each of the two trips;
+//! - the trip of the faulty zone is seen only when the ELCB is read;
+//! - `restore_s` ends when the last healthy load reads closed.
+//!
+//! Attribution requires `dwell_s` to exceed the ELCB status latency (its
+//! module's scan period + request timeout + the breaker's operating time +
+//! margin): a dwell counts from the close command, and a trip read after the
+//! dwell would be pinned on the next load. Configuration validation refuses a
+//! dwell not above scan + timeout of the ELCB status device.
 //!
 //! ## Limits, faults and takeover
 //! - More than `max_trips` ELCB trips in one sequence: lockout.
@@ -117,8 +145,9 @@
 //!   confirmations waits on all of them, so OLUC never closes a load while an
 //!   earlier opening is still unconfirmed.
 //! - **Attribution** is unchanged: a trip is pinned on the load being closed
-//!   or dwelling, so `dwell_s` must exceed the time from closing a load to
-//!   reading the ELCB (scan period of the ELCB's module plus margins).
+//!   or dwelling, so `dwell_s` must exceed the time from the close command to
+//!   reading the ELCB (scan period of the ELCB's module plus margins; see
+//!   "Timing").
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
@@ -568,6 +597,15 @@ pub struct Sequence {
     closing_proven: bool,
     /// The dwell running is the batch's settle dwell, not a load's own.
     settling: bool,
+    /// Proven loads commanded closed together, zones first with the MCCB
+    /// open, then the MCCB (see "Proven loads"); empty when closing one load.
+    closing_batch: Vec<u8>,
+    /// The reclose delay of the last trip has run out (the ELCB is reset as
+    /// soon as every open is confirmed).
+    reclose_due: bool,
+    /// The dwell timer of the last close command has run out (the next load
+    /// is closed as soon as this one is confirmed).
+    dwell_due: bool,
     /// Known-faulty loads (0 = MCCB / busbar).
     faulty: BTreeSet<u8>,
     lockout: bool,
@@ -624,6 +662,9 @@ impl Sequence {
             batch: Vec::new(),
             closing_proven: false,
             settling: false,
+            closing_batch: Vec::new(),
+            reclose_due: false,
+            dwell_due: false,
             faulty: BTreeSet::new(),
             lockout: false,
             known: None,
@@ -782,22 +823,34 @@ impl Sequence {
     fn on_timer(&mut self, timer: Timer, now_s: f64, out: &mut Vec<Output>) {
         match (timer, self.step) {
             (Timer::RecloseDelay, Step::RecloseWait) => self.enter_elcb_reset(out),
+            (Timer::RecloseDelay, Step::Tripped) => {
+                // The delay runs from the trip; the opens are still being
+                // confirmed. Never reclose onto closed loads: wait for them.
+                if self.pending.is_empty() {
+                    self.enter_elcb_reset(out);
+                } else {
+                    self.reclose_due = true;
+                    event(
+                        out,
+                        "reclose_delay_elapsed",
+                        "reclose delay elapsed; the ELCB is reset once every open is confirmed"
+                            .into(),
+                    );
+                }
+            }
+            (Timer::Dwell, Step::Oluc | Step::Oldc) => {
+                // The dwell runs from the close command; the close is not
+                // confirmed yet. The next load waits for the confirmation.
+                self.dwell_due = true;
+            }
             (Timer::Dwell, Step::OlucDwell | Step::OldcDwell) if self.settling => {
                 // The batch held for a full dwell: carry on where the walk is.
                 self.settling = false;
                 self.batch.clear();
                 self.continue_pass(now_s, out);
             }
-            (Timer::Dwell, Step::OlucDwell) => {
-                self.proven.insert(self.count_c);
-                self.count_c = self.count_c.saturating_add(1);
-                self.oluc_next(now_s, out);
-            }
-            (Timer::Dwell, Step::OldcDwell) => {
-                self.proven.insert(self.oldc);
-                self.oldc = self.oldc.saturating_sub(1);
-                self.oldc_next(now_s, out);
-            }
+            (Timer::Dwell, Step::OlucDwell) => self.oluc_dwell_done(now_s, out),
+            (Timer::Dwell, Step::OldcDwell) => self.oldc_dwell_done(now_s, out),
             (Timer::Confirm, _) => self.on_confirm_timeout(out),
             // A timer that belongs to a step we have left (tokens make this rare).
             _ => {}
@@ -1051,6 +1104,9 @@ impl Sequence {
         self.batch.clear();
         self.closing_proven = false;
         self.settling = false;
+        self.closing_batch.clear();
+        self.dwell_due = false;
+        self.reclose_due = false;
         let Some(known) = self.known.clone() else {
             return;
         };
@@ -1086,13 +1142,30 @@ impl Sequence {
         // Everything is opened: a new pass starts with nothing owed.
         self.in_oldc = false;
         self.batch.clear();
+        self.closing_batch.clear();
         self.closing_proven = false;
         self.settling = false;
-        self.set_step(
-            Step::Tripped,
-            "opening the main MCCB and all zone MCBs",
-            out,
-        );
+        self.dwell_due = false;
+        self.reclose_due = false;
+        if self.known.as_ref().is_none_or(|k| k.elcb) {
+            self.set_step(
+                Step::Tripped,
+                "opening the main MCCB and all zone MCBs",
+                out,
+            );
+        } else {
+            // The reclose delay runs from the trip, while the opens are
+            // confirmed; the reset waits for both.
+            self.set_step(
+                Step::Tripped,
+                &format!(
+                    "opening the main MCCB and all zone MCBs; ELCB reset in {} s",
+                    self.settings.reclose_delay_s
+                ),
+                out,
+            );
+            self.start(Timer::RecloseDelay, self.settings.reclose_delay_s, out);
+        }
         let Some(known) = self.known.clone() else {
             return;
         };
@@ -1125,6 +1198,17 @@ impl Sequence {
                 self.count_c = 0;
                 self.oluc_next(now_s, out);
             }
+            Step::Oluc if self.closing_proven && !self.closing_batch.is_empty() => {
+                // The whole batch is on: go on with the walk, which skips the
+                // loads now closed; the batch owes its settle dwell.
+                self.note_restored(now_s);
+                self.closing_proven = false;
+                let loads = std::mem::take(&mut self.closing_batch);
+                self.batch.extend(loads);
+                self.count_c = 0;
+                self.in_oldc = false;
+                self.oluc_next(now_s, out);
+            }
             Step::Oluc if self.closing_proven => {
                 self.note_restored(now_s);
                 self.closing_proven = false;
@@ -1139,6 +1223,16 @@ impl Sequence {
                 self.oldc = self.oldc.saturating_sub(1);
                 self.oldc_next(now_s, out);
             }
+            // The dwell runs from the close command: it may have run out
+            // before the status confirmed the close.
+            Step::Oluc if self.dwell_due => {
+                self.note_restored(now_s);
+                self.oluc_dwell_done(now_s, out);
+            }
+            Step::Oldc if self.dwell_due => {
+                self.note_restored(now_s);
+                self.oldc_dwell_done(now_s, out);
+            }
             Step::Oluc => {
                 self.note_restored(now_s);
                 let load = self.count_c;
@@ -1147,7 +1241,6 @@ impl Sequence {
                     &format!("OLUC: load {load} closed, dwelling"),
                     out,
                 );
-                self.start(Timer::Dwell, self.settings.dwell_s, out);
             }
             Step::Oldc => {
                 self.note_restored(now_s);
@@ -1157,7 +1250,6 @@ impl Sequence {
                     &format!("OLDC: zone {zone} closed, dwelling"),
                     out,
                 );
-                self.start(Timer::Dwell, self.settings.dwell_s, out);
             }
             _ => {}
         }
@@ -1166,22 +1258,26 @@ impl Sequence {
     fn on_confirmed_tripped(&mut self, now_s: f64, out: &mut Vec<Output>) {
         if self.known.as_ref().is_some_and(|k| k.elcb) {
             // Only on Reset: the ELCB is closed already, go straight to OLUC.
+            self.cancel(Timer::RecloseDelay, out);
             self.count_c = 0;
             self.oluc_next(now_s, out);
+        } else if self.reclose_due {
+            self.enter_elcb_reset(out);
         } else {
             self.set_step(
                 Step::RecloseWait,
-                &format!(
-                    "all breakers open; ELCB reset in {} s",
-                    self.settings.reclose_delay_s
-                ),
+                "all breakers open; waiting for the reclose delay (it runs from the trip)",
                 out,
             );
-            self.start(Timer::RecloseDelay, self.settings.reclose_delay_s, out);
+            if self.timers[Timer::RecloseDelay.index()].is_none() {
+                // Defensive: the delay always runs here; never wait forever.
+                self.start(Timer::RecloseDelay, self.settings.reclose_delay_s, out);
+            }
         }
     }
 
     fn enter_elcb_reset(&mut self, out: &mut Vec<Output>) {
+        self.reclose_due = false;
         self.set_step(Step::ElcbReset, "resetting the ELCB", out);
         self.pulse_reset(out);
         self.start_confirm_if_pending(out);
@@ -1229,6 +1325,12 @@ impl Sequence {
                 continue;
             }
             let proven = self.is_proven(c);
+            if c == 0 && proven {
+                // The MCCB is open: the proven zones can be closed dead.
+                let loads = self.proven_prefix();
+                self.close_proven_batch(loads, out);
+                return;
+            }
             if !proven && self.settle_if_owed(out) {
                 return;
             }
@@ -1240,10 +1342,7 @@ impl Sequence {
             } else {
                 format!("OLUC step {c}: closing {b}")
             };
-            self.set_step(Step::Oluc, &why, out);
-            self.closing_proven = proven;
-            self.switch(b, true, out);
-            self.start_confirm_if_pending(out);
+            self.close_load(Step::Oluc, b, proven, &why, out);
             return;
         }
     }
@@ -1275,10 +1374,7 @@ impl Sequence {
             } else {
                 format!("OLDC: closing {b}")
             };
-            self.set_step(Step::Oldc, &why, out);
-            self.closing_proven = proven;
-            self.switch(b, true, out);
-            self.start_confirm_if_pending(out);
+            self.close_load(Step::Oldc, b, proven, &why, out);
             return;
         }
     }
@@ -1288,6 +1384,112 @@ impl Sequence {
         self.fast_reclose && self.proven.contains(&load)
     }
 
+    /// A dwell ran out after load `count_c` was confirmed closed: it is
+    /// proven; OLUC goes on.
+    fn oluc_dwell_done(&mut self, now_s: f64, out: &mut Vec<Output>) {
+        self.proven.insert(self.count_c);
+        self.count_c = self.count_c.saturating_add(1);
+        self.oluc_next(now_s, out);
+    }
+
+    fn oldc_dwell_done(&mut self, now_s: f64, out: &mut Vec<Output>) {
+        self.proven.insert(self.oldc);
+        self.oldc = self.oldc.saturating_sub(1);
+        self.oldc_next(now_s, out);
+    }
+
+    /// Closes one load. Its dwell (or, for a proven load, the settle dwell
+    /// its batch owes) runs from the close command, concurrently with the
+    /// status confirmation.
+    fn close_load(
+        &mut self,
+        step: Step,
+        b: Breaker,
+        proven: bool,
+        why: &str,
+        out: &mut Vec<Output>,
+    ) {
+        self.set_step(step, why, out);
+        self.closing_proven = proven;
+        self.closing_batch.clear();
+        self.switch(b, true, out);
+        self.start_dwell(out);
+        self.start_confirm_if_pending(out);
+    }
+
+    fn start_dwell(&mut self, out: &mut Vec<Output>) {
+        self.dwell_due = false;
+        self.start(Timer::Dwell, self.settings.dwell_s, out);
+    }
+
+    /// The loads the walk of this pass would close next, from load 0, as
+    /// long as they are proven (the walk skips closed and known-faulty loads
+    /// exactly as `oluc_next` / `oldc_next` do). Starts with load 0.
+    fn proven_prefix(&self) -> Vec<u8> {
+        let n = self.settings.zones;
+        let closed = |l: u8| {
+            self.known
+                .as_ref()
+                .is_some_and(|k| k.closed(Breaker::load(l)))
+        };
+        let mut loads = Vec::new();
+        let mut stop = None;
+        for c in 0..=n {
+            if self.faulty.contains(&c) {
+                stop = Some(c);
+                break;
+            }
+            if closed(c) {
+                continue;
+            }
+            if !self.is_proven(c) {
+                return loads;
+            }
+            loads.push(c);
+        }
+        if let Some(stop) = stop.filter(|s| *s > 0) {
+            for d in (stop + 1..=n).rev() {
+                if self.faulty.contains(&d) || closed(d) {
+                    continue;
+                }
+                if !self.is_proven(d) {
+                    return loads;
+                }
+                loads.push(d);
+            }
+        }
+        loads
+    }
+
+    /// Closes a batch of proven loads (load 0 first in `loads`) with one
+    /// energising operation: the zone MCBs first, dead because the MCCB is
+    /// open, then the MCCB. No zone is closed onto a live bus, so a trip can
+    /// only come with the MCCB close, after every command of the batch; the
+    /// batch's settle dwell runs from that command.
+    fn close_proven_batch(&mut self, loads: Vec<u8>, out: &mut Vec<Output>) {
+        if !self.interlock_ok(Breaker::Mccb, out) {
+            return;
+        }
+        let list: Vec<String> = loads.iter().map(|l| l.to_string()).collect();
+        self.set_step(
+            Step::Oluc,
+            &format!(
+                "OLUC step 0: re-closing proven load(s) {} (proven healthy in this sequence: \
+                 no dwell of their own): zone MCBs first with the main MCCB open, then the main MCCB",
+                list.join(", ")
+            ),
+            out,
+        );
+        self.closing_proven = true;
+        for z in loads.iter().copied().filter(|l| *l > 0) {
+            self.switch(Breaker::Zone(z), true, out);
+        }
+        self.switch(Breaker::Mccb, true, out);
+        self.closing_batch = loads;
+        self.start_dwell(out);
+        self.start_confirm_if_pending(out);
+    }
+
     /// If proven loads were closed without dwell since the last dwell, starts
     /// their one settle dwell (so a late trip of theirs cannot be pinned on
     /// the next load) and returns true.
@@ -1295,6 +1497,12 @@ impl Sequence {
         let Some(last) = self.batch.last().copied() else {
             return false;
         };
+        if self.dwell_due {
+            // The settle dwell ran from the batch's last close command and
+            // has run out already.
+            self.batch.clear();
+            return false;
+        }
         // Shown as the dwell of the last load closed.
         let step = if self.in_oldc && last > self.oluc_stop {
             Step::OldcDwell
@@ -1306,12 +1514,15 @@ impl Sequence {
         self.set_step(
             step,
             &format!(
-                "proven load(s) {} re-closed; one dwell before going on",
+                "proven load(s) {} re-closed; one dwell from the last close command before going on",
                 list.join(", ")
             ),
             out,
         );
-        self.start(Timer::Dwell, self.settings.dwell_s, out);
+        if self.timers[Timer::Dwell.index()].is_none() {
+            // Defensive: it runs from the last close command.
+            self.start_dwell(out);
+        }
         true
     }
 
@@ -1398,7 +1609,9 @@ impl Sequence {
     /// over with a full dwell on every load (see the module docs).
     fn on_proven_batch_trip(&mut self, now_s: f64, out: &mut Vec<Output>) {
         let mut suspects = self.batch.clone();
-        if self.closing_proven {
+        if self.closing_proven && !self.closing_batch.is_empty() {
+            suspects.extend(self.closing_batch.iter().copied());
+        } else if self.closing_proven {
             suspects.push(if self.step == Step::Oldc {
                 self.oldc
             } else {
@@ -1571,7 +1784,27 @@ impl Sequence {
             }
             Step::OlucDwell | Step::OldcDwell if self.settling => {
                 // The batch's settle dwell runs again in full.
-                self.start(Timer::Dwell, self.settings.dwell_s, out);
+                self.start_dwell(out);
+            }
+            Step::Oluc if !self.closing_batch.is_empty() => {
+                // Re-issue what is not closed yet, zones before the MCCB; the
+                // settle dwell runs again in full.
+                self.start_dwell(out);
+                let loads = self.closing_batch.clone();
+                let zones_first = loads
+                    .iter()
+                    .filter(|l| **l > 0)
+                    .chain(loads.iter().filter(|l| **l == 0));
+                for b in zones_first.map(|l| Breaker::load(*l)).collect::<Vec<_>>() {
+                    if state.closed(b) {
+                        self.pending.retain(|(p, _)| *p != b);
+                    } else {
+                        self.switch(b, true, out);
+                    }
+                }
+                if !self.start_confirm_if_pending(out) {
+                    self.on_confirmed(now_s, out);
+                }
             }
             Step::Oluc | Step::OlucDwell | Step::Oldc | Step::OldcDwell => {
                 let (b, closing, dwell) = if matches!(from, Step::Oluc | Step::OlucDwell) {
@@ -1579,6 +1812,8 @@ impl Sequence {
                 } else {
                     (Breaker::Zone(self.oldc), Step::Oldc, Step::OldcDwell)
                 };
+                // The dwell (or settle dwell) runs again in full.
+                self.start_dwell(out);
                 if state.closed(b) {
                     self.pending.retain(|(p, _)| *p != b);
                     self.step = closing;
