@@ -7,6 +7,7 @@
 mod demo_plant;
 mod dispatch_cmd;
 mod logging;
+mod replay;
 mod runtime;
 mod sinks;
 mod users;
@@ -42,6 +43,40 @@ enum Command {
         /// Data folder (SQLite database, generated credentials).
         #[arg(long, default_value = "gridscada-data")]
         data: PathBuf,
+        /// Drive the plant with a scenario (its plant replaces the embedded
+        /// one), on a clock compressed by --speed, for watching and training.
+        #[arg(long)]
+        scenario: Option<PathBuf>,
+        /// Plant seconds per wall second while a scenario runs.
+        #[arg(long, default_value_t = 1.0, requires = "scenario")]
+        speed: f64,
+    },
+    /// Replay a scenario through the whole stack (simulators, Modbus poller,
+    /// alarms, historian, fault isolation, dispatch) faster than real time,
+    /// and report. Exit 0 when every expectation holds, 1 when one fails,
+    /// 2 when the scenario cannot be read or run.
+    Replay {
+        /// The scenario file (see docs/SCENARIOS.md).
+        file: PathBuf,
+        /// Plant seconds per wall second, on a scaled clock.
+        #[arg(long, conflicts_with = "max")]
+        speed: Option<f64>,
+        /// As fast as the stack goes, on a virtual clock that advances when
+        /// everything is idle (deterministic). The default.
+        #[arg(long)]
+        max: bool,
+        /// Write the JSON report here.
+        #[arg(long)]
+        report: Option<PathBuf>,
+        /// Write the HTML report (one file, no external assets) here.
+        #[arg(long)]
+        html: Option<PathBuf>,
+        /// Keep the run's database in this folder (default: a temporary one).
+        #[arg(long)]
+        data: Option<PathBuf>,
+        /// Skip the second run with the rule-based dispatch (no cost comparison).
+        #[arg(long)]
+        no_compare: bool,
     },
     /// Run against a real plant configuration.
     Serve {
@@ -119,7 +154,50 @@ fn main() -> ExitCode {
     logging::init(cli.log_json);
     match cli.command {
         Command::Check { path } => check(&path),
-        Command::Demo { http, data } => runtime::block_on(runtime::demo(http, data)),
+        Command::Demo {
+            http,
+            data,
+            scenario,
+            speed,
+        } => {
+            let live = match scenario {
+                Some(file) => match replay::LiveScenario::load(&file, speed) {
+                    Ok(l) => Some(l),
+                    Err(e) => {
+                        eprintln!("{e:#}");
+                        return ExitCode::from(2);
+                    }
+                },
+                None => None,
+            };
+            runtime::block_on(runtime::demo(http, data, live))
+        }
+        Command::Replay {
+            file,
+            speed,
+            max: _,
+            report,
+            html,
+            data,
+            no_compare,
+        } => {
+            let pace = match speed {
+                Some(s) if s.is_finite() && s > 0.0 && s <= 100_000.0 => replay::Pace::Scaled(s),
+                Some(s) => {
+                    eprintln!("error: --speed {s}: need 0 < speed <= 100000");
+                    return ExitCode::from(2);
+                }
+                None => replay::Pace::Max,
+            };
+            replay::replay(replay::ReplayArgs {
+                file,
+                pace,
+                report,
+                html,
+                data,
+                no_compare,
+            })
+        }
         Command::Serve { config } => runtime::block_on(runtime::serve(config)),
         Command::Sim { config } => runtime::block_on(runtime::sim(config)),
         Command::User {

@@ -71,11 +71,19 @@ impl Mode {
     }
 }
 
-/// `gridscada demo`: the embedded plant, on loopback.
-pub async fn demo(http: String, data: PathBuf) -> ExitCode {
+/// `gridscada demo`: the embedded plant, on loopback; with a scenario, the
+/// scenario's plant driven by its timeline on a compressed clock.
+pub async fn demo(
+    http: String,
+    data: PathBuf,
+    scenario: Option<crate::replay::LiveScenario>,
+) -> ExitCode {
     report(
         async {
-            let plant = demo_plant::load().map_err(|d| diagnostics("the embedded demo plant", d))?;
+            let plant = match &scenario {
+                Some(live) => live.plant.clone(),
+                None => demo_plant::load().map_err(|d| diagnostics("the embedded demo plant", d))?,
+            };
             let addr: SocketAddr = http
                 .parse()
                 .with_context(|| format!("--http '{http}' is not an address like 127.0.0.1:8080"))?;
@@ -84,7 +92,7 @@ pub async fn demo(http: String, data: PathBuf) -> ExitCode {
                     "the demo prints its passwords and serves a simulated plant, so it only binds loopback addresses; --http {addr} is not one"
                 ));
             }
-            run(plant, addr, &data, Mode::Demo).await
+            run(plant, addr, &data, Mode::Demo, scenario).await
         }
         .await,
     )
@@ -104,7 +112,7 @@ pub async fn serve(config: PathBuf) -> ExitCode {
                 .parse()
                 .context("[server] http is not a socket address")?;
             let data = PathBuf::from(&plant.server.data_dir);
-            run(plant, addr, &data, Mode::Serve).await
+            run(plant, addr, &data, Mode::Serve, None).await
         }
         .await,
     )
@@ -143,7 +151,7 @@ pub async fn open_store(plant: &Plant, data: &Path) -> anyhow::Result<Store> {
 }
 
 /// Every tag the database holds: the plant's, plus the derived ones.
-fn all_tags(plant: &Plant) -> Vec<TagMeta> {
+pub(crate) fn all_tags(plant: &Plant) -> Vec<TagMeta> {
     let mut tags: Vec<TagMeta> = plant.tag_metas().collect();
     tags.extend(gridscada_modbus::device_status_tags(plant));
     for panel in &plant.panels {
@@ -208,6 +216,9 @@ pub struct StackOptions {
     pub clock: Arc<dyn Clock>,
     /// Start the simulated plant on ephemeral loopback ports and poll it.
     pub simulate: bool,
+    /// How the microgrid's outer loop makes setpoints (replay's rule-based
+    /// baseline forces the rule).
+    pub dispatch_policy: dispatch::DispatchPolicy,
 }
 
 impl Stack {
@@ -337,13 +348,14 @@ impl Stack {
             Some(mg) => {
                 let (status_tx, status_rx) = watch::channel(DispatchStatus::default());
                 let (notices_tx, notices_rx) = mpsc::channel(256);
-                tasks.spawn(dispatch::run_dispatch(
+                tasks.spawn(dispatch::run_dispatch_with(
                     mg.clone(),
                     db.clone(),
                     writer.clone(),
                     clock.clone(),
                     status_tx,
                     notices_tx,
+                    opts.dispatch_policy,
                 ));
                 tasks.spawn(sinks::dispatch_notices(
                     notices_rx,
@@ -378,6 +390,16 @@ impl Stack {
         })
     }
 
+    /// The poller's counters (requests, timeouts, transport operations in flight).
+    pub fn poll_stats(&self) -> gridscada_modbus::StatsHandle {
+        self.field.stats_handle()
+    }
+
+    /// The historian's buffer and write figures.
+    pub fn historian_metrics(&self) -> gridscada_store::HistorianMetrics {
+        self.historian.handle().metrics()
+    }
+
     /// Stops in reverse order: the producers first, then what records their
     /// output, so nothing committed is lost.
     pub async fn shutdown(mut self) {
@@ -399,14 +421,25 @@ impl Stack {
     }
 }
 
-async fn run(plant: Plant, http: SocketAddr, data: &Path, mode: Mode) -> anyhow::Result<()> {
+async fn run(
+    plant: Plant,
+    http: SocketAddr,
+    data: &Path,
+    mode: Mode,
+    scenario: Option<crate::replay::LiveScenario>,
+) -> anyhow::Result<()> {
     let store = open_store(&plant, data).await?;
+    let clock: Arc<dyn Clock> = match &scenario {
+        Some(live) => live.clock(),
+        None => Arc::new(SystemClock),
+    };
     let stack = Stack::start(
         plant,
         store,
         StackOptions {
-            clock: Arc::new(SystemClock),
+            clock,
             simulate: mode == Mode::Demo,
+            dispatch_policy: Default::default(),
         },
     )
     .await?;
@@ -447,6 +480,9 @@ async fn run(plant: Plant, http: SocketAddr, data: &Path, mode: Mode) -> anyhow:
         for (role, user, password) in &creds.accounts {
             println!("    {role:<13} user {user:<11} password {password}");
         }
+    }
+    if let Some(live) = scenario {
+        crate::replay::spawn_live(&stack, live);
     }
     println!("Press Ctrl-C to stop.");
 

@@ -490,6 +490,16 @@ pub struct StatsHandle {
 }
 
 impl StatsHandle {
+    /// Connection attempts and requests waiting for an answer right now, over
+    /// every link. Replay on a virtual clock advances plant time only when
+    /// this is zero, so no answer is ever outrun by the clock.
+    pub fn in_flight(&self) -> u64 {
+        self.link_stats
+            .iter()
+            .map(|s| s.counters.in_flight.load(Ordering::SeqCst))
+            .sum()
+    }
+
     /// Counters of every device and link.
     pub fn stats(&self) -> PollStats {
         let get = |a: &std::sync::atomic::AtomicU64| a.load(Ordering::Relaxed);

@@ -117,6 +117,9 @@ pub(crate) struct WriteCmd {
 /// Link-level counters shared with [`crate::PollStats`].
 #[derive(Default)]
 pub(crate) struct LinkCounters {
+    /// Connection attempts and requests waiting for the transport now. Replay
+    /// on a virtual clock advances plant time only while this is zero.
+    pub in_flight: AtomicU64,
     pub connects: AtomicU64,
     pub disconnects: AtomicU64,
     pub late_replies: AtomicU64,
@@ -275,7 +278,10 @@ impl Link {
             .max()
             .unwrap_or(Duration::from_secs(1));
         let wall = self.clock.to_wall(timeout.max(Duration::from_millis(100)));
-        match self.transport.connect(wall).await {
+        let busy = InFlight::new(&self.counters);
+        let connected = self.transport.connect(wall).await;
+        drop(busy);
+        match connected {
             Ok(()) => {
                 self.counters.connects.fetch_add(1, Ordering::Relaxed);
                 self.reconnect_wait = RECONNECT_FIRST;
@@ -339,7 +345,9 @@ impl Link {
         let wall = self.clock.to_wall(dev.timeout);
         let unit = dev.unit;
         let started = tokio::time::Instant::now();
+        let busy = InFlight::new(&self.counters);
         let result = self.transport.transact(unit, req, wall).await;
+        drop(busy);
         let elapsed = started.elapsed();
         let lc = self.transport.counters();
         self.counters
@@ -752,6 +760,23 @@ fn bad_samples(
             })
         })
         .collect()
+}
+
+/// Counts one transport operation in flight; released on drop, so a
+/// cancelled request (shutdown) does not leave the gauge raised.
+struct InFlight(Arc<LinkCounters>);
+
+impl InFlight {
+    fn new(c: &Arc<LinkCounters>) -> Self {
+        c.in_flight.fetch_add(1, Ordering::SeqCst);
+        InFlight(Arc::clone(c))
+    }
+}
+
+impl Drop for InFlight {
+    fn drop(&mut self) {
+        self.0.in_flight.fetch_sub(1, Ordering::SeqCst);
+    }
 }
 
 fn bump_link_down(c: &LinkCounters) {

@@ -20,6 +20,7 @@ mod microgrid;
 mod panel;
 mod plant;
 mod profile;
+pub mod scenario;
 mod server;
 
 use std::collections::HashMap;

@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# Replays every scenario in scenarios/ through the whole stack (gridscada
+# replay --max) and checks its expectations. Writes each report (JSON and
+# HTML) to tests/e2e/artifacts/replay/. Prints "N passed, M failed" and exits
+# non-zero when any scenario fails.
+#   GRIDSCADA_BIN  the binary (default: target/release/gridscada, else target/debug/gridscada)
+set -uo pipefail
+cd "$(dirname "$0")/../.."
+bin="${GRIDSCADA_BIN:-}"
+if [ -z "$bin" ]; then
+    if [ -x target/release/gridscada ]; then bin=target/release/gridscada; else bin=target/debug/gridscada; fi
+fi
+if [ ! -x "$bin" ]; then
+    echo "replay.sh: no gridscada binary at '$bin' (build it or set GRIDSCADA_BIN)" >&2
+    exit 2
+fi
+out=tests/e2e/artifacts/replay
+mkdir -p "$out"
+passed=0
+failed=0
+failures=()
+for scenario in scenarios/*.toml; do
+    name=$(basename "$scenario" .toml)
+    start=$(date +%s)
+    if RUST_LOG=warn "$bin" replay "$scenario" --max \
+        --report "$out/$name.json" --html "$out/$name.html" >"$out/$name.txt" 2>"$out/$name.log"; then
+        passed=$((passed + 1))
+        verdict=ok
+    else
+        failed=$((failed + 1))
+        failures+=("$name")
+        verdict=FAILED
+    fi
+    echo "$verdict $name ($(( $(date +%s) - start )) s): $(tail -n 1 "$out/$name.txt")"
+done
+echo "$passed passed, $failed failed"
+if [ "$failed" -gt 0 ]; then
+    for f in "${failures[@]}"; do
+        echo "--- $f"
+        grep -v '^  pass' "$out/$f.txt" || true
+        tail -n 5 "$out/$f.log" || true
+    done
+    exit 1
+fi
