@@ -4,7 +4,7 @@
 use std::io::{IsTerminal, Read};
 use std::path::{Path, PathBuf};
 
-use anyhow::{anyhow, bail, Context};
+use anyhow::{anyhow, Context};
 use gridscada_config::Role;
 use gridscada_store::{NewUser, Store};
 use gridscada_tagdb::{Clock, SystemClock};
@@ -130,21 +130,22 @@ pub async fn add(
             (plant, data)
         }
     };
-    let (password, generated) = if std::io::stdin().is_terminal() {
-        (gridscada_web::auth::generate_password(), true)
+    // A password piped in is used; a terminal, or nothing on stdin (e.g.
+    // </dev/null in a provisioning script), gets a generated one, printed once.
+    let piped = if std::io::stdin().is_terminal() {
+        String::new()
     } else {
         let mut text = String::new();
         std::io::stdin()
             .read_to_string(&mut text)
             .context("reading the password from stdin")?;
-        let password = text.lines().next().unwrap_or("").to_string();
-        if password.is_empty() {
-            bail!(
-                "no password on stdin; pipe one in, or run from a terminal to have one generated"
-            );
-        }
-        gridscada_web::auth::check_password_strength(&password).map_err(|e| anyhow!(e))?;
-        (password, false)
+        text.lines().next().unwrap_or("").to_string()
+    };
+    let (password, generated) = if piped.is_empty() {
+        (gridscada_web::auth::generate_password(), true)
+    } else {
+        gridscada_web::auth::check_password_strength(&piped).map_err(|e| anyhow!(e))?;
+        (piped, false)
     };
     let store = runtime::open_store(&plant, &data).await?;
     let hash = gridscada_web::auth::hash_password(password.clone())

@@ -138,3 +138,70 @@ fn demo_serves_healthz() {
     assert!(body.contains("\"status\":\"ok\""), "{body}");
     assert!(data.path().exists());
 }
+
+/// A copy of the demo plant whose data folder is inside `dir`.
+fn plant_in(dir: &std::path::Path) -> std::path::PathBuf {
+    for f in std::fs::read_dir(repo().join("tags")).unwrap() {
+        let f = f.unwrap().path();
+        std::fs::copy(&f, dir.join(f.file_name().unwrap())).unwrap();
+    }
+    let main = dir.join("gridscada.toml");
+    let text = std::fs::read_to_string(&main).unwrap().replace(
+        "data_dir = \"data\"",
+        &format!("data_dir = \"{}\"", dir.join("data").display()),
+    );
+    std::fs::write(&main, text).unwrap();
+    main
+}
+
+fn user_add(config: &std::path::Path, name: &str, role: &str, stdin: &str) -> std::process::Output {
+    let mut child = Command::new(BIN)
+        .args(["user", "add", name, "--role", role, "--config"])
+        .arg(config)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(stdin.as_bytes())
+        .unwrap();
+    child.wait_with_output().unwrap()
+}
+
+#[test]
+fn user_add_reads_or_generates_the_password() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = plant_in(dir.path());
+    // Piped: used as given, never printed.
+    let out = user_add(&config, "alice", "operator", "a-long-enough-password\n");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout} {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("Created user 'alice' (operator)."),
+        "{stdout}"
+    );
+    assert!(!stdout.contains("a-long-enough-password"));
+    // Nothing on stdin: one is generated and shown once.
+    let out = user_add(&config, "bob", "administrator", "");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success());
+    assert!(stdout.contains("Password (shown once): "), "{stdout}");
+    // A weak password, a taken name and an unknown role are refused.
+    let out = user_add(&config, "carol", "operator", "short\n");
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("at least 10 characters"));
+    let out = user_add(&config, "alice", "operator", "another-good-password\n");
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("already exists"));
+    let out = user_add(&config, "dave", "root", "another-good-password\n");
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("'root' is not a role"));
+}
