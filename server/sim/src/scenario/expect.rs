@@ -126,10 +126,14 @@ impl Expectation {
         let Some(s) = sample else {
             return self.result(false, expected, "no value".into());
         };
+        let shown = match &s.value {
+            gridscada_tagdb::Value::Float(f) => compact(*f),
+            other => other.to_string(),
+        };
         let actual = if s.quality.is_good() {
-            s.value.to_string()
+            shown
         } else {
-            format!("{} ({})", s.value, s.quality)
+            format!("{shown} ({})", s.quality)
         };
         let matches = match (value, &s.value) {
             (ExpectValue::Bool(b), v) => v.as_bool() == Some(*b),
@@ -154,7 +158,7 @@ impl Expectation {
                 let ok = v.is_finite()
                     && bound.min.is_none_or(|m| *v >= m - 1e-9)
                     && bound.max.is_none_or(|m| *v <= m + 1e-9);
-                self.result(ok, expected, format!("{v}"))
+                self.result(ok, expected, compact(*v))
             }
         }
     }
@@ -171,8 +175,31 @@ impl Expectation {
     }
 }
 
+/// A number as a report shows it: at most four decimals, no float noise
+/// (`10.400000000000006` reads `10.4`).
+pub fn compact(v: f64) -> String {
+    if !v.is_finite() {
+        return v.to_string();
+    }
+    let s = format!("{:.4}", v);
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    if s == "-0" {
+        "0".into()
+    } else {
+        s.to_string()
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn compact_numbers_hide_float_noise() {
+        assert_eq!(super::compact(10.400000000000006), "10.4");
+        assert_eq!(super::compact(2.0), "2");
+        assert_eq!(super::compact(-0.00001), "0");
+        assert_eq!(super::compact(230.39999389648438), "230.4");
+    }
+
     use super::*;
     use gridscada_tagdb::{Quality, Timestamp};
 
