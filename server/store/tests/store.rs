@@ -466,7 +466,10 @@ async fn alarm_states_survive_restart(mut db: TestDb) {
         .await
         .unwrap();
     // A late writer with an older record never rolls the state back.
-    db.store.upsert_alarm_states(&[a.clone()]).await.unwrap();
+    db.store
+        .upsert_alarm_states(std::slice::from_ref(&a))
+        .await
+        .unwrap();
     db.reopen().await;
     assert_eq!(db.store.alarm_states().await.unwrap(), vec![a2.clone(), b2]);
     assert!(db.store.delete_alarm_state("SS1.Zone2.I:hi").await.unwrap());
