@@ -49,6 +49,12 @@ pub fn check_user_name(name: &str) -> ApiResult<()> {
     Ok(())
 }
 
+/// Group names follow the same rule as user names.
+fn check_group_name(group: &str) -> ApiResult<()> {
+    check_user_name(group)
+        .map_err(|_| ApiError::bad_request("a group name needs 1 to 64 printable characters"))
+}
+
 pub async fn create(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
@@ -57,8 +63,7 @@ pub async fn create(
     let b = body(b)?;
     check_user_name(&b.name)?;
     let group = b.group.unwrap_or_else(|| b.role.label().to_string());
-    check_user_name(&group)
-        .map_err(|_| ApiError::bad_request("a group name needs 1 to 64 printable characters"))?;
+    check_group_name(&group)?;
     let (password, generated) = match b.password {
         Some(p) => {
             auth::check_password_strength(&p).map_err(ApiError::bad_request)?;
@@ -136,6 +141,10 @@ pub async fn update(
         .user(&name)
         .await?
         .ok_or_else(|| ApiError::not_found(format!("no user named '{name}'")))?;
+    // Validate everything before changing anything: no partial updates.
+    if let Some(group) = &b.group {
+        check_group_name(group)?;
+    }
     let demoted = b.role.is_some_and(|r| r != Role::Administrator);
     if user.role == Role::Administrator && (demoted || b.blocked == Some(true)) {
         keep_an_administrator(&s, &name).await?;
@@ -146,9 +155,6 @@ pub async fn update(
         changes.push(format!("role {}", role.label()));
     }
     if let Some(group) = &b.group {
-        check_user_name(group).map_err(|_| {
-            ApiError::bad_request("a group name needs 1 to 64 printable characters")
-        })?;
         s.store.set_user_group(&name, group).await?;
         changes.push(format!("group {group}"));
     }
@@ -313,8 +319,7 @@ pub async fn set_group_screens(
     b: JsonBody<ScreensBody>,
 ) -> ApiResult<Json<Value>> {
     let b = body(b)?;
-    check_user_name(&group)
-        .map_err(|_| ApiError::bad_request("a group name needs 1 to 64 printable characters"))?;
+    check_group_name(&group)?;
     if let Some(bad) = b.screens.iter().find(|x| !SCREENS.contains(&x.as_str())) {
         return Err(ApiError::bad_request(format!(
             "unknown screen '{bad}'; screens are {}",
