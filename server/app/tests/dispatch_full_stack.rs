@@ -265,10 +265,14 @@ async fn surplus(charging: bool) {
     assert_eq!(dg.counters.starts, 0);
     assert_eq!(rig.tag_bool("MG.DG1.Running"), Some(false));
     assert_eq!(rig.tag_bool("MG.DG1.RunCmd"), Some(false));
+    // The battery forms the grid and covers what the setpoints leave between
+    // periods; a surplus must not leave anything unserved beyond numerical
+    // noise (1 % of the demand energy in the window).
     let energy = &snap.microgrid.as_ref().unwrap().energy;
+    let demand = energy.demand_kwh - snap0.microgrid.as_ref().unwrap().energy.demand_kwh;
     assert!(
-        energy.unserved_kwh - unserved0 < 1e-3,
-        "energy unserved during a surplus: {energy:?} (at start {unserved0} kWh)"
+        energy.unserved_kwh - unserved0 <= 0.01 * demand,
+        "energy unserved during a surplus: {energy:?} (at start {unserved0} kWh, demand in the window {demand} kWh)"
     );
     while let Ok(n) = rig.notices.try_recv() {
         assert!(

@@ -50,6 +50,10 @@ pub struct MicrogridParams {
     pub load_pf: f64,
     /// Initial state of charge as a fraction of capacity (clamped to the bounds).
     pub initial_soc_frac: f64,
+    /// Storage inverters are grid-forming: they take up the island's
+    /// instantaneous imbalance on top of their setpoints (see `form_grid`).
+    /// Off, storage follows its setpoint only, like the other units.
+    pub storage_grid_forming: bool,
 }
 
 impl Default for MicrogridParams {
@@ -67,6 +71,7 @@ impl Default for MicrogridParams {
             v_nominal: 230.0,
             load_pf: 0.95,
             initial_soc_frac: 0.5,
+            storage_grid_forming: true,
         }
     }
 }
@@ -274,42 +279,18 @@ impl Microgrid {
                     u.counters.energy_kwh += u.p_kw * dt / 3600.0;
                 }
                 UnitKind::Storage => {
-                    let c = &u.cfg;
-                    let h = dt / 3600.0;
-                    let eff_c = c.eff_charge.get_ref().clamp(0.01, 1.0);
-                    let eff_d = c.eff_discharge.get_ref().clamp(0.01, 1.0);
-                    // Power the state of charge allows over this step.
-                    let max_dis = c
-                        .max_discharge_kw
-                        .min(((u.soc_kwh - c.soc_min_kwh) * eff_d / h).max(0.0));
-                    let max_ch = c
-                        .max_charge_kw
-                        .min(((c.soc_max_kwh - u.soc_kwh) / (eff_c * h)).max(0.0));
+                    // The inverter tracks its setpoint; the state of charge is
+                    // integrated below, once grid-forming has set the power.
+                    let (max_ch, max_dis) = storage_limits(u, dt);
                     let target = finite_or(u.setpoint_kw, 0.0).clamp(-max_ch, max_dis);
                     u.p_kw = ramp_to(u.p_kw, target, ramp, dt).clamp(-max_ch, max_dis);
-                    if u.p_kw >= 0.0 {
-                        u.soc_kwh -= u.p_kw * h / eff_d;
-                        u.counters.energy_kwh += u.p_kw * h;
-                    } else {
-                        u.soc_kwh += -u.p_kw * h * eff_c;
-                        u.counters.charged_kwh += -u.p_kw * h;
-                    }
-                    // Rounding must not carry the state of charge past its bounds.
-                    let (lo, hi) = (
-                        c.soc_min_kwh.min(c.soc_max_kwh),
-                        c.soc_max_kwh.max(c.soc_min_kwh),
-                    );
-                    if u.p_kw > 0.0 {
-                        u.soc_kwh = u.soc_kwh.max(lo);
-                    } else if u.p_kw < 0.0 {
-                        u.soc_kwh = u.soc_kwh.min(hi);
-                    }
                 }
                 UnitKind::Diesel => {
                     step_diesel(u, t, dt, start_delay, f0, f1);
                 }
             }
         }
+        self.form_grid(dt);
         self.balance();
         let h = dt / 3600.0;
         let served = self.supply_kw.clamp(0.0, self.demand_kw);
@@ -319,6 +300,45 @@ impl Microgrid {
         c.unserved_kwh += (self.demand_kw - served) * h;
         c.surplus_kwh += (self.supply_kw - self.demand_kw).max(0.0) * h;
         c.curtailed_kwh = self.units.iter().map(|u| u.counters.curtailed_kwh).sum();
+    }
+
+    /// Grid-forming: in an island the storage inverters hold the balance.
+    /// Whatever the other units and the setpoints leave between demand and
+    /// supply, the storage takes up at once, within its power and state-of-
+    /// charge limits (on top of its setpoint, as a droop response). Only what
+    /// it cannot cover moves the frequency and counts as unserved or surplus.
+    /// Then the state of charge is integrated with the power actually flowed.
+    fn form_grid(&mut self, dt: f64) {
+        let mut residual = self.demand_kw - self.units.iter().map(|u| u.p_kw).sum::<f64>();
+        let grid_forming = self.params.storage_grid_forming;
+        let h = dt / 3600.0;
+        for u in &mut self.units {
+            if u.cfg.kind != UnitKind::Storage {
+                continue;
+            }
+            if grid_forming && u.state != UnitState::Fault {
+                let (max_ch, max_dis) = storage_limits(u, dt);
+                let p = (u.p_kw + residual).clamp(-max_ch, max_dis);
+                residual -= p - u.p_kw;
+                u.p_kw = p;
+            }
+            let c = &u.cfg;
+            let eff_c = c.eff_charge.get_ref().clamp(0.01, 1.0);
+            let eff_d = c.eff_discharge.get_ref().clamp(0.01, 1.0);
+            if u.p_kw >= 0.0 {
+                u.soc_kwh -= u.p_kw * h / eff_d;
+                u.counters.energy_kwh += u.p_kw * h;
+            } else {
+                u.soc_kwh += -u.p_kw * h * eff_c;
+                u.counters.charged_kwh += -u.p_kw * h;
+            }
+            // Rounding must not carry the state of charge past its bounds.
+            let (lo, hi) = (
+                c.soc_min_kwh.min(c.soc_max_kwh),
+                c.soc_max_kwh.max(c.soc_min_kwh),
+            );
+            u.soc_kwh = u.soc_kwh.clamp(lo, hi);
+        }
     }
 
     /// Islanded balance: frequency and voltage move with supply − demand.
@@ -422,6 +442,22 @@ fn step_diesel(u: &mut Unit, t: Timestamp, dt: f64, start_delay: Duration, f0: f
 }
 
 /// Moves `from` toward `to` by at most `rate × dt` (rate 0 = unlimited).
+/// The charge and discharge power a storage unit can take over a step of
+/// `dt` seconds: its power limits, and what its state of charge allows.
+fn storage_limits(u: &Unit, dt: f64) -> (f64, f64) {
+    let c = &u.cfg;
+    let h = dt / 3600.0;
+    let eff_c = c.eff_charge.get_ref().clamp(0.01, 1.0);
+    let eff_d = c.eff_discharge.get_ref().clamp(0.01, 1.0);
+    let max_dis = c
+        .max_discharge_kw
+        .min(((u.soc_kwh - c.soc_min_kwh) * eff_d / h).max(0.0));
+    let max_ch = c
+        .max_charge_kw
+        .min(((c.soc_max_kwh - u.soc_kwh) / (eff_c * h)).max(0.0));
+    (max_ch, max_dis)
+}
+
 fn ramp_to(from: f64, to: f64, rate: f64, dt: f64) -> f64 {
     if rate <= 0.0 || !rate.is_finite() {
         return to;
@@ -538,6 +574,8 @@ mod tests {
         u.eff_charge = Spanned::new(0..0, 0.9);
         u.eff_discharge = Spanned::new(0..0, 0.8);
         let mut mg = grid(vec![u]);
+        // The integration alone: the battery follows its setpoint only.
+        mg.params.storage_grid_forming = false;
         assert_eq!(mg.units[0].soc_kwh, 100.0);
         mg.units[0].setpoint_kw = -40.0;
         mg.advance_to(secs(3600.0));
@@ -560,6 +598,38 @@ mod tests {
         mg.advance_to(secs(7200.0 + 4.0 * 3600.0));
         assert!((mg.units[0].soc_kwh - 20.0).abs() < 1e-6);
         assert_eq!(mg.units[0].p_kw, 0.0);
+    }
+
+    #[test]
+    fn grid_forming_storage_takes_up_the_imbalance_within_its_limits() {
+        let mut pv = unit("pv", UnitKind::Pv);
+        pv.rated_kw = 100.0;
+        let mut b = unit("bess", UnitKind::Storage);
+        b.capacity_kwh = 200.0;
+        b.soc_min_kwh = 20.0;
+        b.soc_max_kwh = 190.0;
+        b.max_charge_kw = 50.0;
+        b.max_discharge_kw = 60.0;
+        let mut mg = grid(vec![pv, b]);
+        mg.irradiance = Profile::Constant(0.0);
+        mg.demand = Profile::Constant(30.0);
+        mg.units[0].setpoint_kw = 0.0;
+        mg.units[1].setpoint_kw = 10.0;
+        mg.advance_to(secs(10.0));
+        // Setpoint 10 kW, demand 30 kW, nothing else: the battery gives 30.
+        assert!(
+            (mg.units[1].p_kw - 30.0).abs() < 1e-9,
+            "{}",
+            mg.units[1].p_kw
+        );
+        assert!((mg.hz - 50.0).abs() < 1e-9);
+        let unserved = mg.counters.unserved_kwh;
+        // Beyond its discharge limit the rest is unserved, and shows in Hz.
+        mg.demand = Profile::Constant(80.0);
+        mg.advance_to(secs(20.0));
+        assert!((mg.units[1].p_kw - 60.0).abs() < 1e-9);
+        assert!(mg.counters.unserved_kwh > unserved);
+        assert!(mg.hz < 50.0);
     }
 
     #[test]

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use gridscada_config::{load_path, Plant, RegisterKind};
-use gridscada_sim::{start, BindMode, Simulator};
+use gridscada_sim::{BindMode, Simulator};
 use gridscada_tagdb::{Clock, ScaledClock, Timestamp};
 use tokio_modbus::client::{tcp, Context, Reader, Writer};
 use tokio_modbus::Slave;
@@ -32,7 +32,16 @@ pub async fn rig(speed: f64) -> Rig {
 
 pub async fn rig_with(plant: Plant, speed: f64) -> Rig {
     let clock = Arc::new(ScaledClock::new(Timestamp::from_millis(NOON), speed));
-    let sim = start(&plant, clock.clone(), BindMode::Ephemeral)
+    // These tests check each unit's own controller against its setpoint, so
+    // the battery does not also form the grid here (that has its own test).
+    let options = gridscada_sim::SimOptions {
+        microgrid: gridscada_sim::MicrogridParams {
+            storage_grid_forming: false,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let sim = gridscada_sim::start_with(&plant, clock.clone(), BindMode::Ephemeral, options)
         .await
         .expect("simulator starts");
     Rig { plant, sim, clock }
