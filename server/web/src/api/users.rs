@@ -49,6 +49,14 @@ pub fn check_user_name(name: &str) -> ApiResult<()> {
     Ok(())
 }
 
+/// The user named `name`, or 404.
+async fn existing_user(s: &WebState, name: &str) -> ApiResult<gridscada_store::User> {
+    s.store
+        .user(name)
+        .await?
+        .ok_or_else(|| ApiError::not_found(format!("no user named '{name}'")))
+}
+
 /// Group names follow the same rule as user names.
 fn check_group_name(group: &str) -> ApiResult<()> {
     check_user_name(group)
@@ -136,11 +144,7 @@ pub async fn update(
     b: JsonBody<UpdateBody>,
 ) -> ApiResult<Json<Value>> {
     let b = body(b)?;
-    let user = s
-        .store
-        .user(&name)
-        .await?
-        .ok_or_else(|| ApiError::not_found(format!("no user named '{name}'")))?;
+    let user = existing_user(&s, &name).await?;
     // Validate everything before changing anything: no partial updates.
     if let Some(group) = &b.group {
         check_group_name(group)?;
@@ -181,11 +185,7 @@ pub async fn update(
         ),
     )
     .await;
-    let user = s
-        .store
-        .user(&name)
-        .await?
-        .ok_or_else(|| ApiError::not_found(format!("no user named '{name}'")))?;
+    let user = existing_user(&s, &name).await?;
     Ok(Json(json!({ "user": user.summary() })))
 }
 
@@ -212,11 +212,7 @@ pub async fn remove(
             "confirmation does not match: send {{\"confirm\": \"{name}\"}}"
         )));
     }
-    let user = s
-        .store
-        .user(&name)
-        .await?
-        .ok_or_else(|| ApiError::not_found(format!("no user named '{name}'")))?;
+    let user = existing_user(&s, &name).await?;
     if user.role == Role::Administrator {
         keep_an_administrator(&s, &name).await?;
     }
@@ -254,11 +250,7 @@ pub async fn password(
             "only administrators may change another user's password",
         ));
     }
-    let user = s
-        .store
-        .user(&name)
-        .await?
-        .ok_or_else(|| ApiError::not_found(format!("no user named '{name}'")))?;
+    let user = existing_user(&s, &name).await?;
     if own {
         let current = b.current_password.clone().unwrap_or_default();
         if !auth::verify_password(current, user.password_hash.clone()).await {
