@@ -236,18 +236,7 @@ impl HorizonOil {
 impl HorizonStorage {
     fn from_value(v: &Value, path: &str) -> Result<Self, InputError> {
         let mut o = Obj::new(v, path)?;
-        let unit = StorageUnit {
-            id: o.string("id")?,
-            soc_kwh: o.num("soc_kwh")?,
-            soc_min_kwh: o.num("soc_min_kwh")?,
-            soc_max_kwh: o.num("soc_max_kwh")?,
-            max_charge_kw: o.num("max_charge_kw")?,
-            max_discharge_kw: o.num("max_discharge_kw")?,
-            eff_charge: o.num("eff_charge")?,
-            eff_discharge: o.num("eff_discharge")?,
-            cycle_cost_per_kwh: o.num("cycle_cost_per_kwh")?,
-            stored_value_per_kwh: 0.0,
-        };
+        let unit = StorageUnit::read_fields(&mut o)?;
         let u = HorizonStorage {
             unit,
             ramp_kw_per_s: opt_nonneg(&mut o, "ramp_kw_per_s")?,

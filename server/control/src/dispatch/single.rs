@@ -206,7 +206,16 @@ impl OilUnit {
 impl StorageUnit {
     pub(crate) fn from_value(v: &Value, path: &str) -> Result<Self, InputError> {
         let mut o = Obj::new(v, path)?;
-        let u = StorageUnit {
+        let mut u = StorageUnit::read_fields(&mut o)?;
+        u.stored_value_per_kwh = o.opt_num("stored_value_per_kwh")?.unwrap_or(0.0);
+        o.finish()?;
+        Ok(u)
+    }
+
+    /// The fields every storage unit has, single-period or horizon; the
+    /// caller reads its own extra keys and finishes the object.
+    pub(crate) fn read_fields(o: &mut Obj<'_>) -> Result<Self, InputError> {
+        Ok(StorageUnit {
             id: o.string("id")?,
             soc_kwh: o.num("soc_kwh")?,
             soc_min_kwh: o.num("soc_min_kwh")?,
@@ -216,10 +225,8 @@ impl StorageUnit {
             eff_charge: o.num("eff_charge")?,
             eff_discharge: o.num("eff_discharge")?,
             cycle_cost_per_kwh: o.num("cycle_cost_per_kwh")?,
-            stored_value_per_kwh: o.opt_num("stored_value_per_kwh")?.unwrap_or(0.0),
-        };
-        o.finish()?;
-        Ok(u)
+            stored_value_per_kwh: 0.0,
+        })
     }
 
     pub(crate) fn validate(&self, path: &str) -> Result<(), InputError> {
