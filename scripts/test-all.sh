@@ -47,7 +47,7 @@ cargo fmt --all -- --check
 step "cargo clippy"
 cargo clippy --workspace --all-targets -- -D warnings
 step "cargo test"
-cargo test --workspace
+cargo test --workspace --no-fail-fast
 
 # --- 5. End-to-end tests against third-party peers ------------------------
 # A release build: scenario replay runs whole simulated days through the
