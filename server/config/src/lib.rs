@@ -8,6 +8,7 @@
 //! [`Plant`]; it opens no sockets, starts no tasks and knows nothing of how the
 //! other crates use the configuration beyond the rules they need checked.
 
+pub mod daily;
 mod diag;
 mod load;
 pub mod model;

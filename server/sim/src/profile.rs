@@ -57,39 +57,7 @@ impl Profile {
     }
 }
 
-/// Hour of day (UTC) of a plant time, in [0, 24).
-pub fn hour_of_day(t: Timestamp) -> f64 {
-    (t.as_millis().rem_euclid(86_400_000)) as f64 / 3_600_000.0
-}
-
-fn interpolate_daily(points: &[(f64, f64)], h: f64) -> f64 {
-    let mut pts: Vec<(f64, f64)> = points.to_vec();
-    pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let Some(&first) = pts.first() else {
-        return 0.0;
-    };
-    let last = pts[pts.len() - 1];
-    if pts.len() == 1 {
-        return first.1;
-    }
-    // Segment containing h, wrapping from the last point to the first + 24 h.
-    for w in pts.windows(2) {
-        if h >= w[0].0 && h <= w[1].0 {
-            return lerp(w[0], w[1], h);
-        }
-    }
-    let wrapped = (first.0 + 24.0, first.1);
-    let hh = if h < first.0 { h + 24.0 } else { h };
-    lerp(last, wrapped, hh)
-}
-
-fn lerp(a: (f64, f64), b: (f64, f64), x: f64) -> f64 {
-    let span = b.0 - a.0;
-    if span <= 0.0 {
-        return a.1;
-    }
-    a.1 + (b.1 - a.1) * (x - a.0) / span
-}
+pub use gridscada_config::daily::{hour_of_day, interpolate_daily};
 
 /// Clear-sky plane-of-array irradiance, W/m²: a half sine from 06:00 to
 /// 18:00 UTC peaking at 1000 W/m² at noon.
