@@ -82,6 +82,7 @@ fn horizon(smoothing: f64) -> HorizonProblem {
         cost_per_kwh: c,
         ramp_kw_per_s: 0.02,
         initial_kw: Some(40.0),
+        relaxed_commitment: false,
     };
     HorizonProblem {
         dt_h: 0.25,

@@ -32,6 +32,10 @@
 //!  "smoothing_cost_per_kw2": 0.001}
 //! ```
 //!
+//! - `relaxed_commitment` (optional, oil, default false): after the first
+//!   period the unit may produce anywhere in `[0, max_kw]`, whatever
+//!   `running` says: the LP relaxation of starts and stops decided outside
+//!   the problem (the live loop's look-ahead uses it).
 //! - `periods[t].available_kw` must give every PV and wind unit's forecast;
 //!   `periods[t].running` optionally overrides an oil unit's `running` in
 //!   period t (the commitment schedule).
@@ -104,6 +108,11 @@ pub struct HorizonOil {
     pub ramp_kw_per_s: f64,
     #[serde(default)]
     pub initial_kw: Option<f64>,
+    /// After the first period the unit may produce anywhere in
+    /// `[0, max_kw]`: the LP relaxation of starts and stops that a rule
+    /// outside the problem decides later.
+    #[serde(default)]
+    pub relaxed_commitment: bool,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -170,6 +179,10 @@ pub struct PeriodResult {
 pub struct HorizonSolution {
     pub status: &'static str,
     pub objective: f64,
+    /// Per storage id: how much the horizon's cost falls per kWh more stored
+    /// at the start (the marginal value of stored energy), per kWh. The live
+    /// loop prices stored energy with it in the single-period LP.
+    pub stored_energy_value_per_kwh: Setpoints,
     pub periods: Vec<PeriodResult>,
     pub solve_ms: f64,
 }
@@ -211,6 +224,7 @@ impl HorizonOil {
             cost_per_kwh: o.num("cost_per_kwh")?,
             ramp_kw_per_s: opt_nonneg(&mut o, "ramp_kw_per_s")?,
             initial_kw: o.opt_num("initial_kw")?,
+            relaxed_commitment: o.opt_bool("relaxed_commitment")?.unwrap_or(false),
         };
         o.finish()?;
         Ok(u)
@@ -472,15 +486,25 @@ impl HorizonProblem {
             .unwrap_or(u.running)
     }
 
+    /// Output bounds of oil unit `k` in period `t`, and whether it counts as
+    /// online (reserve headroom, ramps).
+    fn oil_band(&self, t: usize, k: usize) -> (f64, f64, bool) {
+        let u = &self.oil[k];
+        if u.relaxed_commitment && t > 0 {
+            (0.0, u.max_kw, true)
+        } else if self.running(t, k) {
+            (u.min_kw, u.max_kw, true)
+        } else {
+            (0.0, 0.0, false)
+        }
+    }
+
     /// A clear reason for the obvious infeasibility: in some period the
     /// running oil units' minimum load exceeds demand plus storage charging power.
     pub fn precheck(&self) -> Option<String> {
         let absorb: f64 = self.storage.iter().map(|s| s.unit.max_charge_kw).sum();
         for (t, p) in self.periods.iter().enumerate() {
-            let forced: f64 = (0..self.oil.len())
-                .filter(|&k| self.running(t, k))
-                .map(|k| self.oil[k].min_kw)
-                .sum();
+            let forced: f64 = (0..self.oil.len()).map(|k| self.oil_band(t, k).0).sum();
             if forced > p.demand_kw + absorb + FEAS_TOL {
                 return Some(format!(
                     "period {t}: running oil units must produce at least {forced} kW (minimum \
@@ -499,7 +523,7 @@ impl HorizonProblem {
             return Err(DispatchError::Infeasible(reason));
         }
         let (model, v) = self.build();
-        let mut x = model.solve()?;
+        let (mut x, prices) = model.solve_with_prices()?;
         // Repair: state of charge exactly from the (clipped) flows, then the
         // power balance of each period by moving non-storage variables.
         for (k, s) in self.storage.iter().enumerate() {
@@ -543,9 +567,19 @@ impl HorizonProblem {
                 }
             })
             .collect();
+        // The worth of one more kWh stored now: the price of the starting
+        // state of charge in the first period's dynamics.
+        let stored_energy_value_per_kwh = Setpoints(
+            self.storage
+                .iter()
+                .zip(&v.first_soc_row)
+                .map(|(s, &row)| (s.unit.id.clone(), prices[row]))
+                .collect(),
+        );
         Ok(HorizonSolution {
             status: "optimal",
             objective: model.objective(&x),
+            stored_energy_value_per_kwh,
             periods,
             solve_ms: started.elapsed().as_secs_f64() * 1e3,
         })
@@ -613,12 +647,7 @@ impl HorizonProblem {
             }
             let mut oil_running: Vec<(usize, f64)> = Vec::new();
             for (k, u) in self.oil.iter().enumerate() {
-                let run = self.running(t, k);
-                let (lo, hi) = if run {
-                    (u.min_kw, u.max_kw)
-                } else {
-                    (0.0, 0.0)
-                };
+                let (lo, hi, run) = self.oil_band(t, k);
                 let j = m.var(
                     format!("{} output in period {t}", u.id),
                     lo,
@@ -634,7 +663,7 @@ impl HorizonProblem {
                 let was_running = if t == 0 {
                     u.initial_kw.is_some()
                 } else {
-                    self.running(t - 1, k)
+                    self.oil_band(t - 1, k).2
                 };
                 if let (Some(r), true, true) = (ramp(u.ramp_kw_per_s), run, was_running) {
                     let (coefs, rhs0): (Vec<(usize, f64)>, f64) = match prev_oil[k] {
@@ -703,7 +732,10 @@ impl HorizonProblem {
                 let mut rhs = 0.0;
                 match prev_sto[k] {
                     Some((_, _, ps)) => dyn_row.push((ps, -1.0)),
-                    None => rhs = u.soc_kwh,
+                    None => {
+                        rhs = u.soc_kwh;
+                        v.first_soc_row.push(m.rows.len());
+                    }
                 }
                 m.row(
                     format!("{} state-of-charge dynamics in period {t}", u.id),
@@ -856,6 +888,9 @@ struct HVars {
     shortfall: Vec<Option<usize>>,
     balance_row: Vec<usize>,
     balance_adjust: Vec<Vec<(usize, f64)>>,
+    /// Per storage: the model row of its first-period state-of-charge
+    /// dynamics, whose right-hand side is the starting state of charge.
+    first_soc_row: Vec<usize>,
 }
 
 #[cfg(test)]
@@ -904,6 +939,7 @@ mod tests {
                 cost_per_kwh: 0.35,
                 ramp_kw_per_s: 0.01,
                 initial_kw: Some(60.0),
+                relaxed_commitment: false,
             }],
             storage: vec![HorizonStorage {
                 unit: StorageUnit {
@@ -962,6 +998,55 @@ mod tests {
             assert!((d - prev).abs() <= ramp + 1e-6);
             prev = d;
         }
+    }
+
+    #[test]
+    fn stored_energy_value_is_the_cost_saved_per_kwh_stored() {
+        // Three cases: energy that displaces diesel later, energy that only
+        // meets the terminal value, and energy that averts shedding.
+        let cases = {
+            let mut worth_diesel = day(24);
+            worth_diesel.reserve = None;
+            let mut surplus = worth_diesel.clone();
+            surplus.oil.clear();
+            for p in &mut surplus.periods {
+                p.demand_kw = 10.0;
+            }
+            let mut short = surplus.clone();
+            for p in &mut short.periods {
+                p.demand_kw = 250.0;
+            }
+            [worth_diesel, surplus, short]
+        };
+        for p in cases {
+            let s = p.solve().unwrap();
+            let value = s.stored_energy_value_per_kwh.get("bess1").unwrap();
+            let mut more = p.clone();
+            more.storage[0].unit.soc_kwh += 0.01;
+            let saved = (s.objective - more.solve().unwrap().objective) / 0.01;
+            assert!(
+                (value - saved).abs() <= 1e-3 * saved.abs().max(1.0),
+                "value {value} vs saved {saved} per kWh"
+            );
+            assert!(value >= -1e-9, "{value}");
+        }
+    }
+
+    #[test]
+    fn relaxed_commitment_frees_the_oil_unit_after_the_first_period() {
+        let mut p = day(24);
+        p.reserve = None;
+        p.oil[0].running = false;
+        p.oil[0].initial_kw = None;
+        let fixed = p.solve().unwrap();
+        p.oil[0].relaxed_commitment = true;
+        let relaxed = p.solve().unwrap();
+        check_dynamics(&p, &relaxed);
+        let dg = |s: &HorizonSolution, t: usize| s.periods[t].setpoints_kw.get("dg1").unwrap();
+        assert_eq!(dg(&relaxed, 0), 0.0, "period 0 keeps the commitment");
+        assert!((1..24).all(|t| dg(&fixed, t) == 0.0));
+        assert!((1..24).any(|t| dg(&relaxed, t) > 1.0 && dg(&relaxed, t) < 30.0));
+        assert!(relaxed.objective < fixed.objective);
     }
 
     #[test]

@@ -172,7 +172,17 @@ impl Model {
     /// Solves with clarabel and clips the answer into the bounds. The caller
     /// repairs its equalities and then calls [`Model::check`].
     pub fn solve(&self) -> Result<Vec<f64>, SolveFailure> {
+        self.solve_with_prices().map(|(x, _)| x)
+    }
+
+    /// [`Model::solve`], plus each row's price: how much the optimal
+    /// objective falls per unit increase of the row's right-hand side
+    /// (`−∂objective/∂rhs`, the negated Lagrange multiplier), in `self.rows`
+    /// order. The horizon reads the worth of stored energy off it.
+    pub fn solve_with_prices(&self) -> Result<(Vec<f64>, Vec<f64>), SolveFailure> {
         let n = self.n();
+        // Where each of `self.rows` lands in clarabel's cone order.
+        let mut slot = vec![0usize; self.rows.len()];
         // Rows in cone order: equalities (incl. fixed variables), then inequalities.
         let mut trip: Vec<(usize, usize, f64)> = Vec::new(); // (col, row, val)
         let mut b: Vec<f64> = Vec::new();
@@ -187,8 +197,11 @@ impl Model {
                 b.push(rhs);
                 m += 1;
             };
-        for r in self.rows.iter().filter(|r| r.sense == Sense::Eq) {
-            push_row(&r.coefs, r.rhs, &mut trip, &mut b);
+        for (i, r) in self.rows.iter().enumerate() {
+            if r.sense == Sense::Eq {
+                slot[i] = b.len();
+                push_row(&r.coefs, r.rhs, &mut trip, &mut b);
+            }
         }
         let fixed: Vec<bool> = (0..n)
             .map(|j| self.ub[j] - self.lb[j] <= FIXED_TOL)
@@ -197,8 +210,11 @@ impl Model {
             push_row(&[(j, 1.0)], self.lb[j], &mut trip, &mut b);
         }
         let m_eq = b.len();
-        for r in self.rows.iter().filter(|r| r.sense == Sense::Le) {
-            push_row(&r.coefs, r.rhs, &mut trip, &mut b);
+        for (i, r) in self.rows.iter().enumerate() {
+            if r.sense == Sense::Le {
+                slot[i] = b.len();
+                push_row(&r.coefs, r.rhs, &mut trip, &mut b);
+            }
         }
         for j in (0..n).filter(|&j| !fixed[j]) {
             if self.ub[j].is_finite() {
@@ -250,7 +266,19 @@ impl Model {
                     ));
                 }
                 self.clip(&mut x);
-                Ok(x)
+                // clarabel solves min c·x s.t. Ax + s = b, s ∈ K, whose
+                // multiplier z gives ∂objective/∂b = −z.
+                let prices = slot
+                    .iter()
+                    .map(|&k| {
+                        sol.z
+                            .get(k)
+                            .copied()
+                            .filter(|z| z.is_finite())
+                            .unwrap_or(0.0)
+                    })
+                    .collect();
+                Ok((x, prices))
             }
             SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => {
                 Err(SolveFailure::Infeasible(
@@ -305,6 +333,32 @@ mod tests {
         let sol = m.solve().unwrap();
         assert!((m.objective(&sol) + 1.5).abs() < 1e-9);
         m.check(&sol, FEAS_TOL).unwrap();
+    }
+
+    #[test]
+    fn row_prices_are_the_objective_sensitivity_to_the_rhs() {
+        // min 2x + 5y  s.t. x + y = d, x <= 3: the marginal unit of d costs 5
+        // (y), and one more unit of x's capacity saves 3.
+        let build = |d: f64, cap: f64| {
+            let mut m = Model::default();
+            let x = m.var("x".into(), 0.0, f64::INFINITY, 2.0);
+            let y = m.var("y".into(), 0.0, f64::INFINITY, 5.0);
+            m.row("demand".into(), vec![(x, 1.0), (y, 1.0)], Sense::Eq, d);
+            m.row("cap".into(), vec![(x, 1.0)], Sense::Le, cap);
+            m
+        };
+        let m = build(10.0, 3.0);
+        let (x, prices) = m.solve_with_prices().unwrap();
+        let f = |m: &Model| {
+            let x = m.solve().unwrap();
+            m.objective(&x)
+        };
+        let base = m.objective(&x);
+        let d_demand = f(&build(10.001, 3.0)) - base;
+        let d_cap = f(&build(10.0, 3.001)) - base;
+        assert!((prices[0] + d_demand / 0.001).abs() < 1e-4, "{prices:?}");
+        assert!((prices[1] + d_cap / 0.001).abs() < 1e-4, "{prices:?}");
+        assert!((prices[0] + 5.0).abs() < 1e-6 && (prices[1] - 3.0).abs() < 1e-6);
     }
 
     #[test]
