@@ -587,8 +587,71 @@ pub struct MicrogridConfig {
     pub stale_after_s: f64,
     #[serde(default)]
     pub commitment: CommitmentConfig,
+    /// Look-ahead of the outer loop (absent: each period on its own).
+    #[serde(default)]
+    pub horizon: Option<HorizonConfig>,
     #[serde(rename = "unit")]
     pub units: Vec<UnitConfig>,
+}
+
+/// Points of a daily curve: `[hour, value]` pairs, hour in [0, 24) UTC,
+/// interpolated linearly and wrapping at midnight (see [`crate::daily`]).
+pub type DailyPoints = Spanned<Vec<(f64, f64)>>;
+
+/// The receding horizon: every `resolve_s` the outer loop solves the
+/// multi-period problem over `periods` × `period_s` ahead, from the
+/// measurements now and the forecasts, and prices stored energy in each
+/// period's dispatch with what the horizon says a stored kWh is worth.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct HorizonConfig {
+    /// Number of look-ahead periods.
+    #[serde(default = "default_horizon_periods")]
+    pub periods: Spanned<f64>,
+    /// Length of one look-ahead period, s.
+    #[serde(default = "default_horizon_period_s")]
+    pub period_s: Spanned<f64>,
+    /// How often the horizon is solved again, s (at least the dispatch period).
+    #[serde(default = "default_horizon_resolve_s")]
+    pub resolve_s: Spanned<f64>,
+    /// How fast today's deviation from a daily forecast curve fades towards
+    /// the curve, h (e-folding time of the ratio measured / curve).
+    #[serde(default = "default_blend_h")]
+    pub blend_h: Spanned<f64>,
+    /// Daily demand curve, kW (absent: the demand now persists).
+    #[serde(default)]
+    pub demand_forecast_kw: Option<DailyPoints>,
+    /// Spinning reserve to hold in every look-ahead period.
+    #[serde(default)]
+    pub reserve: Option<ReserveConfig>,
+}
+
+fn default_horizon_periods() -> Spanned<f64> {
+    Spanned::new(0..0, 16.0)
+}
+fn default_horizon_period_s() -> Spanned<f64> {
+    Spanned::new(0..0, 900.0)
+}
+fn default_horizon_resolve_s() -> Spanned<f64> {
+    Spanned::new(0..0, 60.0)
+}
+fn default_blend_h() -> Spanned<f64> {
+    Spanned::new(0..0, 2.0)
+}
+
+/// Spinning reserve: online headroom (running diesels, storage discharge)
+/// must cover these shares of load, PV and wind; a shortfall costs
+/// `shortfall_cost_per_kwh`.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReserveConfig {
+    #[serde(default)]
+    pub load_frac: f64,
+    #[serde(default)]
+    pub pv_frac: f64,
+    #[serde(default)]
+    pub wind_frac: f64,
+    pub shortfall_cost_per_kwh: f64,
 }
 
 fn default_dispatch_period() -> Spanned<f64> {
@@ -682,6 +745,10 @@ pub struct UnitConfig {
     pub eff_discharge: Spanned<f64>,
     #[serde(default)]
     pub cycle_cost_per_kwh: f64,
+    /// PV, wind: daily curve of the power expected to be available, kW, for
+    /// the horizon's forecast (absent: the availability now persists).
+    #[serde(default)]
+    pub forecast_kw: Option<DailyPoints>,
 }
 
 fn default_eff() -> Spanned<f64> {

@@ -699,6 +699,101 @@ fn check_dwell_vs_elcb_latency<'t, 'd>(
     );
 }
 
+/// Longest look-ahead the live loop accepts: a week of 15-minute periods.
+const MAX_HORIZON_PERIODS: f64 = 672.0;
+
+fn check_horizon(cx: &mut Ctx<'_>, mg: &MicrogridConfig, h: &HorizonConfig) {
+    let owner = "[microgrid.horizon]";
+    let n = *h.periods.get_ref();
+    if !(n.fract() == 0.0 && (1.0..=MAX_HORIZON_PERIODS).contains(&n)) {
+        cx.err(
+            0,
+            h.periods.span(),
+            format!("{owner}: periods must be a whole number from 1 to {MAX_HORIZON_PERIODS}"),
+        );
+    }
+    positive(cx, owner, "period_s", &h.period_s);
+    positive(cx, owner, "resolve_s", &h.resolve_s);
+    let dispatch = *mg.dispatch_period_s.get_ref();
+    for (field, v) in [("period_s", &h.period_s), ("resolve_s", &h.resolve_s)] {
+        if *v.get_ref() < dispatch {
+            cx.err(
+                0,
+                v.span(),
+                format!(
+                    "{owner}: {field} ({} s) is shorter than dispatch_period_s ({dispatch} s)",
+                    v.get_ref()
+                ),
+            );
+        }
+    }
+    if !(h.blend_h.get_ref().is_finite() && *h.blend_h.get_ref() > 0.0) {
+        cx.err(
+            0,
+            h.blend_h.span(),
+            format!("{owner}: blend_h must be a positive number of hours"),
+        );
+    }
+    if let Some(points) = &h.demand_forecast_kw {
+        check_daily_points(cx, owner, "demand_forecast_kw", points, f64::INFINITY);
+    }
+    if let Some(r) = &h.reserve {
+        let fracs = [r.load_frac, r.pv_frac, r.wind_frac];
+        let fracs_ok = fracs.iter().all(|f| (0.0..=1.0).contains(f));
+        let cost_ok = r.shortfall_cost_per_kwh.is_finite() && r.shortfall_cost_per_kwh >= 0.0;
+        if !(fracs_ok && cost_ok) {
+            cx.err(
+                0,
+                h.periods.span(),
+                format!(
+                    "{owner}: reserve needs load_frac, pv_frac and wind_frac in [0, 1] \
+                     and a shortfall_cost_per_kwh of 0 or more"
+                ),
+            );
+        }
+    }
+}
+
+/// A daily curve: at least one point, hours distinct and in [0, 24), values
+/// finite, not negative and at most `max`.
+fn check_daily_points(cx: &mut Ctx<'_>, owner: &str, field: &str, points: &DailyPoints, max: f64) {
+    let pts = points.get_ref();
+    if pts.is_empty() {
+        cx.err(0, points.span(), format!("{owner}: {field} has no points"));
+    }
+    let mut seen: Vec<f64> = Vec::new();
+    for (i, &(hour, value)) in pts.iter().enumerate() {
+        let at = format!("{owner}: {field} point {} [{hour}, {value}]", i + 1);
+        if !(hour.is_finite() && (0.0..24.0).contains(&hour)) {
+            cx.err(
+                0,
+                points.span(),
+                format!("{at}: the hour must be in [0, 24)"),
+            );
+        } else if seen.contains(&hour) {
+            cx.err(
+                0,
+                points.span(),
+                format!("{at}: hour {hour} is given twice"),
+            );
+        }
+        seen.push(hour);
+        if !(value.is_finite() && value >= 0.0) {
+            cx.err(
+                0,
+                points.span(),
+                format!("{at}: the value must be 0 or more"),
+            );
+        } else if value > max {
+            cx.err(
+                0,
+                points.span(),
+                format!("{at}: the value exceeds rated_kw {max}"),
+            );
+        }
+    }
+}
+
 fn check_microgrid<'t>(
     cx: &mut Ctx<'_>,
     mg: &MicrogridConfig,
@@ -716,10 +811,24 @@ fn check_microgrid<'t>(
         &num,
         false,
     );
+    if let Some(h) = &mg.horizon {
+        check_horizon(cx, mg, h);
+    }
     let mut ids: HashMap<&str, &Spanned<String>> = HashMap::new();
     for u in &mg.units {
         let id = u.id.get_ref();
         let owner = format!("microgrid unit '{id}'");
+        if let Some(points) = &u.forecast_kw {
+            if matches!(u.kind, UnitKind::Pv | UnitKind::Wind) {
+                check_daily_points(cx, &owner, "forecast_kw", points, u.rated_kw);
+            } else {
+                cx.err(
+                    0,
+                    points.span(),
+                    format!("{owner}: forecast_kw is for PV and wind units only"),
+                );
+            }
+        }
         if let Some(prev) = ids.insert(id, &u.id) {
             let first = cx.place(0, prev.span());
             cx.err(

@@ -300,3 +300,72 @@ write_role = "operator"
     let ok = main.replace("dwell_s = 0.3", "dwell_s = 0.4");
     assert_problems(&ok, tags, &[]);
 }
+
+/// The demo plant with `extra` appended to its main file: the problems.
+fn demo_plant_with(edit: impl Fn(String) -> String) -> Vec<String> {
+    let src = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tags");
+    let dir = tempfile::tempdir().unwrap();
+    for f in fs::read_dir(&src).unwrap() {
+        let f = f.unwrap().path();
+        fs::copy(&f, dir.path().join(f.file_name().unwrap())).unwrap();
+    }
+    let main = dir.path().join("gridscada.toml");
+    fs::write(&main, edit(fs::read_to_string(&main).unwrap())).unwrap();
+    let prefix = dir.path().display().to_string();
+    match load_path(dir.path()) {
+        Ok(_) => vec![],
+        Err(diags) => diags
+            .iter()
+            .map(|d| d.to_string().replace(&prefix, "DIR"))
+            .collect(),
+    }
+}
+
+#[test]
+fn the_demo_plant_looks_ahead_with_forecasts() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tags");
+    let plant = load_path(&dir).unwrap_or_else(|d| panic!("{d:?}"));
+    let mg = plant.microgrid.unwrap();
+    let h = mg.horizon.expect("the demo plant has a horizon");
+    assert_eq!(*h.periods.get_ref(), 16.0);
+    // Integers and floats both read as numbers.
+    assert_eq!(h.demand_forecast_kw.unwrap().get_ref()[0], (0.0, 61.0));
+    assert!(mg.units[0].forecast_kw.is_some());
+}
+
+#[test]
+fn horizon_settings_and_forecast_curves_are_checked() {
+    let got = demo_plant_with(|s| {
+        s.replace("periods = 16\n", "periods = 2.5\n")
+            .replace("resolve_s = 60.0", "resolve_s = 1.0")
+            .replace("[0, 61], [2, 60]", "[0, 61], [0, 60]")
+            .replace("[12, 95]", "[12, 195]")
+            .replace("[18, 0],\n]", "[24, 0],\n]")
+    });
+    let want = [
+        "periods must be a whole number from 1 to 672",
+        "resolve_s (1 s) is shorter than dispatch_period_s (5 s)",
+        "demand_forecast_kw point 2 [0, 60]: hour 0 is given twice",
+        "microgrid unit 'pv1': forecast_kw point 7 [12, 195]: the value exceeds rated_kw 100",
+        "microgrid unit 'pv1': forecast_kw point 13 [24, 0]: the hour must be in [0, 24)",
+    ];
+    assert_eq!(got.len(), want.len(), "{got:#?}");
+    for w in want {
+        assert!(
+            got.iter()
+                .any(|g| g.starts_with("DIR/gridscada.toml:") && g.contains(w)),
+            "no '{w}' in {got:#?}"
+        );
+    }
+    // A forecast on a storage unit is refused by name.
+    let got = demo_plant_with(|s| {
+        s.replace(
+            "cycle_cost_per_kwh = 0.02\n",
+            "cycle_cost_per_kwh = 0.02\nforecast_kw = [[0, 1]]\n",
+        )
+    });
+    assert!(
+        got.len() == 1 && got[0].contains("forecast_kw is for PV and wind units only"),
+        "{got:#?}"
+    );
+}

@@ -498,6 +498,7 @@ mod tests {
             eff_charge: Spanned::new(0..0, 0.95),
             eff_discharge: Spanned::new(0..0, 0.95),
             cycle_cost_per_kwh: 0.0,
+            forecast_kw: None,
         }
     }
 
@@ -508,6 +509,7 @@ mod tests {
             demand_tag: Spanned::new(0..0, "MG.Load.P_kW".into()),
             stale_after_s: 15.0,
             commitment: Default::default(),
+            horizon: None,
             units,
         };
         let mut mg = Microgrid::new(&cfg, MicrogridParams::default(), Timestamp::from_millis(0));

@@ -24,6 +24,7 @@ use tokio::sync::{mpsc, watch};
 use gridscada_config::{MicrogridConfig, UnitConfig, UnitIo, UnitKind};
 use gridscada_tagdb::{Clock, TagDb, TagWriter, Timestamp, Value};
 
+use super::lookahead::{horizon_problem, plan, HorizonPlan};
 use super::rules::{commit_diesels, fallback_dispatch, DieselState};
 use super::single::{DispatchProblem, OilUnit, RenewableUnit, StorageUnit};
 use super::{DispatchError, Setpoints};
@@ -63,6 +64,8 @@ pub struct DispatchStatus {
     pub solve_ms: Option<f64>,
     /// Writes the field did not confirm in this period.
     pub write_failures: Vec<String>,
+    /// The look-ahead plan in force (with `[microgrid.horizon]` only).
+    pub horizon: Option<HorizonPlan>,
 }
 
 impl Default for DispatchStatus {
@@ -79,6 +82,7 @@ impl Default for DispatchStatus {
             objective: None,
             solve_ms: None,
             write_failures: Vec::new(),
+            horizon: None,
         }
     }
 }
@@ -253,6 +257,12 @@ pub struct Dispatcher {
     /// Run commands the field confirmed.
     run_written: HashMap<String, bool>,
     policy: DispatchPolicy,
+    /// The last look-ahead plan (made every `resolve_s`), and which diesels
+    /// ran when it was made.
+    plan: Option<HorizonPlan>,
+    plan_running: Vec<bool>,
+    /// Setpoints the field accepted last period: where the plan's ramps start.
+    last_setpoints: Setpoints,
 }
 
 /// One measurement: the value, or why it cannot be used.
@@ -295,6 +305,9 @@ impl Dispatcher {
             first: true,
             run_written: HashMap::new(),
             policy: DispatchPolicy::Optimal,
+            plan: None,
+            plan_running: Vec::new(),
+            last_setpoints: Setpoints::default(),
         }
     }
 
@@ -472,6 +485,7 @@ impl Dispatcher {
             .map(|u| u.available_kw)
             .sum();
         let soc_frac = (soc_known && cap_sum > 0.0).then(|| soc_sum / cap_sum);
+        let mut commitment_changed = false;
         if let Some(dec) = commit_diesels(
             &self.cfg.commitment,
             now,
@@ -484,6 +498,7 @@ impl Dispatcher {
                 d.run = dec.run;
                 d.since = now;
             }
+            commitment_changed = true;
             notices.push(DispatchNotice::Event {
                 at: now,
                 message: format!(
@@ -503,6 +518,25 @@ impl Dispatcher {
                 .is_some_and(|d| d.run);
             let meas = measured_running.get(&o.id).copied();
             o.running = cmd && meas.unwrap_or(cmd);
+        }
+
+        // Look ahead when a plan is due, and price stored energy with it.
+        if self.policy == DispatchPolicy::Optimal && problems.is_empty() {
+            self.look_ahead(&problem, now, commitment_changed, &mut notices);
+        }
+        // A running diesel stops only once the battery is charged (the
+        // commitment rule, which the plan relaxes away), so while one runs a
+        // stored kWh is worth at least the fixed estimate: storing surplus
+        // then shortens the diesel's run.
+        let diesel_committed = self.diesels.iter().any(|d| d.run);
+        for s in &mut problem.storage {
+            if let Some(v) = self.planned_value(&s.id, now) {
+                s.stored_value_per_kwh = if diesel_committed {
+                    v.max(s.stored_value_per_kwh)
+                } else {
+                    v
+                };
+            }
         }
 
         // Solve, or fall back.
@@ -574,9 +608,13 @@ impl Dispatcher {
             reason = Some(format!("write failed: {}", failures.join("; ")));
             st.mode = DispatchMode::Fallback;
         }
+        if failures.is_empty() {
+            self.last_setpoints = st.setpoints_kw.clone();
+        }
         st.write_failures = failures;
         st.reason = reason.clone();
         st.inputs = Some(problem);
+        st.horizon = self.plan.clone();
 
         // Alarm and events on transitions (none when the rule is the policy).
         let mode = match self.policy {
@@ -616,6 +654,84 @@ impl Dispatcher {
         }
         self.first = false;
         (st, notices)
+    }
+
+    /// Makes a new plan when none exists, the last is `resolve_s` old, or the
+    /// diesel commitment just changed; events when planning starts failing
+    /// and when it recovers.
+    fn look_ahead(
+        &mut self,
+        measured: &DispatchProblem,
+        now: Timestamp,
+        commitment_changed: bool,
+        notices: &mut Vec<DispatchNotice>,
+    ) {
+        let Some(h) = self.cfg.horizon.clone() else {
+            return;
+        };
+        let running: Vec<bool> = measured.oil.iter().map(|o| o.running).collect();
+        let due = match &self.plan {
+            None => true,
+            Some(p) => {
+                commitment_changed
+                    || running != self.plan_running
+                    || now < p.at
+                    || now.since(p.at).as_secs_f64() >= *h.resolve_s.get_ref()
+            }
+        };
+        if !due {
+            return;
+        }
+        let cfg = &self.cfg;
+        let terminal = |id: &str| {
+            cfg.units
+                .iter()
+                .find(|u| u.id.get_ref() == id)
+                .map_or(0.0, |u| stored_energy_value(cfg, u))
+        };
+        let problem = horizon_problem(cfg, &h, now, measured, &self.last_setpoints, &terminal);
+        let new = plan(&problem, now);
+        let was_ok = self.plan.as_ref().is_none_or(|p| p.status == "optimal");
+        match (was_ok, new.status == "optimal") {
+            (true, false) => {
+                let r = new.reason.clone().unwrap_or_default();
+                tracing::warn!("dispatch look-ahead failed: {r}");
+                notices.push(DispatchNotice::Event {
+                    at: now,
+                    message: format!(
+                        "dispatch look-ahead failed ({r}); stored energy priced at the fixed estimate"
+                    ),
+                });
+            }
+            (false, true) => notices.push(DispatchNotice::Event {
+                at: now,
+                message: "dispatch look-ahead planning again".into(),
+            }),
+            _ => {}
+        }
+        self.plan = Some(new);
+        self.plan_running = running;
+    }
+
+    /// What the plan says a stored kWh in `id` is worth, while the plan is
+    /// optimal and no older than three re-plan intervals. Capped below the
+    /// price of shedding: a shortfall the forecast only expects later never
+    /// makes the dispatch shed now to save energy for it.
+    fn planned_value(&self, id: &str, now: Timestamp) -> Option<f64> {
+        let h = self.cfg.horizon.as_ref()?;
+        let p = self.plan.as_ref().filter(|p| p.status == "optimal")?;
+        let fresh = now >= p.at && now.since(p.at).as_secs_f64() <= 3.0 * *h.resolve_s.get_ref();
+        let eff_d = self
+            .cfg
+            .units
+            .iter()
+            .find(|u| u.id.get_ref() == id)
+            .map_or(1.0, |u| *u.eff_discharge.get_ref());
+        let cap = 0.9 * self.cfg.voll_per_kwh * eff_d;
+        fresh
+            .then(|| p.stored_energy_value_per_kwh.get(id))
+            .flatten()
+            .map(|v| v.min(cap))
     }
 
     fn apply_fallback(&self, problem: &DispatchProblem, st: &mut DispatchStatus) {
@@ -848,6 +964,115 @@ cost_per_kwh = 0.35
         assert!(notices
             .iter()
             .any(|n| matches!(n, DispatchNotice::Alarm { active: false, .. })));
+    }
+
+    /// The fixture's plant with a look-ahead whose demand curve is `demand`.
+    fn with_horizon(demand: &str) -> MicrogridConfig {
+        toml::from_str(&format!(
+            "{CFG}\n[horizon]\nperiods = 16\nperiod_s = 900.0\nresolve_s = 60.0\n\
+             blend_h = 2.0\ndemand_forecast_kw = {demand}\n"
+        ))
+        .unwrap()
+    }
+
+    const FIVE_PM: i64 = 17 * 3_600_000;
+
+    #[tokio::test]
+    async fn look_ahead_charges_from_the_running_diesel_before_an_evening_peak() {
+        // 17:00, diesel running, 60 kW demand, no sun, battery at 40 kWh.
+        // The forecast peak of 200 kW at 19:00-20:00 exceeds the diesel's
+        // 150 kW plus what 40 kWh can give: energy stored now averts shedding.
+        let peak = "[[0, 60], [17, 60], [18.5, 200], [20.5, 200], [21, 60]]";
+        let now = Timestamp::from_millis(FIVE_PM);
+        let run = |cfg: MicrogridConfig| async move {
+            let db = db(&cfg);
+            let w = FakeWriter {
+                db: db.clone(),
+                now: Mutex::new(now),
+                fail: Mutex::new(None),
+                log: Mutex::new(Vec::new()),
+            };
+            plant(&db, now, 60.0, 0.0, 40.0, true);
+            let mut d = Dispatcher::new(cfg, now);
+            d.step(&db, &w, now).await
+        };
+        let (ahead, notices) = run(with_horizon(peak)).await;
+        assert_eq!(ahead.mode, DispatchMode::Optimal, "{:?}", ahead.reason);
+        let plan = ahead.horizon.as_ref().expect("a plan");
+        assert_eq!(plan.status, "optimal", "{:?}", plan.reason);
+        assert_eq!(plan.periods, 16);
+        assert_eq!(plan.demand_kw[0], 60.0);
+        assert!(
+            plan.demand_kw.iter().any(|d| *d > 190.0),
+            "{:?}",
+            plan.demand_kw
+        );
+        let value = plan.stored_energy_value_per_kwh.get("bess1").unwrap();
+        assert!(value > 1.0, "stored energy averts shedding: {value}");
+        // The dispatch priced stored energy at the plan's value (capped) and
+        // charges the battery from the diesel at full rate.
+        let priced = ahead.inputs.as_ref().unwrap().storage[0].stored_value_per_kwh;
+        assert!((priced - value.min(0.9 * 5.0 * 0.95)).abs() < 1e-9);
+        let bess = ahead.setpoints_kw.get("bess1").unwrap();
+        let dg = ahead.setpoints_kw.get("dg1").unwrap();
+        assert!(
+            (bess + 50.0).abs() < 1e-3,
+            "battery charges at 50 kW: {bess}"
+        );
+        assert!((dg - 110.0).abs() < 1e-3, "diesel 60 + 50 kW: {dg}");
+        assert!(notices
+            .iter()
+            .all(|n| !matches!(n, DispatchNotice::Alarm { .. })));
+        // Without the look-ahead the same moment discharges the battery to
+        // the diesel's minimum load instead.
+        let (alone, _) = run(config()).await;
+        assert!(alone.horizon.is_none());
+        assert!(alone.setpoints_kw.get("bess1").unwrap() > 0.0, "{alone:?}");
+    }
+
+    #[tokio::test]
+    async fn the_plan_is_renewed_every_resolve_interval_and_a_failed_one_is_reported() {
+        // The diesel just restarted (held on by its minimum run time) meets
+        // 10 kW of demand, and the battery is all but full. This 5 s period
+        // can store the excess; a 15-minute look-ahead period cannot, so no
+        // plan exists.
+        let cfg = with_horizon("[[0, 60]]");
+        let db = db(&cfg);
+        let t0 = Timestamp::from_millis(FIVE_PM);
+        let w = FakeWriter {
+            db: db.clone(),
+            now: Mutex::new(t0),
+            fail: Mutex::new(None),
+            log: Mutex::new(Vec::new()),
+        };
+        plant(&db, t0, 10.0, 0.0, 189.9, true);
+        let mut d = Dispatcher::new(cfg, t0);
+        let (st, notices) = d.step(&db, &w, t0).await;
+        let plan = st.horizon.as_ref().unwrap();
+        assert_eq!(plan.status, "infeasible", "{plan:?}");
+        assert!(notices.iter().any(|n| matches!(n,
+            DispatchNotice::Event { message, .. } if message.contains("look-ahead failed"))));
+        // The dispatch itself goes on, optimal, with the fixed estimate.
+        assert_eq!(st.mode, DispatchMode::Optimal, "{:?}", st.reason);
+        let fixed = stored_energy_value(&d.cfg, &d.cfg.units[1]);
+        assert_eq!(
+            st.inputs.as_ref().unwrap().storage[0].stored_value_per_kwh,
+            fixed
+        );
+        // 5 s later: no new plan yet, no repeated event.
+        let t1 = t0.add(Duration::from_secs(5));
+        plant(&db, t1, 10.0, 0.0, 189.9, true);
+        let (st, notices) = d.step(&db, &w, t1).await;
+        assert_eq!(st.horizon.as_ref().unwrap().at, t0);
+        assert!(notices.is_empty(), "{notices:?}");
+        // A minute on, demand is back: planned again, and said so.
+        let t2 = t0.add(Duration::from_secs(60));
+        plant(&db, t2, 60.0, 0.0, 20.0, true);
+        let (st, notices) = d.step(&db, &w, t2).await;
+        let plan = st.horizon.as_ref().unwrap();
+        assert_eq!((plan.at, plan.status.as_str()), (t2, "optimal"), "{plan:?}");
+        assert!(notices.iter().any(|n| matches!(n,
+            DispatchNotice::Event { message, .. } if message.contains("planning again"))));
     }
 
     #[tokio::test]

@@ -3,7 +3,8 @@
 //! **Owns:** the dispatch problem (seed section 3, eqs. 1-7, extended as in
 //! `docs/DISPATCH.md`): the single-period LP the live loop solves every
 //! dispatch period ([`single`]), the multi-period look-ahead LP/QP
-//! ([`horizon`]), both solved in-process with clarabel ([`lp`]); reading them
+//! ([`horizon`]), both solved in-process with clarabel ([`lp`]); the live
+//! loop's receding horizon with its forecasts ([`lookahead`]); reading them
 //! from untrusted JSON with located errors ([`input`]); the rule-based
 //! fallback dispatch and the diesel commitment rule ([`rules`]); and the live
 //! driver that reads the tag database, solves, and writes setpoints ([`driver`]).
@@ -16,6 +17,7 @@
 pub mod driver;
 pub mod horizon;
 mod input;
+pub mod lookahead;
 mod lp;
 pub mod rules;
 pub mod single;
