@@ -193,7 +193,46 @@ export default {
             ? [h('dt', { text: 'Write failures' }), h('dd', { class: 'error', text: Array.isArray(d.write_failures) ? d.write_failures.join('; ') : String(d.write_failures) })] : null),
         h('table', { class: 'data', id: 'dispatch-setpoints' },
           h('thead', {}, h('tr', {}, h('th', { scope: 'col', text: 'Unit' }), h('th', { scope: 'col', class: 'num', text: 'Setpoint' }))),
-          h('tbody', {}, sp.map(([u, kw]) => h('tr', {}, h('td', { text: u }), h('td', { class: 'num', text: typeof kw === 'number' ? `${fmtNumber(kw)} kW` : String(kw) }))))));
+          h('tbody', {}, sp.map(([u, kw]) => h('tr', {}, h('td', { text: u }), h('td', { class: 'num', text: typeof kw === 'number' ? `${fmtNumber(kw)} kW` : String(kw) }))))),
+        d.horizon ? drawPlan(d.horizon) : null);
+    }
+
+    // The look-ahead plan: forecasts, planned state of charge and diesel per
+    // period, and what a stored kWh is worth to the dispatch until the next plan.
+    function drawPlan(p) {
+      const num = (v, unit, digits = 1) => typeof v === 'number' ? `${fmtNumber(v, digits)}${unit}` : '—';
+      const n = Number(p.periods) || 0;
+      const periodMin = (Number(p.period_s) || 0) / 60;
+      const stores = Object.keys(p.soc_kwh || {});
+      const diesels = Object.keys(p.diesel_kw || {});
+      const values = Object.entries(p.stored_energy_value_per_kwh || {});
+      const ok = p.status === 'optimal';
+      const rows = [];
+      for (let t = 0; t < n; t++) {
+        const mins = t * periodMin;
+        rows.push(h('tr', {},
+          h('td', { text: `+${Math.floor(mins / 60)}:${String(Math.round(mins % 60)).padStart(2, '0')}` }),
+          h('td', { class: 'num', text: num(p.demand_kw?.[t], ' kW') }),
+          h('td', { class: 'num', text: num(p.renewable_kw?.[t], ' kW') }),
+          stores.map((id) => h('td', { class: 'num', text: num(p.soc_kwh[id]?.[t], ' kWh') })),
+          diesels.map((id) => h('td', { class: 'num', text: num(p.diesel_kw[id]?.[t], ' kW') }))));
+      }
+      return h('section', { id: 'dispatch-plan', 'aria-labelledby': 'mg-plan' },
+        h('h3', { id: 'mg-plan', text: `Look-ahead plan (${fmtNumber(n * periodMin / 60, 1)} h)` }),
+        h('dl', { class: 'kv' },
+          h('dt', { text: 'Planned at' }), h('dd', { text: fmtTime(p.at) }),
+          h('dt', { text: 'Status' }), h('dd', {}, h('span', { class: ['badge', ok ? 'badge-ok' : 'badge-warn'], text: String(p.status || '—').toUpperCase() })),
+          p.reason ? [h('dt', { text: 'Reason' }), h('dd', { text: String(p.reason) })] : null,
+          values.map(([id, v]) => [h('dt', { text: `Value of stored energy (${id})` }), h('dd', { text: `${num(v, '', 3)} per kWh` })])),
+        ok && n ? h('table', { class: 'data', id: 'dispatch-plan-table' },
+          h('caption', { text: 'Forecast and plan per period' }),
+          h('thead', {}, h('tr', {},
+            h('th', { scope: 'col', text: 'From now' }),
+            h('th', { scope: 'col', class: 'num', text: 'Demand' }),
+            h('th', { scope: 'col', class: 'num', text: 'PV + wind' }),
+            stores.map((id) => h('th', { scope: 'col', class: 'num', text: `${id} SoC` })),
+            diesels.map((id) => h('th', { scope: 'col', class: 'num', text: `${id}` })))),
+          h('tbody', {}, rows)) : null);
     }
 
     loadDispatch();
