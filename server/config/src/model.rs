@@ -642,7 +642,7 @@ fn default_blend_h() -> Spanned<f64> {
 /// Spinning reserve: online headroom (running diesels, storage discharge)
 /// must cover these shares of load, PV and wind; a shortfall costs
 /// `shortfall_cost_per_kwh`.
-#[derive(Debug, Clone, Deserialize, Serialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct ReserveConfig {
     #[serde(default)]

@@ -19,8 +19,13 @@ fn problems(main: &str, tags: &str) -> Vec<String> {
     let dir = tempfile::tempdir().unwrap();
     fs::write(dir.path().join("gridscada.toml"), main).unwrap();
     fs::write(dir.path().join("tags.toml"), tags).unwrap();
-    let prefix = dir.path().display().to_string();
-    match load_path(dir.path()) {
+    problems_in(dir.path())
+}
+
+/// Loads the plant in `dir`; the diagnostics with the folder replaced by `DIR`.
+fn problems_in(dir: &std::path::Path) -> Vec<String> {
+    let prefix = dir.display().to_string();
+    match load_path(dir) {
         Ok(_) => vec![],
         Err(diags) => diags
             .iter()
@@ -301,7 +306,7 @@ write_role = "operator"
     assert_problems(&ok, tags, &[]);
 }
 
-/// The demo plant with `extra` appended to its main file: the problems.
+/// The demo plant with its main file edited by `edit`: the problems.
 fn demo_plant_with(edit: impl Fn(String) -> String) -> Vec<String> {
     let src = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tags");
     let dir = tempfile::tempdir().unwrap();
@@ -311,14 +316,7 @@ fn demo_plant_with(edit: impl Fn(String) -> String) -> Vec<String> {
     }
     let main = dir.path().join("gridscada.toml");
     fs::write(&main, edit(fs::read_to_string(&main).unwrap())).unwrap();
-    let prefix = dir.path().display().to_string();
-    match load_path(dir.path()) {
-        Ok(_) => vec![],
-        Err(diags) => diags
-            .iter()
-            .map(|d| d.to_string().replace(&prefix, "DIR"))
-            .collect(),
-    }
+    problems_in(dir.path())
 }
 
 #[test]

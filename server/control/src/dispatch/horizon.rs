@@ -127,17 +127,9 @@ pub struct HorizonStorage {
     pub terminal_value_per_kwh: f64,
 }
 
-/// Spinning reserve requirement.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ReserveRule {
-    #[serde(default)]
-    pub load_frac: f64,
-    #[serde(default)]
-    pub pv_frac: f64,
-    #[serde(default)]
-    pub wind_frac: f64,
-    pub shortfall_cost_per_kwh: f64,
-}
+/// Spinning reserve requirement: the same rule as `[microgrid.horizon]
+/// reserve` in the plant configuration.
+pub use gridscada_config::ReserveConfig as ReserveRule;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct HorizonProblem {

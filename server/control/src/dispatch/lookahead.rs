@@ -28,7 +28,7 @@ use gridscada_config::{HorizonConfig, MicrogridConfig};
 use gridscada_tagdb::Timestamp;
 
 use super::horizon::{
-    HorizonOil, HorizonProblem, HorizonRenewable, HorizonStorage, PeriodForecast, ReserveRule,
+    HorizonOil, HorizonProblem, HorizonRenewable, HorizonStorage, PeriodForecast,
 };
 use super::single::{DispatchProblem, StorageUnit};
 use super::{DispatchError, Setpoints};
@@ -197,12 +197,7 @@ pub fn horizon_problem(
                 terminal_value_per_kwh: terminal_value(&s.id).max(0.0),
             })
             .collect(),
-        reserve: h.reserve.as_ref().map(|r| ReserveRule {
-            load_frac: r.load_frac,
-            pv_frac: r.pv_frac,
-            wind_frac: r.wind_frac,
-            shortfall_cost_per_kwh: r.shortfall_cost_per_kwh,
-        }),
+        reserve: h.reserve.clone(),
         max_renewable_share: None,
         smoothing_cost_per_kw2: 0.0,
     }
