@@ -876,15 +876,19 @@ cost_per_kwh = 0.35
             .map(|(_, v)| v.clone())
     }
 
+    fn fake_writer(db: &Arc<TagDb>, now: Timestamp) -> FakeWriter {
+        FakeWriter {
+            db: db.clone(),
+            now: Mutex::new(now),
+            fail: Mutex::new(None),
+            log: Mutex::new(Vec::new()),
+        }
+    }
+
     fn fixture() -> (MicrogridConfig, Arc<TagDb>, FakeWriter) {
         let cfg = config();
         let db = db(&cfg);
-        let w = FakeWriter {
-            db: db.clone(),
-            now: Mutex::new(Timestamp::from_millis(0)),
-            fail: Mutex::new(None),
-            log: Mutex::new(Vec::new()),
-        };
+        let w = fake_writer(&db, Timestamp::from_millis(0));
         (cfg, db, w)
     }
 
@@ -986,12 +990,7 @@ cost_per_kwh = 0.35
         let now = Timestamp::from_millis(FIVE_PM);
         let run = |cfg: MicrogridConfig| async move {
             let db = db(&cfg);
-            let w = FakeWriter {
-                db: db.clone(),
-                now: Mutex::new(now),
-                fail: Mutex::new(None),
-                log: Mutex::new(Vec::new()),
-            };
+            let w = fake_writer(&db, now);
             plant(&db, now, 60.0, 0.0, 40.0, true);
             let mut d = Dispatcher::new(cfg, now);
             d.step(&db, &w, now).await
@@ -1039,12 +1038,7 @@ cost_per_kwh = 0.35
         let cfg = with_horizon("[[0, 60]]");
         let db = db(&cfg);
         let t0 = Timestamp::from_millis(FIVE_PM);
-        let w = FakeWriter {
-            db: db.clone(),
-            now: Mutex::new(t0),
-            fail: Mutex::new(None),
-            log: Mutex::new(Vec::new()),
-        };
+        let w = fake_writer(&db, t0);
         plant(&db, t0, 10.0, 0.0, 189.9, true);
         let mut d = Dispatcher::new(cfg, t0);
         let (st, notices) = d.step(&db, &w, t0).await;
