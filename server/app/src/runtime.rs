@@ -317,6 +317,7 @@ impl Stack {
             clock.clone(),
         ));
         let mut panels = Vec::new();
+        let mut retained = sinks::load_panel_retained(&store).await;
         for panel in &plant.panels {
             let (cmd_tx, cmd_rx) = mpsc::channel(16);
             let (status_tx, status_rx) = watch::channel(PanelStatus::initial(panel));
@@ -329,7 +330,14 @@ impl Stack {
                 cmd_rx,
                 status_tx,
                 panel_notices_tx.clone(),
+                retained.remove(&id),
             );
+            tasks.spawn(sinks::panel_retained(
+                store.clone(),
+                id.clone(),
+                status_rx.clone(),
+                clock.clone(),
+            ));
             let label = id.clone();
             tasks.spawn(async move {
                 if let Err(e) = driver.await {

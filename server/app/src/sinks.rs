@@ -10,7 +10,7 @@ use std::time::Duration;
 use gridscada_alarms::AlarmEngine;
 use gridscada_config::Plant;
 use gridscada_control::dispatch::{self, DispatchMode, DispatchNotice, DispatchStatus};
-use gridscada_control::fault_isolation::PanelNotice;
+use gridscada_control::fault_isolation::{PanelNotice, PanelStatus, Retained};
 use gridscada_store::{
     HistorianHandle, NewDispatch, NewEvent, RecordPolicy, Recorder, RetentionPolicy, Store,
 };
@@ -111,6 +111,51 @@ fn system_alarm(
     if let Err(e) = r {
         tracing::error!(%key, error = %e, "system alarm");
     }
+}
+
+/// Saves what a panel's sequence must carry across a restart (mode, faulty
+/// zones, lockout) each time it changes, so the next start takes it over.
+/// A failed save is retried with the next change and logged.
+pub async fn panel_retained(
+    store: Store,
+    panel: String,
+    mut status: watch::Receiver<PanelStatus>,
+    clock: Arc<dyn Clock>,
+) {
+    // The channel's first value is a placeholder from before the sequence
+    // started (it would overwrite what was saved): only changes are saved.
+    let mut saved: Option<Retained> = None;
+    while status.changed().await.is_ok() {
+        let r = status.borrow_and_update().retained.clone();
+        if saved.as_ref() != Some(&r) {
+            let json = serde_json::to_value(&r).unwrap_or_default();
+            match store.save_panel_state(&panel, &json, clock.now()).await {
+                Ok(()) => saved = Some(r),
+                Err(e) => tracing::error!(%panel, error = %e, "could not save the panel's state"),
+            }
+        }
+    }
+}
+
+/// What the previous run left for each panel (by id); unreadable entries
+/// are logged and skipped, so that panel starts fresh.
+pub async fn load_panel_retained(store: &Store) -> HashMap<String, Retained> {
+    let rows = match store.panel_states().await {
+        Ok(rows) => rows,
+        Err(e) => {
+            tracing::error!(error = %e, "could not read the panels' saved states; they start fresh");
+            return HashMap::new();
+        }
+    };
+    rows.into_iter()
+        .filter_map(|(id, json)| match serde_json::from_value::<Retained>(json) {
+            Ok(r) => Some((id, r)),
+            Err(e) => {
+                tracing::error!(panel = %id, error = %e, "unreadable saved panel state; it starts fresh");
+                None
+            }
+        })
+        .collect()
 }
 
 /// Panel notices: events to the log, alarm conditions to the alarm engine

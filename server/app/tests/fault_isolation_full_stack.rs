@@ -106,6 +106,7 @@ impl Stack {
                 cmd_rx,
                 status_tx,
                 notices_tx.clone(),
+                None,
             ));
             panels.push((
                 p.id.get_ref().clone(),

@@ -46,6 +46,7 @@ mod dispatch;
 mod error;
 mod events;
 mod historian;
+mod panels;
 mod recorder;
 mod store;
 mod users;

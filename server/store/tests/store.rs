@@ -787,6 +787,24 @@ async fn dispatch_records(db: TestDb) {
 }
 both_backends!(dispatch, dispatch_records);
 
+async fn panel_states_survive(db: TestDb) {
+    let s = &db.store;
+    assert!(s.panel_states().await.unwrap().is_empty());
+    let a = serde_json::json!({"mode": "auto", "faulty": [2], "lockout": false});
+    let b = serde_json::json!({"mode": "manual", "faulty": [], "lockout": true});
+    s.save_panel_state("ss1", &a, ts(1000)).await.unwrap();
+    s.save_panel_state("css1", &b, ts(1000)).await.unwrap();
+    // A later save replaces the earlier one.
+    let a2 = serde_json::json!({"mode": "auto", "faulty": [], "lockout": false});
+    s.save_panel_state("ss1", &a2, ts(2000)).await.unwrap();
+    assert_eq!(
+        s.panel_states().await.unwrap(),
+        vec![("css1".to_string(), b), ("ss1".to_string(), a2)]
+    );
+    db.cleanup().await;
+}
+both_backends!(panel_states, panel_states_survive);
+
 async fn wait_for(what: &str, mut cond: impl FnMut() -> bool) {
     for _ in 0..1000 {
         if cond() {

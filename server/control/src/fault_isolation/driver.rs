@@ -21,8 +21,8 @@ use serde::Serialize;
 use tokio::sync::{mpsc, oneshot, watch};
 
 use super::machine::{
-    Breaker, CommandError, Input, Metrics, Mode, OperatorCommand, Output, Reading, Sequence,
-    Settings, Snapshot, Timer,
+    Breaker, CommandError, Input, Metrics, Mode, OperatorCommand, Output, Reading, Retained,
+    Sequence, Settings, Snapshot, Timer,
 };
 
 /// An operator command for one panel, with the user for the audit trail.
@@ -93,6 +93,10 @@ pub struct PanelStatus {
     /// Every signal of the panel has Good quality.
     pub comm_ok: bool,
     pub last_sequence: Metrics,
+    /// What must survive a restart; the application saves it when it changes
+    /// and hands it back to [`run_panel`] on the next start.
+    #[serde(skip)]
+    pub retained: Retained,
 }
 
 impl PanelStatus {
@@ -124,6 +128,7 @@ impl PanelStatus {
             lockout: false,
             comm_ok: false,
             last_sequence: seq.metrics().clone(),
+            retained: seq.retained(),
         }
     }
 }
@@ -218,6 +223,11 @@ impl Ids {
 /// confirmation timeout (in wall time, `clock.to_wall`) counts as a
 /// communication failure. After a failed write the rest of that batch of
 /// commands is dropped: the machine decides again with the failure in hand.
+///
+/// `retained` is what the previous run of the server left for this panel
+/// (`PanelStatus::retained`): with it the sequence takes over the mode, the
+/// faulty zones and the lockout ([`Sequence::restore`]).
+#[allow(clippy::too_many_arguments)]
 pub async fn run_panel(
     panel: PanelConfig,
     db: Arc<TagDb>,
@@ -226,15 +236,21 @@ pub async fn run_panel(
     mut commands: mpsc::Receiver<PanelCommand>,
     status: watch::Sender<PanelStatus>,
     notices: mpsc::Sender<PanelNotice>,
+    retained: Option<Retained>,
 ) -> Result<(), DriverError> {
     let ids = Ids::resolve(&db, &panel)?;
     let mut sub = db.subscribe(&ids.watched());
     let settings = Settings::from_panel(&panel);
     let t0 = clock.now();
+    let mut restored = Vec::new();
+    let seq = match &retained {
+        Some(r) => Sequence::restore(settings, r, &mut restored),
+        None => Sequence::new(settings),
+    };
     let mut d = Driver {
         panel_id: panel.id.get_ref().clone(),
         io: panel.io(),
-        seq: Sequence::new(settings),
+        seq,
         ids,
         db,
         writer,
@@ -246,6 +262,7 @@ pub async fn run_panel(
         base: PanelStatus::initial(&panel),
         last_derived: None,
     };
+    d.execute(restored, None).await;
     d.publish();
     d.feed_snapshot().await;
     loop {
@@ -576,6 +593,7 @@ impl Driver {
             lockout: seq.lockout(),
             comm_ok: seq.comm_good(),
             last_sequence: seq.metrics().clone(),
+            retained: seq.retained(),
             ..self.base.clone()
         };
         self.status.send_if_modified(|s| {

@@ -190,6 +190,7 @@ fn rig(speed: f64) -> Rig {
         cmd_rx,
         status_tx,
         notice_tx,
+        None,
     ));
     Rig {
         db,

@@ -202,6 +202,33 @@ impl Harness {
         h
     }
 
+    /// The server restarts: a new sequence from what `prev` retained, on the
+    /// same physical panel, then its first snapshot.
+    fn restart(prev: &Harness) -> Harness {
+        let mut out = Vec::new();
+        let seq = Sequence::restore(prev.seq.settings().clone(), &prev.seq.retained(), &mut out);
+        let mut h = Harness {
+            seq,
+            panel: prev.panel.clone(),
+            now: prev.now,
+            timers: Vec::new(),
+            need_snapshot: false,
+            calls: 0,
+            outage: None,
+            outage_while_running: None,
+            step_after_outage: None,
+            commands_while_suspended: 0,
+            events: Vec::new(),
+            alarms: Vec::new(),
+            commands: Vec::new(),
+            steps: Vec::new(),
+        };
+        h.process(out);
+        let s = h.panel.snapshot();
+        h.input(Input::Snapshot(s));
+        h
+    }
+
     fn process(&mut self, out: Vec<Output>) {
         let suspended = self.seq.step() == Step::Suspended;
         for o in out {
@@ -1118,4 +1145,79 @@ fn breaker_names_parse() {
         assert!(Breaker::parse(bad, 4).is_err(), "{bad}");
     }
     assert_eq!(Breaker::Zone(3).name(), "zone3");
+}
+
+#[test]
+fn a_restart_keeps_the_isolated_zones_and_reset_still_restores_them() {
+    let mut h = Harness::new(settings(4));
+    h.fault(&[2]);
+    h.run();
+    assert_eq!(h.seq.step(), Step::Isolated);
+    let mut h = Harness::restart(&h);
+    assert_eq!(h.seq.step(), Step::Isolated);
+    assert_eq!(h.seq.faulty_zones(), vec![2]);
+    assert!(h.alarm_active("zone2.isolated"));
+    assert!(h.has_event("restored"));
+    h.run();
+    assert!(
+        h.commands.is_empty(),
+        "nothing switches by itself: {:?}",
+        h.commands
+    );
+    // Repaired, Reset: zone 2 comes back, exactly as without the restart.
+    h.clear_faults();
+    h.command(OperatorCommand::Reset).unwrap();
+    h.run();
+    assert_eq!(h.seq.step(), Step::Idle);
+    assert_eq!(h.commands, vec![(Breaker::Zone(2), true)]);
+    assert!(h.panel.zones.iter().all(|z| *z));
+}
+
+#[test]
+fn a_restart_keeps_a_lockout_and_never_switches_onto_the_fault() {
+    // A fault on load 0 locks out with the ELCB open and everything off. A
+    // fresh sequence would take the open ELCB for a new trip.
+    let mut h = Harness::new(settings(4));
+    h.fault(&[0]);
+    h.run();
+    assert_eq!(h.seq.step(), Step::Lockout);
+    let energised = h.panel.energise_count.clone();
+    let mut h = Harness::restart(&h);
+    assert_eq!(h.seq.step(), Step::Lockout);
+    assert!(h.alarm_active("lockout") && h.alarm_active("load0.fault"));
+    h.now += 100.0;
+    h.need_snapshot = true;
+    h.run();
+    assert!(h.commands.is_empty(), "{:?}", h.commands);
+    assert_eq!(h.panel.energise_count, energised);
+    assert!(!h.panel.elcb);
+}
+
+#[test]
+fn a_restart_in_the_middle_of_a_sequence_locks_out_and_keeps_manual_mode() {
+    let mut h = Harness::new(settings(4));
+    h.fault(&[3]);
+    h.run_until(|h| h.seq.step() == Step::OlucDwell);
+    let r = h.seq.retained();
+    assert_eq!(r.interrupted_at.as_deref(), Some("oluc_dwell"));
+    let h2 = Harness::restart(&h);
+    assert_eq!(h2.seq.step(), Step::Lockout);
+    assert!(h2.alarm_active("lockout"));
+    assert!(h2.commands.is_empty());
+    // Manual mode survives a restart too, and stays manual.
+    let mut m = Harness::new(settings(2));
+    m.command(OperatorCommand::SetMode(Mode::Manual)).unwrap();
+    let m = Harness::restart(&m);
+    assert_eq!((m.seq.mode(), m.seq.step()), (Mode::Manual, Step::Manual));
+    assert!(!m.alarm_active("lockout"));
+    // Faulty loads beyond the panel's zones (a changed configuration) are dropped.
+    let mut out = Vec::new();
+    let r = Retained {
+        mode: Mode::Auto,
+        faulty: vec![2, 9],
+        lockout: false,
+        interrupted_at: None,
+    };
+    let s = Sequence::restore(settings(4), &r, &mut out);
+    assert_eq!(s.faulty_zones(), vec![2]);
 }
