@@ -434,6 +434,7 @@ async fn run_stack(
             clock: clock.clone(),
             simulate: true,
             dispatch_policy: policy,
+            restore_panels: false,
         },
     )
     .await?;

@@ -219,6 +219,10 @@ pub struct StackOptions {
     /// How the microgrid's outer loop makes setpoints (replay's rule-based
     /// baseline forces the rule).
     pub dispatch_policy: dispatch::DispatchPolicy,
+    /// Take over each panel sequence's saved state (mode, faulty zones,
+    /// lockout) from the store. Off for replay: a scenario starts from its
+    /// own initial state, whatever an earlier run left in the data folder.
+    pub restore_panels: bool,
 }
 
 impl Stack {
@@ -317,7 +321,11 @@ impl Stack {
             clock.clone(),
         ));
         let mut panels = Vec::new();
-        let mut retained = sinks::load_panel_retained(&store).await;
+        let mut retained = if opts.restore_panels {
+            sinks::load_panel_retained(&store).await
+        } else {
+            Default::default()
+        };
         for panel in &plant.panels {
             let (cmd_tx, cmd_rx) = mpsc::channel(16);
             let (status_tx, status_rx) = watch::channel(PanelStatus::initial(panel));
@@ -448,6 +456,8 @@ async fn run(
             clock,
             simulate: mode == Mode::Demo,
             dispatch_policy: Default::default(),
+            // A scenario starts from its own initial state.
+            restore_panels: scenario.is_none(),
         },
     )
     .await?;
