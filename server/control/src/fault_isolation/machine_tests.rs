@@ -181,25 +181,7 @@ fn settings(n: u8) -> Settings {
 impl Harness {
     fn new(settings: Settings) -> Harness {
         let n = settings.zones;
-        let mut h = Harness {
-            seq: Sequence::new(settings),
-            panel: Panel::new(n),
-            now: 0.0,
-            timers: Vec::new(),
-            need_snapshot: false,
-            calls: 0,
-            outage: None,
-            outage_while_running: None,
-            step_after_outage: None,
-            commands_while_suspended: 0,
-            events: Vec::new(),
-            alarms: Vec::new(),
-            commands: Vec::new(),
-            steps: Vec::new(),
-        };
-        let s = h.panel.snapshot();
-        h.input(Input::Snapshot(s));
-        h
+        Harness::on(Sequence::new(settings), Panel::new(n), 0.0, Vec::new())
     }
 
     /// The server restarts: a new sequence from what `prev` retained, on the
@@ -207,10 +189,16 @@ impl Harness {
     fn restart(prev: &Harness) -> Harness {
         let mut out = Vec::new();
         let seq = Sequence::restore(prev.seq.settings().clone(), &prev.seq.retained(), &mut out);
+        Harness::on(seq, prev.panel.clone(), prev.now, out)
+    }
+
+    /// A harness running `seq` on `panel` from `now`: `out` (the sequence's
+    /// outputs so far) is processed, then the first snapshot is fed.
+    fn on(seq: Sequence, panel: Panel, now: f64, out: Vec<Output>) -> Harness {
         let mut h = Harness {
             seq,
-            panel: prev.panel.clone(),
-            now: prev.now,
+            panel,
+            now,
             timers: Vec::new(),
             need_snapshot: false,
             calls: 0,
