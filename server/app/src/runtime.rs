@@ -279,12 +279,33 @@ impl Stack {
         )
         .map_err(|e| anyhow!("starting the alarm engine: {e}"))?;
         // System alarms belong to the parts that raise them (panel sequences,
-        // dispatch, historian), which all start afresh: clear the restored
-        // ones and let their owners raise again whatever still holds.
-        for r in restore
+        // dispatch, historian), which start afresh: clear the restored ones
+        // and let their owners raise again whatever still holds. Except the
+        // faulty-zone and lockout alarms of panels that take over their saved
+        // state: those still hold, and stay standing (acknowledged or not).
+        let mut retained = if opts.restore_panels {
+            sinks::load_panel_retained(&store).await
+        } else {
+            Default::default()
+        };
+        let standing: std::collections::HashSet<String> = plant
+            .panels
             .iter()
-            .filter(|r| r.kind == gridscada_alarms::AlarmKind::System && r.active)
-        {
+            .filter_map(|p| {
+                let id = p.id.get_ref();
+                let r = retained.get(id)?;
+                Some(
+                    r.alarm_keys(*p.zones.get_ref())
+                        .into_iter()
+                        .map(|k| sinks::panel_alarm_key(id, &k))
+                        .collect::<Vec<_>>(),
+                )
+            })
+            .flatten()
+            .collect();
+        for r in restore.iter().filter(|r| {
+            r.kind == gridscada_alarms::AlarmKind::System && r.active && !standing.contains(&r.key)
+        }) {
             if let Err(e) = alarms.clear(&r.key) {
                 tracing::warn!(key = %r.key, error = %e, "clearing a restored system alarm");
             }
@@ -321,11 +342,6 @@ impl Stack {
             clock.clone(),
         ));
         let mut panels = Vec::new();
-        let mut retained = if opts.restore_panels {
-            sinks::load_panel_retained(&store).await
-        } else {
-            Default::default()
-        };
         for panel in &plant.panels {
             let (cmd_tx, cmd_rx) = mpsc::channel(16);
             let (status_tx, status_rx) = watch::channel(PanelStatus::initial(panel));

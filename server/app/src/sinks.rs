@@ -158,6 +158,11 @@ pub async fn load_panel_retained(store: &Store) -> HashMap<String, Retained> {
         .collect()
 }
 
+/// The alarm engine's key of panel `panel`'s sequence alarm `key`.
+pub fn panel_alarm_key(panel: &str, key: &str) -> String {
+    format!("{panel}:{key}")
+}
+
 /// Panel notices: events to the log, alarm conditions to the alarm engine
 /// (keyed `PANEL:KEY`, in the panel's selection).
 pub async fn panel_notices(
@@ -199,7 +204,7 @@ pub async fn panel_notices(
                     .unwrap_or_else(|| panel.clone());
                 system_alarm(
                     &alarms,
-                    &format!("{panel}:{key}"),
+                    &panel_alarm_key(&panel, &key),
                     active,
                     priority,
                     &selection,

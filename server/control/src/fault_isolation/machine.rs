@@ -580,6 +580,37 @@ pub struct Retained {
     pub interrupted_at: Option<String>,
 }
 
+impl Retained {
+    /// The alarms [`Sequence::restore`] raises again at once: each faulty
+    /// load's and the lockout's. The application keeps these standing
+    /// across the restart (acknowledged ones stay acknowledged) instead of
+    /// clearing and re-annunciating them.
+    pub fn alarm_keys(&self, zones: u8) -> Vec<String> {
+        let mut keys: Vec<String> = self
+            .faulty
+            .iter()
+            .filter(|l| **l <= zones)
+            .map(|l| faulty_alarm_key(*l))
+            .collect();
+        if self.lockout || self.interrupted_at.is_some() {
+            keys.push(LOCKOUT_ALARM.into());
+        }
+        keys
+    }
+}
+
+/// Key of the lockout alarm.
+const LOCKOUT_ALARM: &str = "lockout";
+
+/// Key of the alarm of a faulty load.
+fn faulty_alarm_key(load: u8) -> String {
+    if load == 0 {
+        "load0.fault".into()
+    } else {
+        format!("zone{load}.isolated")
+    }
+}
+
 /// The sequence of one panel.
 #[derive(Debug, Clone)]
 pub struct Sequence {
@@ -747,6 +778,9 @@ impl Sequence {
     }
 
     /// What must survive a restart (see [`Retained`]).
+    ///
+    /// (The alarm keys a sequence restored from it raises at once are
+    /// [`Retained::alarm_keys`].)
     pub fn retained(&self) -> Retained {
         let step = self
             .suspended_from
@@ -1765,7 +1799,7 @@ impl Sequence {
             self.metrics.outcome = Outcome::Lockout;
         }
         self.raise(
-            "lockout",
+            LOCKOUT_ALARM,
             priority::LOCKOUT,
             format!("fault isolation locked out: {reason}; operator action required (Reset)"),
             out,
@@ -2038,21 +2072,18 @@ impl Sequence {
     }
 
     fn raise_faulty_alarm(&mut self, load: u8, out: &mut Vec<Output>) {
-        if load == 0 {
-            self.raise(
-                "load0.fault",
+        let (priority, message) = if load == 0 {
+            (
                 priority::LOAD0_FAULT,
-                "fault on load 0 (main MCCB / busbar): nothing can be restored".into(),
-                out,
-            );
+                "fault on load 0 (main MCCB / busbar): nothing can be restored".to_string(),
+            )
         } else {
-            self.raise(
-                &format!("zone{load}.isolated"),
+            (
                 priority::ZONE_ISOLATED,
                 format!("zone {load} is faulty and isolated (left off)"),
-                out,
-            );
-        }
+            )
+        };
+        self.raise(&faulty_alarm_key(load), priority, message, out);
     }
 
     fn raise_trip_alarm(&mut self, out: &mut Vec<Output>) {

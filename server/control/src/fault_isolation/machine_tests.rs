@@ -1208,4 +1208,35 @@ fn a_restart_in_the_middle_of_a_sequence_locks_out_and_keeps_manual_mode() {
     };
     let s = Sequence::restore(settings(4), &r, &mut out);
     assert_eq!(s.faulty_zones(), vec![2]);
+    // The alarms it raises at once are the ones `alarm_keys` names.
+    let raised: Vec<String> = out
+        .iter()
+        .filter_map(|o| match o {
+            Output::Alarm {
+                key, active: true, ..
+            } => Some(key.clone()),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(raised, r.alarm_keys(4));
+    assert_eq!(raised, vec!["zone2.isolated".to_string()]);
+    let locked = Retained {
+        mode: Mode::Auto,
+        faulty: vec![0],
+        lockout: true,
+        interrupted_at: None,
+    };
+    let mut out = Vec::new();
+    Sequence::restore(settings(4), &locked, &mut out);
+    let mut raised: Vec<String> = out
+        .iter()
+        .filter_map(|o| match o {
+            Output::Alarm {
+                key, active: true, ..
+            } => Some(key.clone()),
+            _ => None,
+        })
+        .collect();
+    raised.sort();
+    assert_eq!(raised, locked.alarm_keys(4));
 }
