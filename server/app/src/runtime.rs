@@ -291,17 +291,12 @@ impl Stack {
         let standing: std::collections::HashSet<String> = plant
             .panels
             .iter()
-            .filter_map(|p| {
-                let id = p.id.get_ref();
-                let r = retained.get(id)?;
-                Some(
-                    r.alarm_keys(*p.zones.get_ref())
-                        .into_iter()
-                        .map(|k| sinks::panel_alarm_key(id, &k))
-                        .collect::<Vec<_>>(),
-                )
+            .filter_map(|p| Some((p, retained.get(p.id.get_ref())?)))
+            .flat_map(|(p, r)| {
+                r.alarm_keys(*p.zones.get_ref())
+                    .into_iter()
+                    .map(|k| sinks::panel_alarm_key(p.id.get_ref(), &k))
             })
-            .flatten()
             .collect();
         for r in restore.iter().filter(|r| {
             r.kind == gridscada_alarms::AlarmKind::System && r.active && !standing.contains(&r.key)

@@ -691,8 +691,8 @@ impl Dispatcher {
         };
         let problem = horizon_problem(cfg, &h, now, measured, &self.last_setpoints, &terminal);
         let new = plan(&problem, now);
-        let was_ok = self.plan.as_ref().is_none_or(|p| p.status == "optimal");
-        match (was_ok, new.status == "optimal") {
+        let was_ok = self.plan.as_ref().is_none_or(HorizonPlan::is_optimal);
+        match (was_ok, new.is_optimal()) {
             (true, false) => {
                 let r = new.reason.clone().unwrap_or_default();
                 tracing::warn!("dispatch look-ahead failed: {r}");
@@ -719,7 +719,7 @@ impl Dispatcher {
     /// makes the dispatch shed now to save energy for it.
     fn planned_value(&self, id: &str, now: Timestamp) -> Option<f64> {
         let h = self.cfg.horizon.as_ref()?;
-        let p = self.plan.as_ref().filter(|p| p.status == "optimal")?;
+        let p = self.plan.as_ref().filter(|p| p.is_optimal())?;
         let fresh = now >= p.at && now.since(p.at).as_secs_f64() <= 3.0 * *h.resolve_s.get_ref();
         let eff_d = self
             .cfg

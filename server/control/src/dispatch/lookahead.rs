@@ -88,6 +88,13 @@ pub struct HorizonPlan {
     pub stored_energy_value_per_kwh: Setpoints,
 }
 
+impl HorizonPlan {
+    /// Whether the plan was solved (its values may be used).
+    pub fn is_optimal(&self) -> bool {
+        self.status == "optimal"
+    }
+}
+
 /// The horizon problem from the single-period problem measured now.
 ///
 /// - Period 0 is the measurement; later periods are [`forecast`]s at their

@@ -1209,15 +1209,7 @@ fn a_restart_in_the_middle_of_a_sequence_locks_out_and_keeps_manual_mode() {
     let s = Sequence::restore(settings(4), &r, &mut out);
     assert_eq!(s.faulty_zones(), vec![2]);
     // The alarms it raises at once are the ones `alarm_keys` names.
-    let raised: Vec<String> = out
-        .iter()
-        .filter_map(|o| match o {
-            Output::Alarm {
-                key, active: true, ..
-            } => Some(key.clone()),
-            _ => None,
-        })
-        .collect();
+    let raised = raised_alarms(&out);
     assert_eq!(raised, r.alarm_keys(4));
     assert_eq!(raised, vec!["zone2.isolated".to_string()]);
     let locked = Retained {
@@ -1228,15 +1220,19 @@ fn a_restart_in_the_middle_of_a_sequence_locks_out_and_keeps_manual_mode() {
     };
     let mut out = Vec::new();
     Sequence::restore(settings(4), &locked, &mut out);
-    let mut raised: Vec<String> = out
-        .iter()
+    let mut raised = raised_alarms(&out);
+    raised.sort();
+    assert_eq!(raised, locked.alarm_keys(4));
+}
+
+/// Keys of the alarms `out` raises, in order.
+fn raised_alarms(out: &[Output]) -> Vec<String> {
+    out.iter()
         .filter_map(|o| match o {
             Output::Alarm {
                 key, active: true, ..
             } => Some(key.clone()),
             _ => None,
         })
-        .collect();
-    raised.sort();
-    assert_eq!(raised, locked.alarm_keys(4));
+        .collect()
 }
