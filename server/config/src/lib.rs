@@ -12,6 +12,7 @@ pub mod daily;
 mod diag;
 mod load;
 pub mod model;
+pub mod screen;
 mod validate;
 
 pub use diag::{Diagnostic, SourceFile};

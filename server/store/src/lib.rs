@@ -48,6 +48,7 @@ mod events;
 mod historian;
 mod panels;
 mod recorder;
+mod screens;
 mod store;
 mod users;
 mod writer;
@@ -58,6 +59,7 @@ pub use alarms::{
 pub use dispatch::{DispatchRecord, NewDispatch};
 pub use error::StoreError;
 pub use events::{Event, EventFilter, NewEvent};
+pub use screens::{ScreenRecord, MAX_SCREEN_BYTES};
 pub use historian::{
     quality_from_code, quality_to_code, HistorySample, RawSample, RetentionPolicy, TagTrend,
     TrendBucket, MAX_TREND_BUCKETS,

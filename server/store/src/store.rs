@@ -122,6 +122,11 @@ const SQLITE_MIGRATIONS: &[(i64, &str, &str)] = &[
         "panel states",
         include_str!("../migrations/sqlite/0002_panel_states.sql"),
     ),
+    (
+        3,
+        "user screens",
+        include_str!("../migrations/sqlite/0003_user_screens.sql"),
+    ),
 ];
 const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
     (
@@ -133,6 +138,11 @@ const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
         2,
         "panel states",
         include_str!("../migrations/postgres/0002_panel_states.sql"),
+    ),
+    (
+        3,
+        "user screens",
+        include_str!("../migrations/postgres/0003_user_screens.sql"),
     ),
 ];
 

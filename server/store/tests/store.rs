@@ -805,6 +805,53 @@ async fn panel_states_survive(db: TestDb) {
 }
 both_backends!(panel_states, panel_states_survive);
 
+/// Screens: a save names the version it started from; a stale save or a
+/// second "new" screen with a taken id is refused and changes nothing; a
+/// delete also removes the screen from every group's access.
+async fn user_screens_versions(db: TestDb) {
+    let s = &db.store;
+    assert!(s.screens().await.unwrap().is_empty());
+    let body = serde_json::json!({"id": "feeder-a", "name": "Feeder A", "elements": []});
+    let v1 = s
+        .save_screen("feeder-a", "Feeder A", &body, 0, "alice", ts(1000))
+        .await
+        .unwrap();
+    assert_eq!(v1.version, 1);
+    assert_eq!(v1.body["version"], 1);
+    // A second "new" screen with the same id is a conflict.
+    let err = s
+        .save_screen("feeder-a", "Other", &body, 0, "bob", ts(1500))
+        .await
+        .unwrap_err();
+    assert!(matches!(err, StoreError::Conflict(_)), "{err}");
+    let v2 = s
+        .save_screen("feeder-a", "Feeder A2", &body, 1, "bob", ts(2000))
+        .await
+        .unwrap();
+    assert_eq!(v2.version, 2);
+    // Saving from version 1 again is stale.
+    let err = s
+        .save_screen("feeder-a", "Stale", &body, 1, "alice", ts(3000))
+        .await
+        .unwrap_err();
+    assert!(err.to_string().contains("version 2"), "{err}");
+    let got = s.screen("feeder-a").await.unwrap().unwrap();
+    assert_eq!(
+        (got.name.as_str(), got.version, got.updated_by.as_str()),
+        ("Feeder A2", 2, "bob")
+    );
+    assert_eq!(got.updated_at, ts(2000));
+    s.set_group_screens("operator", &["main".into(), "custom:feeder-a".into()])
+        .await
+        .unwrap();
+    assert!(s.delete_screen("feeder-a", "custom:feeder-a").await.unwrap());
+    assert!(!s.delete_screen("feeder-a", "custom:feeder-a").await.unwrap());
+    assert!(s.screen("feeder-a").await.unwrap().is_none());
+    assert_eq!(s.group_screens("operator").await.unwrap(), vec!["main"]);
+    db.cleanup().await;
+}
+both_backends!(user_screens, user_screens_versions);
+
 async fn wait_for(what: &str, mut cond: impl FnMut() -> bool) {
     for _ in 0..1000 {
         if cond() {
