@@ -43,6 +43,11 @@ enum Command {
         /// Data folder (SQLite database, generated credentials).
         #[arg(long, default_value = "gridscada-data")]
         data: PathBuf,
+        /// Simulate this plant configuration (gridscada.toml or its folder)
+        /// instead of the embedded demo plant: every device runs as a
+        /// simulator on loopback, for commissioning before the plant exists.
+        #[arg(long, conflicts_with = "scenario")]
+        config: Option<PathBuf>,
         /// Drive the plant with a scenario (its plant replaces the embedded
         /// one), on a clock compressed by --speed, for watching and training.
         #[arg(long)]
@@ -157,6 +162,7 @@ fn main() -> ExitCode {
         Command::Demo {
             http,
             data,
+            config,
             scenario,
             speed,
         } => {
@@ -170,7 +176,7 @@ fn main() -> ExitCode {
                 },
                 None => None,
             };
-            runtime::block_on(runtime::demo(http, data, live))
+            runtime::block_on(runtime::demo(http, data, config, live))
         }
         Command::Replay {
             file,

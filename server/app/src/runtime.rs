@@ -76,13 +76,18 @@ impl Mode {
 pub async fn demo(
     http: String,
     data: PathBuf,
+    config: Option<PathBuf>,
     scenario: Option<crate::replay::LiveScenario>,
 ) -> ExitCode {
     report(
         async {
-            let plant = match &scenario {
-                Some(live) => live.plant.clone(),
-                None => demo_plant::load().map_err(|d| diagnostics("the embedded demo plant", d))?,
+            let plant = match (&scenario, &config) {
+                (Some(live), _) => live.plant.clone(),
+                (None, Some(c)) => gridscada_config::load_path(c)
+                    .map_err(|d| diagnostics("the configuration", d))?,
+                (None, None) => {
+                    demo_plant::load().map_err(|d| diagnostics("the embedded demo plant", d))?
+                }
             };
             let addr: SocketAddr = http
                 .parse()
@@ -485,7 +490,9 @@ async fn run(
         }
     };
 
-    let (local, server) = gridscada_web::bind(http, gridscada_web::router(web_state(&stack).await))
+    let web = web_state(&stack).await;
+    load_screens(&web, mode).await?;
+    let (local, server) = gridscada_web::bind(http, gridscada_web::router(web))
         .await
         .with_context(|| format!("cannot listen on {http}"))?;
 
@@ -536,6 +543,38 @@ async fn run(
     outcome
 }
 
+/// Takes the user-drawn screens from the store, then the plant's
+/// `screens/*.json` folder (beside the main configuration file) into the
+/// store. `serve` refuses to start on a broken screen file; `demo` warns.
+async fn load_screens(web: &gridscada_web::WebState, mode: Mode) -> anyhow::Result<()> {
+    use gridscada_web::api::screens;
+    for w in screens::load_library(web)
+        .await
+        .context("loading the saved screens")?
+    {
+        tracing::warn!("{w}");
+    }
+    let dir = gridscada_config::screen::folder_of(&web.plant.main_path);
+    match screens::sync_folder(web, &dir).await {
+        Ok(taken) if !taken.is_empty() => {
+            tracing::info!(screens = ?taken, folder = %dir.display(), "screens taken from files");
+        }
+        Ok(_) => {}
+        Err(errors) if mode == Mode::Serve => {
+            return Err(anyhow!(
+                "the screens folder has problems:\n  {}",
+                errors.join("\n  ")
+            ));
+        }
+        Err(errors) => {
+            for e in errors {
+                tracing::warn!("screen not loaded: {e}");
+            }
+        }
+    }
+    Ok(())
+}
+
 /// The web layer's view of a running stack.
 pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
     let auth = gridscada_web::Auth {
@@ -565,6 +604,135 @@ pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
             poll: stack.field.stats_handle(),
             historian: stack.historian.handle(),
         })),
+        screens: Default::default(),
+        tag_index: Arc::new(gridscada_web::access::TagIndex::new(&stack.plant)),
+        devices: Some(Arc::new(StackDevices {
+            plant: stack.plant.clone(),
+            db: stack.db.clone(),
+            poll: stack.field.stats_handle(),
+            rates: Default::default(),
+        })),
+    }
+}
+
+/// The poller's figures per device and link, for the devices screen.
+struct StackDevices {
+    plant: Arc<Plant>,
+    db: Arc<TagDb>,
+    poll: gridscada_modbus::StatsHandle,
+    /// Per device: when its scans were last counted, the count, and the
+    /// rate measured then, so the achieved rate covers the last seconds.
+    rates: std::sync::Mutex<std::collections::HashMap<String, (std::time::Instant, u64, f64)>>,
+}
+
+impl StackDevices {
+    fn achieved_rate(&self, device: &str, scans: u64) -> f64 {
+        let now = std::time::Instant::now();
+        let mut rates = self.rates.lock().unwrap_or_else(|p| p.into_inner());
+        let entry = rates
+            .entry(device.to_string())
+            .or_insert((now, scans, f64::NAN));
+        let secs = now.duration_since(entry.0).as_secs_f64();
+        if secs >= 2.0 {
+            *entry = (now, scans, scans.saturating_sub(entry.1) as f64 / secs);
+        }
+        entry.2
+    }
+}
+
+impl gridscada_web::api::devices::DeviceSource for StackDevices {
+    fn devices(&self) -> gridscada_web::api::devices::DevicesView {
+        use gridscada_web::api::devices::{DeviceView, DevicesView, LinkView};
+        let poll = self.poll.stats();
+        let last_error = |device: &str| {
+            self.db
+                .id(&format!("{device}.Comm.LastError"))
+                .and_then(|id| self.db.get(id))
+                .map(|s| match s.value {
+                    gridscada_tagdb::Value::Str(e) => e.to_string(),
+                    _ => String::new(),
+                })
+                .unwrap_or_default()
+        };
+        let protocol = |d: &gridscada_config::DeviceConfig| {
+            match d.protocol {
+                gridscada_config::Protocol::Tcp => "tcp",
+                gridscada_config::Protocol::Rtu => "rtu",
+            }
+            .to_string()
+        };
+        let devices: Vec<DeviceView> = poll
+            .devices
+            .iter()
+            .map(|st| {
+                let cfg = self.plant.device(&st.device);
+                let scan_ms = self
+                    .plant
+                    .tags
+                    .iter()
+                    .filter(|t| t.device.get_ref() == &st.device)
+                    .filter_map(|t| cfg.map(|d| t.scan_ms(d)))
+                    .min()
+                    .or(cfg.map(|d| *d.scan_ms.get_ref()))
+                    .unwrap_or_default();
+                DeviceView {
+                    name: st.device.clone(),
+                    description: cfg.map(|d| d.description.clone()).unwrap_or_default(),
+                    link: st.link.clone(),
+                    protocol: cfg.map(protocol).unwrap_or_default(),
+                    address: cfg
+                        .map(|d| match (&d.address, &d.serial) {
+                            (Some(a), _) => a.get_ref().clone(),
+                            (None, Some(s)) => s.port.get_ref().clone(),
+                            (None, None) => String::new(),
+                        })
+                        .unwrap_or_default(),
+                    unit_id: cfg.map(|d| *d.unit_id.get_ref()).unwrap_or_default(),
+                    scan_ms,
+                    achieved_scans_per_s: self.achieved_rate(&st.device, st.scans),
+                    response_ms: st.last_response_ms,
+                    requests: st.requests,
+                    errors: st.errors,
+                    timeouts: st.timeouts,
+                    exceptions: st.exceptions,
+                    writes: st.writes,
+                    late_scans: st.late_scans,
+                    overruns: st.overruns,
+                    connected: st.connected,
+                    backing_off: !st.connected && st.requests > 0,
+                    last_error: last_error(&st.device),
+                }
+            })
+            .collect();
+        let links = poll
+            .links
+            .iter()
+            .map(|l| {
+                let on: Vec<&DeviceView> = devices.iter().filter(|d| d.link == l.link).collect();
+                LinkView {
+                    link: l.link.clone(),
+                    protocol: on.first().map(|d| d.protocol.clone()).unwrap_or_default(),
+                    devices: on.iter().map(|d| d.name.clone()).collect(),
+                    connected: on.iter().all(|d| d.connected),
+                    connects: l.connects,
+                    disconnects: l.disconnects,
+                    late_replies: l.late_replies,
+                    garbage_bytes: l.garbage_bytes,
+                    last_error: l.last_error.clone(),
+                }
+            })
+            .collect();
+        // The rate is NaN until two readings are 2 s apart; JSON has no NaN.
+        let devices = devices
+            .into_iter()
+            .map(|mut d| {
+                if !d.achieved_scans_per_s.is_finite() {
+                    d.achieved_scans_per_s = 0.0;
+                }
+                d
+            })
+            .collect();
+        DevicesView { devices, links }
     }
 }
 

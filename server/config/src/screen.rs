@@ -22,6 +22,7 @@ pub const MAX_PENS: usize = 8;
 
 /// One user-defined screen.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Screen {
     pub id: String,
     pub name: String,
@@ -226,7 +227,12 @@ impl Screen {
 impl Element {
     fn validate(&self, i: usize, plant: &dyn PlantView, errs: &mut Vec<String>) {
         let at = |field: &str| format!("element {i} ({}) {field}", self.kind.name());
-        for (field, v, min) in [("x", self.x, 0), ("y", self.y, 0), ("w", self.w, 1), ("h", self.h, 1)] {
+        for (field, v, min) in [
+            ("x", self.x, 0),
+            ("y", self.y, 0),
+            ("w", self.w, 1),
+            ("h", self.h, 1),
+        ] {
             if !(min..=MAX_COORD).contains(&v) {
                 errs.push(format!("{}: {v} is not {min} to {MAX_COORD}", at(field)));
             }
@@ -291,7 +297,9 @@ impl Element {
                     check_label(errs, &at("units"), u, false);
                 }
             }
-            ElementKind::Bar { tag: t, min, max, .. } => {
+            ElementKind::Bar {
+                tag: t, min, max, ..
+            } => {
                 if let Some((kind, _)) = tag(t, errs) {
                     if !matches!(kind, ValueKind::Int | ValueKind::Float) {
                         errs.push(format!(
@@ -349,12 +357,20 @@ impl Element {
             ElementKind::Link { screen, .. } => {
                 let id = screen.strip_prefix(CUSTOM_PREFIX).unwrap_or(screen);
                 if !valid_id(id) {
-                    errs.push(format!("{}: '{}' is not a screen id", at("screen"), clip(screen)));
+                    errs.push(format!(
+                        "{}: '{}' is not a screen id",
+                        at("screen"),
+                        clip(screen)
+                    ));
                 }
             }
             ElementKind::Panel { panel } => {
                 if !plant.has_panel(panel) {
-                    errs.push(format!("{}: no panel with id '{}'", at("panel"), clip(panel)));
+                    errs.push(format!(
+                        "{}: no panel with id '{}'",
+                        at("panel"),
+                        clip(panel)
+                    ));
                 }
             }
             ElementKind::Text { .. } | ElementKind::Line { .. } | ElementKind::Rect { .. } => {}
@@ -418,10 +434,7 @@ pub fn parse_file(path: &Path, text: &str) -> Result<Screen, String> {
             path.display(),
             e.line(),
             e.column(),
-            e.to_string()
-                .split(" at line ")
-                .next()
-                .unwrap_or_default()
+            e.to_string().split(" at line ").next().unwrap_or_default()
         )
     })
 }
@@ -520,11 +533,23 @@ mod tests {
         ]));
         let errs = s.validate(&View);
         let all = errs.join("\n");
-        assert!(all.contains("element 0 (breaker) tag: 'A.P_kW' is a Float tag"), "{all}");
-        assert!(all.contains("element 1 (button) tag: 'A.Closed' is read-only"), "{all}");
+        assert!(
+            all.contains("element 0 (breaker) tag: 'A.P_kW' is a Float tag"),
+            "{all}"
+        );
+        assert!(
+            all.contains("element 1 (button) tag: 'A.Closed' is read-only"),
+            "{all}"
+        );
         assert!(all.contains("element 2 (value) x: -5"), "{all}");
-        assert!(all.contains("element 2 (value) tag: no tag named 'Nope'"), "{all}");
-        assert!(all.contains("element 3 (panel) panel: no panel with id 'zz'"), "{all}");
+        assert!(
+            all.contains("element 2 (value) tag: no tag named 'Nope'"),
+            "{all}"
+        );
+        assert!(
+            all.contains("element 3 (panel) panel: no panel with id 'zz'"),
+            "{all}"
+        );
         assert!(all.contains("element 4 (button) value"), "{all}");
     }
 
@@ -536,8 +561,11 @@ mod tests {
         assert!(!valid_id("-a"));
         assert!(!valid_id(""));
         assert!(!valid_id(&"a".repeat(65)));
-        let err = parse_file(Path::new("screens/x.json"), "{\n  \"id\": \"x\",\n  \"name\": 3\n}")
-            .unwrap_err();
+        let err = parse_file(
+            Path::new("screens/x.json"),
+            "{\n  \"id\": \"x\",\n  \"name\": 3\n}",
+        )
+        .unwrap_err();
         assert!(err.starts_with("screens/x.json:3:"), "{err}");
         let err = parse_file(
             Path::new("s.json"),

@@ -59,12 +59,12 @@ pub use alarms::{
 pub use dispatch::{DispatchRecord, NewDispatch};
 pub use error::StoreError;
 pub use events::{Event, EventFilter, NewEvent};
-pub use screens::{ScreenRecord, MAX_SCREEN_BYTES};
 pub use historian::{
     quality_from_code, quality_to_code, HistorySample, RawSample, RetentionPolicy, TagTrend,
     TrendBucket, MAX_TREND_BUCKETS,
 };
 pub use recorder::{RecordPolicy, Recorder};
+pub use screens::{ScreenRecord, MAX_SCREEN_BYTES};
 pub use store::{BackendKind, OpenOptions, SqliteSync, Store};
 pub use users::{NewUser, User, UserSummary};
 pub use writer::{Historian, HistorianConfig, HistorianHandle, HistorianMetrics};

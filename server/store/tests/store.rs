@@ -844,8 +844,14 @@ async fn user_screens_versions(db: TestDb) {
     s.set_group_screens("operator", &["main".into(), "custom:feeder-a".into()])
         .await
         .unwrap();
-    assert!(s.delete_screen("feeder-a", "custom:feeder-a").await.unwrap());
-    assert!(!s.delete_screen("feeder-a", "custom:feeder-a").await.unwrap());
+    assert!(s
+        .delete_screen("feeder-a", "custom:feeder-a")
+        .await
+        .unwrap());
+    assert!(!s
+        .delete_screen("feeder-a", "custom:feeder-a")
+        .await
+        .unwrap());
     assert!(s.screen("feeder-a").await.unwrap().is_none());
     assert_eq!(s.group_screens("operator").await.unwrap(), vec!["main"]);
     db.cleanup().await;

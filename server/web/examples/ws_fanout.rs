@@ -117,15 +117,18 @@ async fn web_state(db: Arc<TagDb>, dir: &Path) -> (WebState, String) {
     store
         .create_user(&NewUser {
             name: "bench".into(),
-            role: Role::Guest,
+            // An operator's screens include the tag browser, so every tag is
+            // readable (a Guest would only read the tags of its screens).
+            role: Role::Operator,
             password_hash: auth::hash_password("bench password".into()).await.unwrap(),
-            group: "guest".into(),
+            group: "operator".into(),
             created_at: Timestamp::now_utc(),
         })
         .await
         .expect("user");
     let sessions = Arc::new(Sessions::new(SessionPolicy::default()));
     let token = sessions.create("bench", None);
+    let plant_ref = plant.clone();
     let state = WebState {
         db,
         plant: Arc::new(plant),
@@ -143,6 +146,9 @@ async fn web_state(db: Arc<TagDb>, dir: &Path) -> (WebState, String) {
         sim: None,
         http_metrics: Default::default(),
         metrics: None,
+        screens: Default::default(),
+        tag_index: Arc::new(gridscada_web::access::TagIndex::new(&plant_ref)),
+        devices: None,
     };
     (state, format!("{}={token}", auth::COOKIE))
 }

@@ -19,33 +19,6 @@ use parking_lot::Mutex;
 use rand::Rng;
 use serde::Serialize;
 
-/// The screens of the HMI, as named in screen access.
-pub const SCREENS: &[&str] = &[
-    "main",
-    "ss1",
-    "css1",
-    "microgrid",
-    "units",
-    "alarms",
-    "events",
-    "trends",
-    "users",
-];
-
-/// Default screen access of a group named after a role, before an
-/// administrator changes it.
-pub fn default_screens(role: Role) -> Vec<String> {
-    let all = SCREENS.iter().map(|s| s.to_string());
-    match role {
-        Role::Administrator => all.collect(),
-        Role::Supervisor | Role::Operator => all.filter(|s| s != "users").collect(),
-        Role::Guest => ["main", "microgrid", "alarms", "trends"]
-            .iter()
-            .map(|s| s.to_string())
-            .collect(),
-    }
-}
-
 /// The caller of a request.
 #[derive(Debug, Clone, Serialize)]
 pub struct Principal {

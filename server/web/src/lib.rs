@@ -8,6 +8,7 @@
 //! [`WebState`], and sends commands through `TagWriter`. Every route declares its
 //! permission in one table ([`routes::table`]); anything not declared is denied.
 
+pub mod access;
 pub mod api;
 pub mod auth;
 pub mod error;
@@ -46,6 +47,12 @@ pub struct WebState {
     pub http_metrics: Arc<metrics::HttpMetrics>,
     /// The application's own figures for `/metrics` (poller, historian).
     pub metrics: Option<Arc<dyn metrics::MetricsSource>>,
+    /// The screens users drew, as last saved.
+    pub screens: Arc<access::ScreenLibrary>,
+    /// The plant's tags by name (build with [`access::TagIndex::new`]).
+    pub tag_index: Arc<access::TagIndex>,
+    /// Communication figures of the field devices, where field I/O runs.
+    pub devices: Option<Arc<dyn api::devices::DeviceSource>>,
 }
 
 /// The application's routes.

@@ -134,6 +134,10 @@ pub fn table() -> Vec<Route> {
         r(Method::GET, "/api/tags", Perm::LoggedIn, || {
             get(api::tags::list)
         }),
+        // Readable tags only (see access::Readable), checked in the handlers.
+        r(Method::GET, "/api/tags/tree", Perm::LoggedIn, || {
+            get(api::tags::tree)
+        }),
         r(Method::GET, "/api/tags/{name}", Perm::LoggedIn, || {
             get(api::tags::one)
         }),
@@ -143,6 +147,30 @@ pub fn table() -> Vec<Route> {
             "/api/tags/{name}/write",
             Perm::Role(Operator),
             || post(api::tags::write),
+        ),
+        // Devices.
+        r(Method::GET, "/api/devices", Perm::Screen("devices"), || {
+            get(api::devices::list)
+        }),
+        // Screens: the catalog, and the screens users draw.
+        r(Method::GET, "/api/screens", Perm::LoggedIn, || {
+            get(api::screens::catalog)
+        }),
+        // The screen's own access (or the editor's) is checked in the handler.
+        r(Method::GET, "/api/screens/{id}", Perm::LoggedIn, || {
+            get(api::screens::one)
+        }),
+        r(
+            Method::PUT,
+            "/api/screens/{id}",
+            Perm::RoleScreen(Admin, "editor"),
+            || put(api::screens::save),
+        ),
+        r(
+            Method::DELETE,
+            "/api/screens/{id}",
+            Perm::RoleScreen(Admin, "editor"),
+            || delete(api::screens::remove),
         ),
         // Alarms.
         r(Method::GET, "/api/alarms", Perm::LoggedIn, || {
@@ -486,8 +514,18 @@ impl WebState {
     pub async fn screens_of(&self, group: &str, role: Role) -> Vec<String> {
         match self.store.group_screens(group).await {
             Ok(s) if !s.is_empty() => s,
-            _ => crate::auth::default_screens(role),
+            _ => crate::access::default_screens(&self.plant, &self.screens, role),
         }
+    }
+
+    /// Every screen of the plant, in toolbar order.
+    pub fn catalog(&self) -> Vec<crate::access::ScreenEntry> {
+        crate::access::catalog(&self.plant, &self.screens)
+    }
+
+    /// The tags `who` may read.
+    pub fn readable(&self, who: &Principal) -> crate::access::Readable {
+        crate::access::Readable::of(who, &self.plant, &self.screens)
     }
 }
 

@@ -8,7 +8,8 @@ mod common;
 use axum::http::{Method, StatusCode};
 use common::*;
 use gridscada_config::Role;
-use gridscada_web::auth::{default_screens, Principal};
+use gridscada_web::access::default_screens;
+use gridscada_web::auth::Principal;
 use gridscada_web::routes::{table, Perm};
 use serde_json::json;
 
@@ -78,7 +79,7 @@ async fn every_route_against_every_caller() {
             user: Some(me.to_string()),
             role,
             group: Some(me.to_string()),
-            screens: default_screens(role),
+            screens: default_screens(&h.state.plant, &h.state.screens, role),
         };
         for route in &routes {
             let path = concrete(route.path, me);
@@ -179,7 +180,7 @@ async fn key_rules_hold_independently_of_the_table() {
         (
             Method::PUT,
             "/api/groups/visitors/screens",
-            json!({"screens": ["main"]}),
+            json!({"screens": ["events"]}),
             Administrator,
         ),
         (

@@ -71,20 +71,20 @@ async fn hostile_user_and_group_names_round_trip_exactly() {
                 Method::PUT,
                 &gpath,
                 Some(&admin),
-                Some(json!({"screens": ["alarms", "main"]})),
+                Some(json!({"screens": ["alarms", "events"]})),
             )
             .await;
         assert_eq!(r.status, StatusCode::OK, "{group}: {}", r.text());
         assert_eq!(r.json()["group"], group);
         let r = h.call(Method::GET, &gpath, Some(&admin), None).await;
         assert_eq!(r.json()["group"], group);
-        assert_eq!(r.json()["screens"], json!(["alarms", "main"]));
+        assert_eq!(r.json()["screens"], json!(["alarms", "events"]));
         // And the user's session now has exactly those screens.
         let me = h
             .call(Method::GET, "/api/session", Some(&own), None)
             .await
             .json();
-        assert_eq!(me["screens"], json!(["alarms", "main"]));
+        assert_eq!(me["screens"], json!(["alarms", "events"]));
 
         // Update, addressed by the percent-encoded user name.
         let upath = format!("/api/users/{}", seg(name));

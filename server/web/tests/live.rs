@@ -40,7 +40,9 @@ async fn live_push_follows_the_session() {
         .await
         .unwrap();
     tokio::spawn(server);
-    let cookie = h.login("guest", PASSWORD).await;
+    // An operator's screens include the tag browser: every tag is readable
+    // (what a Guest may read is tested in plant_screens.rs).
+    let cookie = h.login("operator", PASSWORD).await;
     let connect = |origin: Option<String>| {
         let mut req = format!("ws://{addr}/api/live")
             .into_client_request()
@@ -59,8 +61,8 @@ async fn live_push_follows_the_session() {
     let (mut ws, _) = connect(Some(format!("http://{addr}"))).await.unwrap();
     let hello = next_json(&mut ws).await.unwrap();
     assert_eq!(hello["type"], "hello");
-    assert_eq!(hello["user"], "guest");
-    assert_eq!(hello["role"], "guest");
+    assert_eq!(hello["user"], "operator");
+    assert_eq!(hello["role"], "operator");
 
     ws.send(Message::Text(
         json!({"subscribe": {"tags": [TAG_RO, "No.Such.Tag"]}})

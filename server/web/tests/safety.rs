@@ -22,7 +22,7 @@ async fn a_foreign_origin_is_refused_for_unsafe_methods_and_websockets() {
             method,
             path,
             Some(&admin),
-            Some(json!({"screens": ["main"]})),
+            Some(json!({"screens": ["events"]})),
         );
         r.headers_mut()
             .insert(header::ORIGIN, origin.parse().unwrap());

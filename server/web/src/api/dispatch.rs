@@ -59,5 +59,11 @@ pub async fn units(State(s): State<WebState>) -> ApiResult<Json<Value>> {
         .microgrid
         .as_ref()
         .ok_or_else(|| ApiError::unavailable("this plant has no microgrid"))?;
-    Ok(Json(json!({ "units": mg.units })))
+    let demand = mg.demand_tag.get_ref();
+    let load_prefix = demand.rsplit_once('.').map(|(p, _)| p).unwrap_or_default();
+    Ok(Json(json!({
+        "units": mg.units,
+        "demand_tag": demand,
+        "load_prefix": load_prefix,
+    })))
 }

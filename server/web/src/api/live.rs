@@ -112,6 +112,7 @@ async fn run(
     let mut tick = tokio::time::interval(FLUSH);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
 
+    let readable = s.readable(&who);
     let hello = json!({"type": "hello", "user": who.user, "role": who.role});
     socket.send(Message::Text(hello.to_string().into())).await?;
 
@@ -125,6 +126,10 @@ async fn run(
                             let mut ids: Vec<TagId> = sub_req.tags.iter().filter_map(|t| s.db.id(t)).collect();
                             for p in sub_req.prefixes.iter().filter(|p| !p.is_empty()) {
                                 ids.extend(s.db.ids_with_prefix(p));
+                            }
+                            // Only what the caller's screens show (access::Readable).
+                            if !readable.all() {
+                                ids.retain(|id| s.db.meta(*id).is_some_and(|m| readable.may_read(&m.name)));
                             }
                             ids.sort();
                             ids.dedup();

@@ -1,11 +1,13 @@
 //! Route handlers, one module per area of the API.
 
 pub mod alarms;
+pub mod devices;
 pub mod dispatch;
 pub mod events;
 pub mod live;
 pub mod misc;
 pub mod panels;
+pub mod screens;
 pub mod session;
 pub mod sim;
 pub mod tags;

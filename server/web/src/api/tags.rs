@@ -3,7 +3,7 @@
 use axum::extract::{Path, Query, State};
 use axum::http::StatusCode;
 use axum::{Extension, Json};
-use gridscada_config::Role;
+use gridscada_config::{DataType, Endian, RegisterKind, Role};
 use gridscada_tagdb::{Sample, TagId, TagMeta, Value, WriteError};
 use serde::{Deserialize, Serialize};
 
@@ -22,62 +22,211 @@ pub struct TagView {
     pub writable: bool,
     /// The least role that may write it, if writable.
     pub write_role: Option<Role>,
+    /// Where the value comes from; `None` for derived tags (device status,
+    /// sequence and dispatch tags).
+    pub source: Option<TagSource>,
     #[serde(flatten)]
     pub sample: Sample,
 }
 
+/// The field register behind a tag.
+#[derive(Serialize)]
+pub struct TagSource {
+    pub device: String,
+    pub table: RegisterKind,
+    pub address: u32,
+    pub bit: Option<u8>,
+    pub data_type: DataType,
+    pub word_order: Endian,
+    pub byte_order: Endian,
+    pub scale: f64,
+    pub offset: f64,
+}
+
 impl WebState {
     pub fn write_role(&self, name: &str) -> Option<Role> {
-        self.plant
-            .tag(name)
+        self.tag_index
+            .get(&self.plant, name)
             .filter(|t| *t.writable.get_ref())
             .and_then(|t| t.write_role.as_ref().map(|r| *r.get_ref()))
     }
 
     pub fn tag_view(&self, id: TagId, meta: &TagMeta) -> Option<TagView> {
         let sample = self.db.get(id)?;
+        let config = self.tag_index.get(&self.plant, &meta.name);
         Some(TagView {
             name: meta.name.to_string(),
             description: meta.description.clone(),
             units: meta.units.clone(),
             kind: meta.kind,
             writable: meta.writable,
-            write_role: self.write_role(&meta.name),
+            write_role: config
+                .filter(|t| *t.writable.get_ref())
+                .and_then(|t| t.write_role.as_ref().map(|r| *r.get_ref())),
+            source: config.map(|t| TagSource {
+                device: t.device.get_ref().clone(),
+                table: *t.kind.get_ref(),
+                address: *t.address.get_ref(),
+                bit: t.bit.as_ref().map(|b| *b.get_ref()),
+                data_type: t.data_type(),
+                word_order: t.word_order,
+                byte_order: t.byte_order,
+                scale: *t.scale.get_ref(),
+                offset: t.offset,
+            }),
             sample,
         })
     }
 }
 
+/// Most tags one page may hold.
+const MAX_PAGE: usize = 1000;
+
 #[derive(Deserialize)]
 pub struct ListQuery {
+    /// Only names that start with this.
     #[serde(default)]
     pub prefix: String,
+    /// Only names or descriptions that contain this, ignoring case.
+    #[serde(default)]
+    pub search: String,
+    #[serde(default)]
+    pub offset: usize,
+    /// Page size, at most 1000; every match when absent.
+    pub limit: Option<usize>,
 }
 
 #[derive(Serialize)]
 pub struct TagList {
     pub tags: Vec<TagView>,
+    /// Tags that match, before paging.
+    pub total: usize,
+    pub offset: usize,
+    pub limit: Option<usize>,
 }
 
-pub async fn list(State(s): State<WebState>, Query(q): Query<ListQuery>) -> Json<TagList> {
-    let tags =
-        s.db.all_meta()
-            .filter(|(_, m)| m.name.starts_with(q.prefix.as_str()))
-            .filter_map(|(id, m)| s.tag_view(id, m))
-            .collect();
-    Json(TagList { tags })
+/// The tags the caller may read, filtered and paged on the server so a
+/// plant of 100,000 tags stays light in the browser.
+pub async fn list(
+    State(s): State<WebState>,
+    Extension(who): Extension<Principal>,
+    Query(q): Query<ListQuery>,
+) -> ApiResult<Json<TagList>> {
+    if let Some(l) = q.limit {
+        if !(1..=MAX_PAGE).contains(&l) {
+            return Err(ApiError::bad_request(format!(
+                "limit must be 1 to {MAX_PAGE}"
+            )));
+        }
+    }
+    if q.search.chars().count() > 256 || q.prefix.chars().count() > 1024 {
+        return Err(ApiError::bad_request(
+            "search may have at most 256 characters, prefix 1024",
+        ));
+    }
+    let readable = s.readable(&who);
+    let needle = q.search.to_lowercase();
+    let matching = s.db.all_meta().filter(|(_, m)| {
+        m.name.starts_with(q.prefix.as_str())
+            && readable.may_read(&m.name)
+            && (needle.is_empty()
+                || m.name.to_lowercase().contains(&needle)
+                || m.description.to_lowercase().contains(&needle))
+    });
+    let mut total = 0;
+    let mut tags = vec![];
+    let end = q.limit.map(|l| q.offset.saturating_add(l));
+    for (id, m) in matching {
+        if total >= q.offset && end.is_none_or(|e| total < e) {
+            tags.extend(s.tag_view(id, m));
+        }
+        total += 1;
+    }
+    Ok(Json(TagList {
+        tags,
+        total,
+        offset: q.offset,
+        limit: q.limit,
+    }))
 }
 
-pub async fn one(State(s): State<WebState>, Path(name): Path<String>) -> ApiResult<Json<TagView>> {
-    let id =
-        s.db.id(&name)
-            .ok_or_else(|| ApiError::not_found(format!("no tag named '{name}'")))?;
-    let meta =
-        s.db.meta(id)
-            .ok_or_else(|| ApiError::not_found(format!("no tag named '{name}'")))?;
-    s.tag_view(id, meta)
-        .map(Json)
-        .ok_or_else(|| ApiError::not_found(format!("no tag named '{name}'")))
+#[derive(Deserialize)]
+pub struct TreeQuery {
+    #[serde(default)]
+    pub prefix: String,
+}
+
+/// One node under a prefix of the dot-separated tag tree.
+#[derive(Serialize)]
+pub struct TreeNode {
+    /// The full name of the node (a tag name, a branch, or both).
+    pub name: String,
+    /// Its last segment.
+    pub label: String,
+    /// Readable tags at or under it.
+    pub count: usize,
+    pub is_tag: bool,
+    pub has_children: bool,
+}
+
+/// The children of a node of the tag tree. `prefix` is "" for the roots, or
+/// a branch's name followed by a dot.
+pub async fn tree(
+    State(s): State<WebState>,
+    Extension(who): Extension<Principal>,
+    Query(q): Query<TreeQuery>,
+) -> ApiResult<Json<serde_json::Value>> {
+    if q.prefix.chars().count() > 1024 {
+        return Err(ApiError::bad_request(
+            "prefix may have at most 1024 characters",
+        ));
+    }
+    let readable = s.readable(&who);
+    let mut nodes: std::collections::BTreeMap<&str, TreeNode> = Default::default();
+    for (_, m) in s.db.all_meta() {
+        let Some(rest) = m.name.strip_prefix(q.prefix.as_str()) else {
+            continue;
+        };
+        if rest.is_empty() || !readable.may_read(&m.name) {
+            continue;
+        }
+        let (label, deeper) = match rest.split_once('.') {
+            Some((l, _)) => (l, true),
+            None => (rest, false),
+        };
+        let name = &m.name[..q.prefix.len() + label.len()];
+        let node = nodes.entry(name).or_insert_with(|| TreeNode {
+            name: name.to_string(),
+            label: label.to_string(),
+            count: 0,
+            is_tag: false,
+            has_children: false,
+        });
+        node.count += 1;
+        node.is_tag |= !deeper;
+        node.has_children |= deeper;
+    }
+    let children: Vec<TreeNode> = nodes.into_values().collect();
+    Ok(Json(
+        serde_json::json!({ "prefix": q.prefix, "children": children }),
+    ))
+}
+
+pub async fn one(
+    State(s): State<WebState>,
+    Extension(who): Extension<Principal>,
+    Path(name): Path<String>,
+) -> ApiResult<Json<TagView>> {
+    let not_found = || ApiError::not_found(format!("no tag named '{}'", name.escape_debug()));
+    let id = s.db.id(&name).ok_or_else(not_found)?;
+    let meta = s.db.meta(id).ok_or_else(not_found)?;
+    if !s.readable(&who).may_read(&name) {
+        return Err(ApiError::forbidden(format!(
+            "tag '{}' is on no screen your group may open",
+            name.escape_debug()
+        )));
+    }
+    s.tag_view(id, meta).map(Json).ok_or_else(not_found)
 }
 
 #[derive(Deserialize)]

@@ -4,11 +4,12 @@ use axum::body::Body;
 use axum::extract::{Query, State};
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
-use axum::Json;
+use axum::{Extension, Json};
 use serde::Deserialize;
 use serde_json::{json, Value};
 
 use crate::api::parse_time;
+use crate::auth::Principal;
 use crate::error::{ApiError, ApiResult};
 use crate::WebState;
 
@@ -24,7 +25,7 @@ pub struct TrendQuery {
 
 const MAX_PENS: usize = 16;
 
-fn tag_list<'a>(s: &WebState, tags: &'a str) -> ApiResult<Vec<&'a str>> {
+fn tag_list<'a>(s: &WebState, who: &Principal, tags: &'a str) -> ApiResult<Vec<&'a str>> {
     let list: Vec<&str> = tags
         .split(',')
         .map(str::trim)
@@ -41,14 +42,21 @@ fn tag_list<'a>(s: &WebState, tags: &'a str) -> ApiResult<Vec<&'a str>> {
     if let Some(unknown) = list.iter().find(|t| s.db.id(t).is_none()) {
         return Err(ApiError::not_found(format!("no tag named '{unknown}'")));
     }
+    let readable = s.readable(who);
+    if let Some(hidden) = list.iter().find(|t| !readable.may_read(t)) {
+        return Err(ApiError::forbidden(format!(
+            "tag '{hidden}' is on no screen your group may open"
+        )));
+    }
     Ok(list)
 }
 
 pub async fn trend(
     State(s): State<WebState>,
+    Extension(who): Extension<Principal>,
     Query(q): Query<TrendQuery>,
 ) -> ApiResult<Json<Value>> {
-    let tags = tag_list(&s, &q.tags)?;
+    let tags = tag_list(&s, &who, &q.tags)?;
     let from = parse_time("from", &q.from)?;
     let to = parse_time("to", &q.to)?;
     let points = q.points.unwrap_or(500);
@@ -69,8 +77,12 @@ pub struct CsvQuery {
 }
 
 /// Raw samples as CSV, streamed so that a long range never sits in memory.
-pub async fn csv(State(s): State<WebState>, Query(q): Query<CsvQuery>) -> ApiResult<Response> {
-    let tags: Vec<String> = tag_list(&s, &q.tags)?
+pub async fn csv(
+    State(s): State<WebState>,
+    Extension(who): Extension<Principal>,
+    Query(q): Query<CsvQuery>,
+) -> ApiResult<Response> {
+    let tags: Vec<String> = tag_list(&s, &who, &q.tags)?
         .into_iter()
         .map(String::from)
         .collect();

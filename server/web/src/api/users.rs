@@ -9,7 +9,7 @@ use serde::Deserialize;
 use serde_json::{json, Value};
 
 use crate::api::audit;
-use crate::auth::{self, Principal, SCREENS};
+use crate::auth::{self, Principal};
 use crate::error::{ApiError, ApiResult};
 use crate::WebState;
 
@@ -284,8 +284,9 @@ pub async fn group_screens(
 ) -> ApiResult<Json<Value>> {
     let role = role_named(&group);
     let screens = s.screens_of(&group, role).await;
+    let available: Vec<String> = s.catalog().into_iter().map(|e| e.id).collect();
     Ok(Json(
-        json!({ "group": group, "screens": screens, "available": SCREENS }),
+        json!({ "group": group, "screens": screens, "available": available }),
     ))
 }
 
@@ -312,11 +313,40 @@ pub async fn set_group_screens(
 ) -> ApiResult<Json<Value>> {
     let b = body(b)?;
     check_group_name(&group)?;
-    if let Some(bad) = b.screens.iter().find(|x| !SCREENS.contains(&x.as_str())) {
+    if let Some(bad) = b
+        .screens
+        .iter()
+        .find(|x| !crate::access::screen_exists(&s.plant, &s.screens, x))
+    {
+        let known: Vec<String> = s.catalog().into_iter().map(|e| e.id).collect();
         return Err(ApiError::bad_request(format!(
-            "unknown screen '{bad}'; screens are {}",
-            SCREENS.join(", ")
+            "unknown screen '{}'; this plant's screens are {}",
+            bad.escape_debug(),
+            known.join(", ")
         )));
+    }
+    // An administrator must stay able to manage users.
+    if !b.screens.iter().any(|x| x == "users") {
+        let mut still_managed = false;
+        for u in s.store.users().await? {
+            if u.role == Role::Administrator && !u.blocked {
+                let screens = if u.group == group {
+                    b.screens.clone()
+                } else {
+                    s.screens_of(&u.group, u.role).await
+                };
+                still_managed |= screens.iter().any(|x| x == "users");
+            }
+        }
+        if !still_managed {
+            return Err(ApiError::new(
+                StatusCode::CONFLICT,
+                "conflict",
+                format!(
+                    "group '{group}' without the users screen would leave no administrator able to manage users"
+                ),
+            ));
+        }
     }
     s.store.set_group_screens(&group, &b.screens).await?;
     audit(

@@ -244,6 +244,7 @@ impl Harness {
         .expect("alarm engine");
         let writer = Arc::new(FakeWriter::default());
         let sim = Arc::new(FakeSim::default());
+        let tag_index = Arc::new(gridscada_web::access::TagIndex::new(&plant));
         let state = WebState {
             db,
             plant: Arc::new(plant),
@@ -264,6 +265,9 @@ impl Harness {
             sim: opts.sim.then(|| sim.clone() as Arc<dyn SimControl>),
             http_metrics: Default::default(),
             metrics: None,
+            screens: Default::default(),
+            tag_index,
+            devices: None,
         };
         let h = Harness {
             app: gridscada_web::router(state.clone()),

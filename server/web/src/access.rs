@@ -1,0 +1,278 @@
+//! Which screens exist and which tags a caller may read.
+//!
+//! **Owns:** the screen catalog of the loaded plant (built-in screens, one
+//! per configured panel, the microgrid screens when there is a microgrid, and
+//! the screens users drew), the in-memory library of user screens, the
+//! default screen access of each role, and tag read access derived from the
+//! screens a caller may open (see `docs/ACCESS.md`). **Must not touch:** SQL
+//! (the library is loaded from and saved through the store by the handlers).
+//!
+//! Nothing here names a plant: every screen and tag set comes from the
+//! configuration and the screens that were saved.
+
+use std::collections::{BTreeMap, HashSet};
+use std::sync::Arc;
+
+use gridscada_config::screen::{Screen, CUSTOM_PREFIX};
+use gridscada_config::{Plant, Role};
+use parking_lot::RwLock;
+use serde::Serialize;
+
+use crate::auth::Principal;
+
+/// Built-in screens that every plant has, after the plant-specific ones, in
+/// toolbar order, with their labels.
+const TOOLS: &[(&str, &str)] = &[
+    ("tags", "Tags"),
+    ("devices", "Devices"),
+    ("alarms", "Alarms"),
+    ("events", "Events"),
+    ("trends", "Trends"),
+    ("editor", "Screen editor"),
+    ("users", "Users"),
+];
+
+/// Screens only an Administrator's group gets by default.
+const ADMIN_ONLY: &[&str] = &["users", "editor"];
+
+/// What kind of screen an entry is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ScreenKind {
+    Builtin,
+    Panel,
+    Custom,
+}
+
+/// One screen of the catalog.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ScreenEntry {
+    /// The id used in screen access lists and HMI routes.
+    pub id: String,
+    pub label: String,
+    pub kind: ScreenKind,
+    /// The panel's id, for a panel screen.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub panel: Option<String>,
+    /// The saved version, for a user screen.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub version: Option<i64>,
+}
+
+/// The screens users drew, as last saved, by id (without `custom:`).
+#[derive(Default)]
+pub struct ScreenLibrary {
+    screens: RwLock<BTreeMap<String, Arc<Screen>>>,
+}
+
+impl ScreenLibrary {
+    pub fn new(screens: impl IntoIterator<Item = Screen>) -> Self {
+        let lib = ScreenLibrary::default();
+        for s in screens {
+            lib.put(s);
+        }
+        lib
+    }
+    pub fn get(&self, id: &str) -> Option<Arc<Screen>> {
+        self.screens.read().get(id).cloned()
+    }
+    pub fn put(&self, screen: Screen) {
+        self.screens
+            .write()
+            .insert(screen.id.clone(), Arc::new(screen));
+    }
+    pub fn remove(&self, id: &str) {
+        self.screens.write().remove(id);
+    }
+    pub fn all(&self) -> Vec<Arc<Screen>> {
+        self.screens.read().values().cloned().collect()
+    }
+}
+
+/// Every screen of this plant, in toolbar order.
+pub fn catalog(plant: &Plant, library: &ScreenLibrary) -> Vec<ScreenEntry> {
+    let builtin = |id: &str, label: &str| ScreenEntry {
+        id: id.into(),
+        label: label.into(),
+        kind: ScreenKind::Builtin,
+        panel: None,
+        version: None,
+    };
+    let mut out = vec![];
+    if !plant.panels.is_empty() {
+        out.push(builtin("main", "Main"));
+    }
+    for p in &plant.panels {
+        let id = p.id.get_ref();
+        out.push(ScreenEntry {
+            id: id.clone(),
+            label: if p.name.trim().is_empty() {
+                id.clone()
+            } else {
+                p.name.clone()
+            },
+            kind: ScreenKind::Panel,
+            panel: Some(id.clone()),
+            version: None,
+        });
+    }
+    if plant.microgrid.is_some() {
+        out.push(builtin("microgrid", "Microgrid"));
+        out.push(builtin("units", "Units"));
+    }
+    for s in library.all() {
+        out.push(ScreenEntry {
+            id: s.access_id(),
+            label: s.name.clone(),
+            kind: ScreenKind::Custom,
+            panel: None,
+            version: Some(s.version),
+        });
+    }
+    out.extend(TOOLS.iter().map(|(id, label)| builtin(id, label)));
+    out
+}
+
+/// Whether `id` names a screen of this plant.
+pub fn screen_exists(plant: &Plant, library: &ScreenLibrary, id: &str) -> bool {
+    match id.strip_prefix(CUSTOM_PREFIX) {
+        Some(custom) => library.get(custom).is_some(),
+        None => catalog(plant, library).iter().any(|e| e.id == id),
+    }
+}
+
+/// The screens a group named after a role may open before an administrator
+/// changes it. Guests see the plant's overview screens and the alarms, never
+/// the engineering screens (tags, devices) or the tools of administrators.
+pub fn default_screens(plant: &Plant, library: &ScreenLibrary, role: Role) -> Vec<String> {
+    catalog(plant, library)
+        .into_iter()
+        .filter(|e| match role {
+            Role::Administrator => true,
+            Role::Supervisor | Role::Operator => !ADMIN_ONLY.contains(&e.id.as_str()),
+            Role::Guest => {
+                matches!(e.kind, ScreenKind::Builtin)
+                    && ["main", "microgrid", "alarms", "trends"].contains(&e.id.as_str())
+            }
+        })
+        .map(|e| e.id)
+        .collect()
+}
+
+/// The tags a caller may read: the union of the tags of the screens their
+/// group may open. The engineering screens (tags, devices) open every tag.
+/// Every logged-in caller may read the devices' `Comm.*` status tags, which
+/// the header's communication light shows on every screen.
+#[derive(Debug, Clone, Default)]
+pub struct Readable {
+    all: bool,
+    prefixes: Vec<String>,
+    names: HashSet<String>,
+    comm_prefixes: Vec<String>,
+}
+
+impl Readable {
+    /// What `who` may read in `plant` with the screens in `library`.
+    pub fn of(who: &Principal, plant: &Plant, library: &ScreenLibrary) -> Readable {
+        let mut r = Readable::default();
+        if !who.is_logged_in() {
+            return r;
+        }
+        r.comm_prefixes = plant
+            .devices
+            .iter()
+            .map(|d| format!("{}.Comm.", d.name.get_ref()))
+            .collect();
+        let panel_prefix = |id: &str| {
+            plant
+                .panels
+                .iter()
+                .find(|p| p.id.get_ref() == id)
+                .map(|p| format!("{}.", p.prefix.get_ref()))
+        };
+        for screen in &who.screens {
+            match screen.as_str() {
+                "tags" | "devices" => r.all = true,
+                "main" => r.prefixes.extend(
+                    plant
+                        .panels
+                        .iter()
+                        .map(|p| format!("{}.", p.prefix.get_ref())),
+                ),
+                "microgrid" | "units" => {
+                    if let Some(mg) = &plant.microgrid {
+                        r.prefixes
+                            .extend(mg.units.iter().map(|u| format!("{}.", u.prefix.get_ref())));
+                        r.names.insert(mg.demand_tag.get_ref().clone());
+                        if let Some((load, _)) = mg.demand_tag.get_ref().rsplit_once('.') {
+                            r.prefixes.push(format!("{load}."));
+                        }
+                        r.prefixes
+                            .push(format!("{}.", gridscada_control::dispatch::tags::PREFIX));
+                    }
+                }
+                other => {
+                    if let Some(custom) = other.strip_prefix(CUSTOM_PREFIX) {
+                        if let Some(s) = library.get(custom) {
+                            r.names.extend(s.tags().into_iter().map(String::from));
+                            r.prefixes
+                                .extend(s.panels().into_iter().filter_map(panel_prefix));
+                        }
+                    } else if let Some(p) = panel_prefix(other) {
+                        r.prefixes.push(p);
+                    }
+                }
+            }
+        }
+        r.prefixes.sort();
+        r.prefixes.dedup();
+        r
+    }
+
+    /// Everything (for tests and tools).
+    pub fn everything() -> Readable {
+        Readable {
+            all: true,
+            ..Default::default()
+        }
+    }
+
+    pub fn all(&self) -> bool {
+        self.all
+    }
+
+    pub fn may_read(&self, tag: &str) -> bool {
+        self.all
+            || self.names.contains(tag)
+            || self.prefixes.iter().any(|p| tag.starts_with(p.as_str()))
+            || self
+                .comm_prefixes
+                .iter()
+                .any(|p| tag.starts_with(p.as_str()))
+    }
+}
+
+/// The configured tags by name, so per-tag look-ups stay O(1) for plants of
+/// 100,000 tags (`Plant::tag` scans).
+#[derive(Debug, Default)]
+pub struct TagIndex(std::collections::HashMap<String, usize>);
+
+impl TagIndex {
+    pub fn new(plant: &Plant) -> Self {
+        TagIndex(
+            plant
+                .tags
+                .iter()
+                .enumerate()
+                .map(|(i, t)| (t.name.get_ref().clone(), i))
+                .collect(),
+        )
+    }
+
+    pub fn get<'p>(&self, plant: &'p Plant, name: &str) -> Option<&'p gridscada_config::TagConfig> {
+        self.0
+            .get(name)
+            .and_then(|&i| plant.tags.get(i))
+            .filter(|t| t.name.get_ref() == name)
+    }
+}

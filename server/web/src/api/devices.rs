@@ -1,0 +1,79 @@
+//! `/api/devices`: the communication state of every field device and link,
+//! for the engineer commissioning them.
+//!
+//! The figures come from the application through a [`DeviceSource`], so this
+//! crate needs no knowledge of Modbus.
+
+use axum::extract::State;
+use axum::Json;
+use serde::Serialize;
+
+use crate::error::{ApiError, ApiResult};
+use crate::WebState;
+
+/// One device as the devices screen shows it.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct DeviceView {
+    pub name: String,
+    pub description: String,
+    /// The connection or serial port it shares with others.
+    pub link: String,
+    pub protocol: String,
+    /// `host:port` for TCP, the serial port for RTU.
+    pub address: String,
+    pub unit_id: u8,
+    /// The fastest scan period configured for its tags.
+    pub scan_ms: u64,
+    /// Scans completed per second, over the last few seconds.
+    pub achieved_scans_per_s: f64,
+    /// Round trip of the last answered request.
+    pub response_ms: f64,
+    pub requests: u64,
+    pub errors: u64,
+    pub timeouts: u64,
+    pub exceptions: u64,
+    pub writes: u64,
+    pub late_scans: u64,
+    pub overruns: u64,
+    pub connected: bool,
+    /// A failing device is not scanned; it is probed at growing intervals
+    /// until it answers again.
+    pub backing_off: bool,
+    pub last_error: String,
+}
+
+/// One connection or serial port.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct LinkView {
+    pub link: String,
+    pub protocol: String,
+    pub devices: Vec<String>,
+    /// Every device on it answers.
+    pub connected: bool,
+    pub connects: u64,
+    pub disconnects: u64,
+    /// Replies that came after their request had timed out (discarded).
+    pub late_replies: u64,
+    /// RTU bytes skipped as line noise.
+    pub garbage_bytes: u64,
+    pub last_error: String,
+}
+
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct DevicesView {
+    pub devices: Vec<DeviceView>,
+    pub links: Vec<LinkView>,
+}
+
+/// Where the application gets the figures (the poller, in `app`).
+pub trait DeviceSource: Send + Sync {
+    fn devices(&self) -> DevicesView;
+}
+
+pub async fn list(State(s): State<WebState>) -> ApiResult<Json<DevicesView>> {
+    let source = s
+        .devices
+        .as_ref()
+        .ok_or_else(|| ApiError::unavailable("field I/O is not running"))?;
+    Ok(Json(source.devices()))
+}
