@@ -233,6 +233,14 @@ fn main() -> ExitCode {
 fn check(path: &std::path::Path) -> ExitCode {
     match gridscada_config::load_path(path) {
         Ok(plant) => {
+            let screen_problems = runtime::check_screens(&plant);
+            if !screen_problems.is_empty() {
+                for p in &screen_problems {
+                    eprintln!("{p}");
+                }
+                eprintln!("{} problem(s) found", screen_problems.len());
+                return ExitCode::FAILURE;
+            }
             println!(
                 "{}: ok ({} devices, {} tags, {} panels{})",
                 plant.main_path.display(),

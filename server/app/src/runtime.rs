@@ -155,6 +155,47 @@ pub async fn open_store(plant: &Plant, data: &Path) -> anyhow::Result<Store> {
     Ok(store)
 }
 
+/// Checks the plant's `screens/*.json` against its tags (derived ones
+/// included) and panels, without starting anything; every problem names its
+/// file, and the element and field.
+pub fn check_screens(plant: &Plant) -> Vec<String> {
+    struct View<'a> {
+        plant: &'a Plant,
+        tags: std::collections::HashMap<String, gridscada_tagdb::ValueKind>,
+    }
+    impl gridscada_config::screen::PlantView for View<'_> {
+        fn tag(&self, name: &str) -> Option<(gridscada_tagdb::ValueKind, bool)> {
+            let kind = *self.tags.get(name)?;
+            let writable = self
+                .plant
+                .tag(name)
+                .is_some_and(|t| *t.writable.get_ref() && t.write_role.is_some());
+            Some((kind, writable))
+        }
+        fn has_panel(&self, id: &str) -> bool {
+            self.plant.panels.iter().any(|p| p.id.get_ref() == id)
+        }
+    }
+    let view = View {
+        plant,
+        tags: all_tags(plant)
+            .into_iter()
+            .map(|m| (m.name.to_string(), m.kind))
+            .collect(),
+    };
+    let dir = gridscada_config::screen::folder_of(&plant.main_path);
+    let (files, mut problems) = gridscada_config::screen::read_folder(&dir);
+    for (path, screen) in files {
+        problems.extend(
+            screen
+                .validate(&view)
+                .into_iter()
+                .map(|e| format!("{}: {e}", path.display())),
+        );
+    }
+    problems
+}
+
 /// Every tag the database holds: the plant's, plus the derived ones.
 pub(crate) fn all_tags(plant: &Plant) -> Vec<TagMeta> {
     let mut tags: Vec<TagMeta> = plant.tag_metas().collect();

@@ -29,6 +29,11 @@ impl Demo {
     /// Starts the demo with its data in `data`, logging to `log` (appended),
     /// and waits for it to print its URL.
     pub fn start(data: &Path, log: &Path) -> Demo {
+        Demo::start_with(data, log, &[])
+    }
+
+    /// Like [`Demo::start`], with more arguments (e.g. `--config PLANT`).
+    pub fn start_with(data: &Path, log: &Path, args: &[&std::ffi::OsStr]) -> Demo {
         let log_file = std::fs::OpenOptions::new()
             .create(true)
             .append(true)
@@ -37,6 +42,7 @@ impl Demo {
         let mut child = Command::new(BIN)
             .args(["demo", "--http", "127.0.0.1:0", "--data"])
             .arg(data)
+            .args(args)
             .env("RUST_LOG", "info")
             .stdout(Stdio::piped())
             .stderr(Stdio::from(log_file))
