@@ -61,6 +61,7 @@ esac
 # crate's integration tests.
 "$st" run "$base/api/openapi.json" \
     --header "Cookie: $cookie" \
+    --header "Origin: $base" \
     --checks not_a_server_error,status_code_conformance,content_type_conformance,response_schema_conformance \
     --max-examples "${ST_MAX_EXAMPLES:-25}" \
     --max-time "${ST_MAX_TIME:-240}" \

@@ -30,6 +30,34 @@ pub const COMM_PRIORITY: u32 = 800;
 /// Longest shelving an operator may ask for (7 days): shelving is temporary by
 /// definition; longer removal is "out of service".
 pub const MAX_SHELVE: Duration = Duration::from_secs(7 * 24 * 3600);
+/// Longest shelve or out-of-service reason, in bytes (what the store keeps).
+pub const MAX_REASON_BYTES: usize = 2048;
+
+/// A reason an operator gives: required (when `required`), at most
+/// [`MAX_REASON_BYTES`], one line of printable text. Checked before any
+/// state changes, so a refused request changes nothing.
+fn check_reason<'a>(what: &str, reason: &'a str, required: bool) -> Result<&'a str, AlarmError> {
+    let reason = reason.trim();
+    if required && reason.is_empty() {
+        return Err(AlarmError::invalid(what, "a reason is required"));
+    }
+    if reason.len() > MAX_REASON_BYTES {
+        return Err(AlarmError::invalid(
+            what,
+            format!(
+                "the reason has {} bytes; at most {MAX_REASON_BYTES}",
+                reason.len()
+            ),
+        ));
+    }
+    if reason.chars().any(char::is_control) {
+        return Err(AlarmError::invalid(
+            what,
+            "the reason may not contain control characters (line breaks, tabs)",
+        ));
+    }
+    Ok(reason)
+}
 
 /// Dense index of an input tag of an [`AlarmSet`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -522,10 +550,7 @@ impl AlarmSet {
         out: &mut Outputs,
     ) -> Result<Timestamp, AlarmError> {
         let user = check_user(user)?;
-        let reason = reason.trim();
-        if reason.is_empty() {
-            return Err(AlarmError::invalid("shelve", "a reason is required"));
-        }
+        let reason = check_reason("shelve", reason, true)?;
         if duration.is_zero() || duration > MAX_SHELVE {
             return Err(AlarmError::invalid(
                 "shelve",
@@ -592,13 +617,7 @@ impl AlarmSet {
         out: &mut Outputs,
     ) -> Result<bool, AlarmError> {
         let user = check_user(user)?;
-        let reason = reason.trim();
-        if out_of_service && reason.is_empty() {
-            return Err(AlarmError::invalid(
-                "out of service",
-                "a reason is required",
-            ));
-        }
+        let reason = check_reason("out of service", reason, out_of_service)?;
         let alarm = self.get_mut(id)?;
         if !alarm.set_out_of_service(out_of_service, user, reason, now, &mut out.transitions) {
             return Ok(false);

@@ -346,6 +346,22 @@ fn shelve_checks_its_arguments() {
         .set
         .shelve(AlarmId(99), "sue", d, "why", ts(0.0), &mut out)
         .is_err());
+    // A reason the store could not keep is refused before anything changes
+    // (it used to shelve, then fail to persist, losing the audit record).
+    let long = "x".repeat(9000);
+    let err = r
+        .set
+        .shelve(id, "sue", d, &long, ts(0.0), &mut out)
+        .unwrap_err();
+    assert!(err.to_string().contains("at most 2048"), "{err}");
+    assert!(r
+        .set
+        .shelve(id, "sue", d, "line\nbreak", ts(0.0), &mut out)
+        .is_err());
+    assert!(r
+        .set
+        .set_out_of_service(id, "sue", true, &long, ts(0.0), &mut out)
+        .is_err());
     assert!(out.transitions.is_empty() && out.events.is_empty());
 }
 

@@ -147,6 +147,14 @@ pub async fn sim(config: Option<PathBuf>) -> ExitCode {
 pub async fn open_store(plant: &Plant, data: &Path) -> anyhow::Result<Store> {
     std::fs::create_dir_all(data)
         .with_context(|| format!("cannot create the data folder {}", data.display()))?;
+    // The folder holds the database (password hashes, audit log) and the
+    // demo's credentials: its owner's only, whatever the umask.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(data, std::fs::Permissions::from_mode(0o700))
+            .with_context(|| format!("cannot restrict the data folder {}", data.display()))?;
+    }
     let url = plant.storage.url.get_ref();
     let store = Store::open(url, &OpenOptions::new(data))
         .await
@@ -531,7 +539,9 @@ async fn run(
         }
     };
 
-    let web = web_state(&stack).await;
+    let mut web = web_state(&stack).await;
+    // The demo serves loopback only, and its figures are no secret.
+    web.auth.metrics_open = mode == Mode::Demo;
     load_screens(&web, mode).await?;
     let (local, server) = gridscada_web::bind(http, gridscada_web::router(web))
         .await
@@ -618,12 +628,19 @@ async fn load_screens(web: &gridscada_web::WebState, mode: Mode) -> anyhow::Resu
 
 /// The web layer's view of a running stack.
 pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
-    let auth = gridscada_web::Auth {
-        sessions: Arc::new(gridscada_web::auth::Sessions::new(Default::default())),
-        throttle: Arc::new(Default::default()),
-        secure_cookies: false,
-        decoy_hash: gridscada_web::auth::make_decoy_hash().await.into(),
-    };
+    let auth = gridscada_web::Auth::new(Default::default(), false).await;
+    // Abandoned sessions are forgotten, not kept until the next restart.
+    let sessions = Arc::downgrade(&auth.sessions);
+    tokio::spawn(async move {
+        let mut tick = tokio::time::interval(std::time::Duration::from_secs(60));
+        loop {
+            tick.tick().await;
+            match sessions.upgrade() {
+                Some(s) => s.sweep(),
+                None => return,
+            }
+        }
+    });
     gridscada_web::WebState {
         db: stack.db.clone(),
         plant: stack.plant.clone(),

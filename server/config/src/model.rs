@@ -32,6 +32,18 @@ pub struct ServerConfig {
     /// working directory.
     #[serde(default = "default_data_dir")]
     pub data_dir: String,
+    /// Host names (without port) the HMI may be reached by, besides IP
+    /// addresses and `localhost`. A request naming another host is refused,
+    /// which defeats DNS rebinding.
+    #[serde(default)]
+    pub allowed_hosts: Vec<String>,
+    /// `/metrics`: a bearer token Prometheus must send. Without one, only
+    /// loopback clients may scrape (`demo`: anyone who reaches it).
+    #[serde(default)]
+    pub metrics_token: Option<String>,
+    /// `/metrics`: client addresses allowed without the token.
+    #[serde(default)]
+    pub metrics_allow: Vec<std::net::IpAddr>,
 }
 
 impl Default for ServerConfig {
@@ -39,6 +51,9 @@ impl Default for ServerConfig {
         ServerConfig {
             http: default_http(),
             data_dir: default_data_dir(),
+            allowed_hosts: vec![],
+            metrics_token: None,
+            metrics_allow: vec![],
         }
     }
 }

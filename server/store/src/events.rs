@@ -77,6 +77,37 @@ pub(crate) fn check_text(what: &str, s: &str, max: usize) -> Result<()> {
     Ok(())
 }
 
+/// `s` with every control character escaped as Rust writes it.
+pub(crate) fn escape_control_chars(s: &str) -> std::borrow::Cow<'_, str> {
+    if !s.chars().any(char::is_control) {
+        return std::borrow::Cow::Borrowed(s);
+    }
+    std::borrow::Cow::Owned(
+        s.chars()
+            .map(|c| {
+                if c.is_control() {
+                    c.escape_default().to_string()
+                } else {
+                    c.to_string()
+                }
+            })
+            .collect(),
+    )
+}
+
+fn escape_controls(e: &NewEvent) -> NewEvent {
+    NewEvent {
+        ts: e.ts,
+        user: e
+            .user
+            .as_deref()
+            .map(|u| escape_control_chars(u).into_owned()),
+        source: escape_control_chars(&e.source).into_owned(),
+        kind: escape_control_chars(&e.kind).into_owned(),
+        message: escape_control_chars(&e.message).into_owned(),
+    }
+}
+
 impl Store {
     /// Records one event; returns its id once committed.
     pub async fn insert_event(&self, event: &NewEvent) -> Result<i64> {
@@ -88,7 +119,13 @@ impl Store {
     }
 
     /// Records events in one transaction; returns their ids once committed.
+    ///
+    /// Control characters in any field are stored escaped (`\n`, `\u{1b}`),
+    /// so text from outside (a login name, a tag value) can never forge a
+    /// second line in the log.
     pub async fn insert_events(&self, events: &[NewEvent]) -> Result<Vec<i64>> {
+        let events: Vec<NewEvent> = events.iter().map(escape_controls).collect();
+        let events = &events[..];
         for e in events {
             check_text("event source", &e.source, 256)?;
             check_text("event type", &e.kind, 64)?;

@@ -146,6 +146,33 @@ const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
     ),
 ];
 
+/// The database holds password hashes and the audit log: it is created
+/// readable by its owner only (0600), whatever the umask, and an existing
+/// one is narrowed to that. SQLite gives its `-wal` and `-shm` files the
+/// database file's mode.
+fn private_file(path: &Path) -> std::io::Result<()> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::{OpenOptionsExt, PermissionsExt};
+        std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .mode(0o600)
+            .open(path)?;
+        for suffix in ["", "-wal", "-shm"] {
+            let mut p = path.as_os_str().to_owned();
+            p.push(suffix);
+            match std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o600)) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(e),
+                _ => {}
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = path;
+    Ok(())
+}
+
 fn migrator(list: &[(i64, &'static str, &'static str)]) -> Migrator {
     let migrations = list
         .iter()
@@ -243,6 +270,10 @@ impl Store {
                 source: Box::new(e),
             })?;
         }
+        private_file(path).map_err(|e| StoreError::Open {
+            what: format!("SQLite database {shown}"),
+            source: Box::new(e),
+        })?;
         let sync = match options.sqlite_sync {
             SqliteSync::Normal => SqliteSynchronous::Normal,
             SqliteSync::Full => SqliteSynchronous::Full,

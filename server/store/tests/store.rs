@@ -858,6 +858,32 @@ async fn user_screens_versions(db: TestDb) {
 }
 both_backends!(user_screens, user_screens_versions);
 
+/// Text from outside can never forge a second line in the event log.
+async fn events_escape_control_characters(db: TestDb) {
+    let s = &db.store;
+    let forged = "failed login as 'x' from 10.9.9.9: ok\nadmin logged in\u{1b}[2J";
+    s.insert_event(&ev(1000, Some("eve\r\n"), "web", "login_failed", forged))
+        .await
+        .unwrap();
+    let got = s
+        .events(&EventFilter {
+            limit: 10,
+            ..Default::default()
+        })
+        .await
+        .unwrap();
+    let e = got.iter().find(|e| e.kind == "login_failed").unwrap();
+    assert!(!e.message.chars().any(char::is_control), "{:?}", e.message);
+    assert!(
+        e.message.contains("ok\\nadmin logged in"),
+        "{:?}",
+        e.message
+    );
+    assert_eq!(e.user.as_deref(), Some("eve\\r\\n"));
+    db.cleanup().await;
+}
+both_backends!(event_escaping, events_escape_control_characters);
+
 async fn wait_for(what: &str, mut cond: impl FnMut() -> bool) {
     for _ in 0..1000 {
         if cond() {

@@ -29,7 +29,7 @@ use futures::{SinkExt, StreamExt};
 use gridscada_config::Role;
 use gridscada_store::{NewUser, OpenOptions, Store};
 use gridscada_tagdb::{Sample, SystemClock, TagDb, TagId, TagMeta, Timestamp, ValueKind};
-use gridscada_web::auth::{self, SessionPolicy, Sessions, Throttle};
+use gridscada_web::auth::{self, SessionPolicy, Sessions};
 use gridscada_web::{Auth, Components, WebState};
 use parking_lot::Mutex;
 use serde_json::json;
@@ -135,9 +135,7 @@ async fn web_state(db: Arc<TagDb>, dir: &Path) -> (WebState, String) {
         store,
         auth: Auth {
             sessions,
-            throttle: Arc::new(Throttle::default()),
-            secure_cookies: false,
-            decoy_hash: auth::make_decoy_hash().await.into(),
+            ..Auth::new(SessionPolicy::default(), false).await
         },
         clock: Arc::new(SystemClock),
         writer: None,

@@ -7,6 +7,8 @@ use axum::http::{header, HeaderMap, HeaderValue, Method, StatusCode};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use axum::routing::MethodRouter;
+use std::sync::Arc;
+
 use axum::Router;
 use gridscada_config::Role;
 
@@ -66,6 +68,16 @@ impl Perm {
             Perm::Screen(s) => logged_in().and_then(|_| screen(s)),
             Perm::Role(r) => logged_in().and_then(|_| role(r)),
             Perm::RoleScreen(r, s) => logged_in().and_then(|_| role(r)).and_then(|_| screen(s)),
+        }
+    }
+}
+
+impl Perm {
+    /// The screen the permission names, if any.
+    pub fn screen(self) -> Option<&'static str> {
+        match self {
+            Perm::Screen(s) | Perm::RoleScreen(_, s) => Some(s),
+            _ => None,
         }
     }
 }
@@ -343,6 +355,7 @@ pub fn build(state: WebState) -> Router {
         router = router.route(route.path, handler);
     }
     let http_metrics = state.http_metrics.clone();
+    let hosts = Arc::new(HostPolicy::new(&state.plant.server.allowed_hosts));
     router
         .fallback(crate::hmi::serve)
         .layer(middleware::from_fn(json_errors))
@@ -350,10 +363,51 @@ pub fn build(state: WebState) -> Router {
             http_metrics,
             crate::metrics::count,
         ))
+        .layer(middleware::from_fn_with_state(hosts, check_origin))
+        // Outside the checks, so their refusals carry the headers too.
         .layer(middleware::from_fn(security_headers))
-        .layer(middleware::from_fn(check_origin))
         .layer(tower_http::compression::CompressionLayer::new())
         .with_state(state)
+}
+
+/// The host names this server answers to: any IP address, `localhost`, and
+/// the configured `[server] allowed_hosts`. A page on another name that
+/// resolves here (DNS rebinding) is refused.
+pub struct HostPolicy {
+    names: Vec<String>,
+}
+
+impl HostPolicy {
+    pub fn new(allowed: &[String]) -> Self {
+        HostPolicy {
+            names: allowed.iter().map(|h| h.to_ascii_lowercase()).collect(),
+        }
+    }
+
+    /// Whether a `Host` header value (with or without port) is ours.
+    pub fn allows(&self, host: &str) -> bool {
+        let host = host.trim();
+        // "[::1]:8080", "127.0.0.1:8080", "name:8080", "name".
+        let name = if let Some(rest) = host.strip_prefix('[') {
+            match rest.split_once(']') {
+                Some((ip, _)) => return ip.parse::<std::net::Ipv6Addr>().is_ok(),
+                None => return false,
+            }
+        } else {
+            host.rsplit_once(':').map_or(host, |(n, port)| {
+                if port.bytes().all(|b| b.is_ascii_digit()) {
+                    n
+                } else {
+                    host
+                }
+            })
+        };
+        if name.parse::<std::net::IpAddr>().is_ok() {
+            return true;
+        }
+        let name = name.trim_end_matches('.').to_ascii_lowercase();
+        name == "localhost" || self.names.contains(&name)
+    }
 }
 
 /// Resolves the caller and checks the route's permission. The principal goes
@@ -365,6 +419,16 @@ async fn authorize(
     next: Next,
 ) -> Response {
     let principal = state.principal(req.headers()).await;
+    // A screen this plant does not have (the microgrid's, in a plant
+    // without one) is absent rather than forbidden.
+    if let Some(screen) = perm.screen() {
+        if principal.is_logged_in()
+            && !crate::access::screen_exists(&state.plant, &state.screens, screen)
+        {
+            return ApiError::not_found(format!("this plant has no {screen} screen"))
+                .into_response();
+        }
+    }
     if let Err(e) = perm.check(&principal) {
         return e.into_response();
     }
@@ -372,32 +436,65 @@ async fn authorize(
     next.run(req).await
 }
 
-/// CSRF defence in depth, on top of SameSite=Strict cookies: an unsafe method
-/// or a WebSocket upgrade whose Origin is another site is refused. (Clients
-/// that send no Origin at all are not browsers acting for another site.)
-async fn check_origin(req: Request, next: Next) -> Response {
-    let unsafe_method = !matches!(*req.method(), Method::GET | Method::HEAD | Method::OPTIONS);
-    let upgrade = req
-        .headers()
-        .get(header::UPGRADE)
-        .is_some_and(|v| v.as_bytes().eq_ignore_ascii_case(b"websocket"));
-    if (unsafe_method || upgrade) && !same_origin(req.headers()) {
-        return ApiError::forbidden(
-            "cross-site request refused (Origin does not match this server)",
+/// Host and CSRF checks, on top of SameSite=Strict cookies:
+/// - the `Host` must be one of ours ([`HostPolicy`]), on every request;
+/// - an unsafe method or a WebSocket upgrade must come from our own origin:
+///   its `Origin`, or without one its `Referer`, must name this host; a
+///   request that carries the session cookie and neither header is refused
+///   (browsers always send one of them; scripts must say where they are).
+async fn check_origin(State(hosts): State<Arc<HostPolicy>>, req: Request, next: Next) -> Response {
+    let headers = req.headers();
+    let host = headers
+        .get(header::HOST)
+        .and_then(|h| h.to_str().ok())
+        .map(str::to_string)
+        .or_else(|| req.uri().authority().map(|a| a.to_string()));
+    let Some(host) = host.filter(|h| hosts.allows(h)) else {
+        return ApiError::new(
+            StatusCode::MISDIRECTED_REQUEST,
+            "unknown_host",
+            "this server does not answer to that host name; add it to [server] allowed_hosts",
         )
         .into_response();
+    };
+    let unsafe_method = !matches!(*req.method(), Method::GET | Method::HEAD | Method::OPTIONS);
+    let upgrade = headers
+        .get(header::UPGRADE)
+        .is_some_and(|v| v.as_bytes().eq_ignore_ascii_case(b"websocket"));
+    if unsafe_method || upgrade {
+        let origin = headers.get(header::ORIGIN).and_then(|v| v.to_str().ok());
+        let referer = headers.get(header::REFERER).and_then(|v| v.to_str().ok());
+        let with_cookie =
+            token_from_cookies(headers.get(header::COOKIE).and_then(|v| v.to_str().ok())).is_some();
+        let refusal = match (origin, referer) {
+            (Some(o), _) if !same_origin(o, &host) => {
+                Some("cross-site request refused (Origin does not match this server)")
+            }
+            (None, Some(r)) if !same_origin(referer_origin(r), &host) => {
+                Some("cross-site request refused (Referer does not match this server)")
+            }
+            (None, None) if with_cookie => Some(
+                "request refused: a logged-in change must say where it comes from (Origin or Referer header)",
+            ),
+            _ => None,
+        };
+        if let Some(why) = refusal {
+            return ApiError::forbidden(why).into_response();
+        }
     }
     next.run(req).await
 }
 
-fn same_origin(headers: &HeaderMap) -> bool {
-    let Some(origin) = headers.get(header::ORIGIN) else {
-        return true;
-    };
-    let Some(host) = headers.get(header::HOST).and_then(|h| h.to_str().ok()) else {
-        return false;
-    };
-    let origin = origin.to_str().unwrap_or("");
+/// `scheme://host[:port]` of a URL.
+fn referer_origin(url: &str) -> &str {
+    let after_scheme = url.find("://").map_or(0, |i| i + 3);
+    match url[after_scheme..].find(['/', '?', '#']) {
+        Some(end) => &url[..after_scheme + end],
+        None => url,
+    }
+}
+
+fn same_origin(origin: &str, host: &str) -> bool {
     origin
         .strip_prefix("http://")
         .or_else(|| origin.strip_prefix("https://"))
@@ -452,10 +549,17 @@ async fn json_errors(req: Request, next: Next) -> Response {
     out
 }
 
-/// Security headers on every response.
+/// Security headers on every response; API answers are never cached (they
+/// carry plant state and user data).
 async fn security_headers(req: Request, next: Next) -> Response {
+    let path = req.uri().path();
+    let dynamic = path.starts_with("/api/") || path == "/metrics" || path == "/healthz";
     let mut resp = next.run(req).await;
+    let failed = resp.status().is_client_error() || resp.status().is_server_error();
     let h = resp.headers_mut();
+    if dynamic || failed {
+        h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
+    }
     let set = |h: &mut HeaderMap, k: &'static str, v: &'static str| {
         h.insert(k, HeaderValue::from_static(v));
     };

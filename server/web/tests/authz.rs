@@ -91,7 +91,14 @@ async fn every_route_against_every_caller() {
                     body_for(&route.method),
                 )
                 .await;
-            let expected = route.perm.check(&principal).err().map(|e| e.status);
+            let absent = route.perm.screen().is_some_and(|screen| {
+                !gridscada_web::access::screen_exists(&h.state.plant, &h.state.screens, screen)
+            });
+            let expected = if absent {
+                Some(StatusCode::NOT_FOUND)
+            } else {
+                route.perm.check(&principal).err().map(|e| e.status)
+            };
             let ok = match expected {
                 Some(status) => r.status == status,
                 None => r.status != StatusCode::UNAUTHORIZED && r.status != StatusCode::FORBIDDEN,

@@ -88,6 +88,8 @@ export class Api {
   async call(method, p, body) {
     const headers = { Accept: 'application/json' };
     if (this.cookie) headers.Cookie = this.cookie;
+    // As a browser does: a logged-in change names its origin (the server refuses it otherwise).
+    if (this.cookie && method !== 'GET' && method !== 'HEAD') headers.Origin = BASE;
     if (body !== undefined) headers['Content-Type'] = 'application/json';
     const resp = await fetch(`${BASE}${p}`, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
     const set = resp.headers.get('set-cookie');

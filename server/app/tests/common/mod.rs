@@ -213,6 +213,10 @@ impl Client {
         }
         if let Some(c) = &self.cookie {
             head.push_str(&format!("Cookie: {c}\r\n"));
+            // As a browser does: a logged-in change names its origin.
+            if method != "GET" {
+                head.push_str(&format!("Origin: http://{}\r\n", self.addr));
+            }
         }
         head.push_str("\r\n");
         s.write_all(head.as_bytes())

@@ -10,15 +10,16 @@ use std::collections::BTreeMap;
 use std::time::Duration;
 
 use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade};
-use axum::extract::State;
-use axum::http::{header, HeaderMap};
-use axum::response::Response;
+use axum::extract::{ConnectInfo, State};
+use axum::http::{header, HeaderMap, StatusCode};
+use axum::response::{IntoResponse, Response};
 use axum::Extension;
 use gridscada_tagdb::{Quality, Sample, TagId, Timestamp, Update, Value};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use crate::auth::{token_from_cookies, Principal};
+use crate::error::ApiError;
 use crate::WebState;
 
 /// Longest a client message may be.
@@ -28,12 +29,23 @@ const FLUSH: Duration = Duration::from_millis(100);
 pub async fn upgrade(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
+    ConnectInfo(peer): ConnectInfo<std::net::SocketAddr>,
     headers: HeaderMap,
     ws: WebSocketUpgrade,
 ) -> Response {
     let token = token_from_cookies(headers.get(header::COOKIE).and_then(|v| v.to_str().ok()));
+    let ip = peer.ip();
+    // Places are taken before the upgrade and freed when the socket ends.
+    let slot = match s.auth.sockets.open(token.as_deref(), ip) {
+        Ok(slot) => slot,
+        Err(why) => {
+            return ApiError::new(StatusCode::TOO_MANY_REQUESTS, "too_many_connections", why)
+                .into_response()
+        }
+    };
     ws.max_message_size(MAX_MESSAGE)
         .on_upgrade(move |socket| async move {
+            let _slot = slot;
             if let Err(e) = run(s, who, token, socket).await {
                 tracing::debug!(error = %e, "live socket closed");
             }

@@ -1,12 +1,60 @@
 //! Health, metrics and the OpenAPI document.
 
-use axum::extract::State;
-use axum::http::header;
+use axum::extract::{ConnectInfo, State};
+use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::IntoResponse;
 use axum::Json;
 use serde_json::json;
 
+use crate::error::ApiError;
 use crate::WebState;
+
+/// Who may scrape `/metrics` (it names every device and which one is down):
+/// with `[server] metrics_token`, a client sending `Authorization: Bearer
+/// TOKEN`; the addresses in `metrics_allow`; loopback clients when no token
+/// is set; anyone in the demo.
+fn metrics_allowed(
+    s: &WebState,
+    ip: Option<std::net::IpAddr>,
+    headers: &HeaderMap,
+) -> Result<(), ApiError> {
+    if s.auth.metrics_open {
+        return Ok(());
+    }
+    let cfg = &s.plant.server;
+    if ip.is_some_and(|ip| cfg.metrics_allow.contains(&ip)) {
+        return Ok(());
+    }
+    match cfg.metrics_token.as_deref() {
+        Some(token) => {
+            let sent = headers
+                .get(header::AUTHORIZATION)
+                .and_then(|v| v.to_str().ok())
+                .and_then(|v| v.strip_prefix("Bearer "))
+                .unwrap_or("");
+            // Compared in constant time.
+            let same = sent.len() == token.len()
+                && sent
+                    .bytes()
+                    .zip(token.bytes())
+                    .fold(0u8, |acc, (a, b)| acc | (a ^ b))
+                    == 0;
+            if same {
+                Ok(())
+            } else {
+                Err(ApiError::new(
+                    StatusCode::UNAUTHORIZED,
+                    "unauthorized",
+                    "/metrics needs Authorization: Bearer <metrics_token>",
+                ))
+            }
+        }
+        None if ip.is_some_and(|ip| ip.is_loopback()) => Ok(()),
+        None => Err(ApiError::forbidden(
+            "/metrics answers loopback clients only; set [server] metrics_token or metrics_allow",
+        )),
+    }
+}
 
 /// Liveness and a one-line picture of the server.
 pub async fn healthz(State(s): State<WebState>) -> Json<serde_json::Value> {
@@ -22,7 +70,12 @@ pub async fn healthz(State(s): State<WebState>) -> Json<serde_json::Value> {
 
 /// Prometheus text exposition: server, tag database, HTTP, alarms, and the
 /// application's poller and historian figures.
-pub async fn metrics(State(s): State<WebState>) -> impl IntoResponse {
+pub async fn metrics(
+    State(s): State<WebState>,
+    ConnectInfo(peer): ConnectInfo<std::net::SocketAddr>,
+    headers: HeaderMap,
+) -> Result<impl IntoResponse, ApiError> {
+    metrics_allowed(&s, Some(peer.ip()), &headers)?;
     let mut out = crate::metrics::Prom::default();
     out.gauge(
         "gridscada_uptime_seconds",
@@ -83,10 +136,10 @@ pub async fn metrics(State(s): State<WebState>) -> impl IntoResponse {
     if let Some(m) = &s.metrics {
         m.render(&mut out);
     }
-    (
+    Ok((
         [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
         out.finish(),
-    )
+    ))
 }
 
 /// The OpenAPI document of the API.

@@ -38,30 +38,50 @@ pub async fn login(
     let Json(login) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
     let ip = peer.ip();
     let name = login.username.trim().to_string();
-    if name.is_empty() || name.len() > 128 || login.password.len() > 1024 {
+    if name.is_empty()
+        || name.len() > 128
+        || name.chars().any(char::is_control)
+        || login.password.len() > 1024
+    {
         return Err(refused());
     }
-    if let Some(wait) = s.auth.throttle.check(&name, ip) {
-        return Err(ApiError::new(
+    // Counted before the password is checked, so a burst cannot get past
+    // the limit (auth::Throttle).
+    let attempt = s.auth.throttle.reserve(&name, ip).map_err(|wait| {
+        ApiError::new(
             StatusCode::TOO_MANY_REQUESTS,
             "throttled",
             format!(
                 "too many failed logins; try again in {} s",
                 wait.as_secs().max(1)
             ),
-        ));
-    }
-    let user = s.store.user(&name).await?;
+        )
+    })?;
+    let user = match s.store.user(&name).await {
+        Ok(u) => u,
+        Err(e) => {
+            s.auth.throttle.cancel(attempt);
+            return Err(e.into());
+        }
+    };
     let hash = user
         .as_ref()
         .map(|u| u.password_hash.clone())
         .unwrap_or_else(|| s.auth.decoy_hash.to_string());
-    let password_ok = auth::verify_password(login.password, hash).await;
+    let Ok(password_ok) = s.auth.passwords.verify(login.password, hash).await else {
+        s.auth.throttle.cancel(attempt);
+        return Err(ApiError::new(
+            StatusCode::TOO_MANY_REQUESTS,
+            "busy",
+            "the server is busy checking other logins; try again in a few seconds",
+        ));
+    };
     let anon = Principal::anonymous();
     let user = match user {
         Some(u) if password_ok && !u.blocked => u,
         other => {
-            s.auth.throttle.failure(&name, ip);
+            // The reserved attempt stays counted as a failure.
+            drop(attempt);
             let why = match other {
                 Some(u) if u.blocked && password_ok => "user is blocked",
                 Some(_) => "wrong password",
@@ -78,7 +98,7 @@ pub async fn login(
             return Err(refused());
         }
     };
-    s.auth.throttle.success(&name, ip);
+    s.auth.throttle.success(attempt);
     let previous =
         auth::token_from_cookies(headers.get(header::COOKIE).and_then(|v| v.to_str().ok()));
     let token = s.auth.sessions.create(&user.name, previous.as_deref());

@@ -79,9 +79,12 @@ pub async fn create(
         }
         None => (auth::generate_password(), true),
     };
-    let hash = auth::hash_password(password.clone())
+    let hash = s
+        .auth
+        .passwords
+        .hash(password.clone())
         .await
-        .map_err(|e| ApiError::internal("hashing a password", e))?;
+        .map_err(|e| ApiError::new(StatusCode::TOO_MANY_REQUESTS, "busy", e))?;
     let user = s
         .store
         .create_user(&NewUser {
@@ -120,21 +123,53 @@ pub struct UpdateBody {
     pub blocked: Option<bool>,
 }
 
-/// Refuses a change that would leave no usable administrator.
-async fn keep_an_administrator(s: &WebState, name: &str) -> ApiResult<()> {
-    let admins = s
-        .store
-        .users()
-        .await?
-        .into_iter()
-        .filter(|u| u.role == Role::Administrator && !u.blocked && u.name != name)
-        .count();
-    if admins == 0 {
-        return Err(ApiError::conflict(
-            "this would leave no administrator who can log in; create another administrator first",
-        ));
+fn busy() -> ApiError {
+    ApiError::new(
+        StatusCode::TOO_MANY_REQUESTS,
+        "busy",
+        "the server is busy checking passwords; try again in a few seconds",
+    )
+}
+
+/// A user as a change would leave them: role, blocked, group; `None` when
+/// deleted.
+type After = Option<(Role, bool, String)>;
+
+/// Refuses a change that would leave no administrator who can log in and
+/// open the users screen. `after` says what the change makes of each user;
+/// `screens` overrides one group's screens (a screen-access change). The
+/// caller holds `auth.admin_guard` from this check through the change.
+async fn keep_a_user_manager(
+    s: &WebState,
+    after: impl Fn(&gridscada_store::User) -> After,
+    screens: Option<(&str, &[String])>,
+) -> ApiResult<()> {
+    for u in s.store.users().await? {
+        let Some((role, blocked, group)) = after(&u) else {
+            continue;
+        };
+        if role != Role::Administrator || blocked {
+            continue;
+        }
+        let manages = match screens {
+            Some((g, list)) if g == group => list.iter().any(|x| x == "users"),
+            _ => s
+                .screens_of(&group, role)
+                .await
+                .iter()
+                .any(|x| x == "users"),
+        };
+        if manages {
+            return Ok(());
+        }
     }
-    Ok(())
+    Err(ApiError::conflict(
+        "this would leave no administrator who can log in and manage users; create or enable another administrator first",
+    ))
+}
+
+fn unchanged(u: &gridscada_store::User) -> After {
+    Some((u.role, u.blocked, u.group.clone()))
 }
 
 pub async fn update(
@@ -144,15 +179,27 @@ pub async fn update(
     b: JsonBody<UpdateBody>,
 ) -> ApiResult<Json<Value>> {
     let b = body(b)?;
-    let user = existing_user(&s, &name).await?;
+    existing_user(&s, &name).await?;
     // Validate everything before changing anything: no partial updates.
     if let Some(group) = &b.group {
         check_group_name(group)?;
     }
-    let demoted = b.role.is_some_and(|r| r != Role::Administrator);
-    if user.role == Role::Administrator && (demoted || b.blocked == Some(true)) {
-        keep_an_administrator(&s, &name).await?;
-    }
+    let _guard = s.auth.admin_guard.lock().await;
+    keep_a_user_manager(
+        &s,
+        |u| {
+            if u.name != name {
+                return unchanged(u);
+            }
+            Some((
+                b.role.unwrap_or(u.role),
+                b.blocked.unwrap_or(u.blocked),
+                b.group.clone().unwrap_or_else(|| u.group.clone()),
+            ))
+        },
+        None,
+    )
+    .await?;
     let mut changes = vec![];
     if let Some(role) = b.role {
         s.store.set_user_role(&name, role).await?;
@@ -212,10 +259,14 @@ pub async fn remove(
             "confirmation does not match: send {{\"confirm\": \"{name}\"}}"
         )));
     }
-    let user = existing_user(&s, &name).await?;
-    if user.role == Role::Administrator {
-        keep_an_administrator(&s, &name).await?;
-    }
+    existing_user(&s, &name).await?;
+    let _guard = s.auth.admin_guard.lock().await;
+    keep_a_user_manager(
+        &s,
+        |u| if u.name == name { None } else { unchanged(u) },
+        None,
+    )
+    .await?;
     s.store.delete_user(&name).await?;
     s.auth.sessions.end_user(&name);
     audit(
@@ -241,6 +292,7 @@ pub async fn password(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
     Path(name): Path<String>,
+    headers: axum::http::HeaderMap,
     b: JsonBody<PasswordBody>,
 ) -> ApiResult<StatusCode> {
     let b = body(b)?;
@@ -253,18 +305,36 @@ pub async fn password(
     let user = existing_user(&s, &name).await?;
     if own {
         let current = b.current_password.clone().unwrap_or_default();
-        if !auth::verify_password(current, user.password_hash.clone()).await {
+        let ok = s
+            .auth
+            .passwords
+            .verify(current, user.password_hash.clone())
+            .await
+            .map_err(|_| busy())?;
+        if !ok {
             return Err(ApiError::forbidden("the current password is wrong"));
         }
     }
     auth::check_password_strength(&b.password).map_err(ApiError::bad_request)?;
-    let hash = auth::hash_password(b.password)
+    let hash = s
+        .auth
+        .passwords
+        .hash(b.password)
         .await
-        .map_err(|e| ApiError::internal("hashing a password", e))?;
+        .map_err(|e| ApiError::new(StatusCode::TOO_MANY_REQUESTS, "busy", e))?;
     s.store
         .set_password_hash(&name, &hash, s.clock.now())
         .await?;
-    if !own {
+    if own {
+        // Every other session of this user ends (a stolen one among them);
+        // this one goes on.
+        let mine = auth::token_from_cookies(
+            headers
+                .get(axum::http::header::COOKIE)
+                .and_then(|v| v.to_str().ok()),
+        );
+        s.auth.sessions.end_others(&name, mine.as_deref());
+    } else {
         s.auth.sessions.end_user(&name);
     }
     audit(
@@ -325,29 +395,8 @@ pub async fn set_group_screens(
             known.join(", ")
         )));
     }
-    // An administrator must stay able to manage users.
-    if !b.screens.iter().any(|x| x == "users") {
-        let mut still_managed = false;
-        for u in s.store.users().await? {
-            if u.role == Role::Administrator && !u.blocked {
-                let screens = if u.group == group {
-                    b.screens.clone()
-                } else {
-                    s.screens_of(&u.group, u.role).await
-                };
-                still_managed |= screens.iter().any(|x| x == "users");
-            }
-        }
-        if !still_managed {
-            return Err(ApiError::new(
-                StatusCode::CONFLICT,
-                "conflict",
-                format!(
-                    "group '{group}' without the users screen would leave no administrator able to manage users"
-                ),
-            ));
-        }
-    }
+    let _guard = s.auth.admin_guard.lock().await;
+    keep_a_user_manager(&s, unchanged, Some((&group, &b.screens))).await?;
     s.store.set_group_screens(&group, &b.screens).await?;
     audit(
         &s,

@@ -23,7 +23,7 @@ use gridscada_tagdb::{
     Quality, Sample, SystemClock, TagDb, TagWriter, Timestamp, Value, WriteError, WriteFuture,
 };
 use gridscada_web::api::sim::{FaultKind, SimControl};
-use gridscada_web::auth::{self, SessionPolicy, Sessions, Throttle};
+use gridscada_web::auth::{self, SessionPolicy};
 use gridscada_web::{Auth, Components, WebState};
 use http_body_util::BodyExt;
 use parking_lot::Mutex;
@@ -41,7 +41,7 @@ pub const TAG_RO: &str = "T.Feeder1.P_kW";
 pub const TAG_OP: &str = "T.Zone1.Reset";
 pub const TAG_SUP: &str = "T.BESS.Setpoint_kW";
 
-const MAIN: &str = "tag_files = [\"tags.toml\"]\n";
+const MAIN: &str = "tag_files = [\"tags.toml\"]\n[server]\nallowed_hosts = [\"scada.test\"]\n";
 const TAGS: &str = r#"
 [[device]]
 name = "D1"
@@ -249,12 +249,7 @@ impl Harness {
             db,
             plant: Arc::new(plant),
             store,
-            auth: Auth {
-                sessions: Arc::new(Sessions::new(opts.policy)),
-                throttle: Arc::new(Throttle::default()),
-                secure_cookies: false,
-                decoy_hash: auth::make_decoy_hash().await.into(),
-            },
+            auth: Auth::new(opts.policy, false).await,
             clock: Arc::new(SystemClock),
             writer: Some(writer.clone() as Arc<dyn TagWriter>),
             started: Instant::now(),
@@ -361,6 +356,10 @@ pub fn request(
         .header(header::HOST, HOST);
     if let Some(c) = cookie {
         b = b.header(header::COOKIE, c);
+        // A browser names its origin on every change (see routes::check_origin).
+        if !matches!(method_of(&b), Some(m) if m == Method::GET || m == Method::HEAD) {
+            b = b.header(header::ORIGIN, format!("http://{HOST}"));
+        }
     }
     match body {
         Some(j) => b
@@ -369,6 +368,10 @@ pub fn request(
             .unwrap(),
         None => b.body(Body::empty()).unwrap(),
     }
+}
+
+fn method_of(b: &axum::http::request::Builder) -> Option<Method> {
+    b.method_ref().cloned()
 }
 
 /// Percent-encodes one path segment (everything but unreserved characters).
