@@ -159,6 +159,21 @@ fn another_plant_is_usable_whole() {
     assert_eq!(status, 200, "{body}");
     assert_eq!(body["value"], 31.5);
     assert_eq!(body["quality"]["code"], "good");
+    // Outside its engineering limits (0 to 75 kW) nothing reaches the
+    // device, and the refusal is audited.
+    for bad in [-5.0, 1e30, -1e6] {
+        let (status, body) = op.post("/api/tags/RTU1.Setpoint/write", json!({"value": bad}));
+        assert_eq!(status, 400, "{body}");
+        assert_eq!(body["error"], "out_of_limits", "{body}");
+    }
+    assert_eq!(op.get_ok("/api/tags/RTU1.Setpoint")["value"], 31.5);
+    let refused = events(&mut admin, "kind=write_failed");
+    assert!(
+        refused.iter().any(|e| e["message"]
+            .as_str()
+            .is_some_and(|m| m.contains("engineering limits"))),
+        "{refused:?}"
+    );
     let found = op.get_ok("/api/tags?search=rtu1.set&limit=10");
     assert_eq!(found["total"], 1);
     assert_eq!(found["tags"][0]["source"]["device"], "RTU1");

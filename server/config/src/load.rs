@@ -36,6 +36,34 @@ impl Plant {
         self.tags.iter().find(|t| t.name.get_ref() == name)
     }
 
+    /// The engineering limits `(min, max)` a write to `name` must respect:
+    /// the tag's own `min`/`max`, else, for a microgrid unit's setpoint, its
+    /// ratings (PV and wind 0..rated, storage -max_charge..max_discharge,
+    /// diesel 0..max). Either bound may be open.
+    pub fn write_limits(&self, name: &str) -> (Option<f64>, Option<f64>) {
+        let tag = self.tag(name);
+        let configured = |l: Option<&serde_spanned::Spanned<f64>>| l.map(|v| *v.get_ref());
+        let (mut lo, mut hi) = (
+            configured(tag.and_then(|t| t.min.as_ref())),
+            configured(tag.and_then(|t| t.max.as_ref())),
+        );
+        if let Some(u) = self
+            .microgrid
+            .iter()
+            .flat_map(|m| &m.units)
+            .find(|u| u.io().setpoint_kw == name)
+        {
+            let (ulo, uhi) = match u.kind {
+                crate::UnitKind::Pv | crate::UnitKind::Wind => (0.0, u.rated_kw),
+                crate::UnitKind::Storage => (-u.max_charge_kw, u.max_discharge_kw),
+                crate::UnitKind::Diesel => (0.0, u.max_kw),
+            };
+            lo = lo.or(Some(ulo));
+            hi = hi.or(Some(uhi));
+        }
+        (lo, hi)
+    }
+
     /// The configured tags as the tag database knows them.
     pub fn tag_metas(&self) -> impl Iterator<Item = gridscada_tagdb::TagMeta> + '_ {
         self.tags.iter().map(|t| {

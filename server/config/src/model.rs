@@ -344,6 +344,13 @@ pub struct TagConfig {
     pub writable: Spanned<bool>,
     /// The least role that may write the tag; required when writable.
     pub write_role: Option<Spanned<Role>>,
+    /// Engineering limits of a writable numeric tag: a write outside them
+    /// is refused, whoever sends it (HMI, control loop, northbound).
+    /// Microgrid setpoints default to their unit's ratings.
+    #[serde(default)]
+    pub min: Option<Spanned<f64>>,
+    #[serde(default)]
+    pub max: Option<Spanned<f64>>,
     /// Scan period of this tag, overriding the device's.
     pub scan_ms: Option<Spanned<u64>>,
     pub alarm: Option<AlarmConfig>,

@@ -406,6 +406,43 @@ fn check_tag(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, device: Option<&DeviceCo
         (Some(r), false) => cx.err(f, r.span(), format!("tag '{name}': write_role is set but the tag is not writable")),
         _ => {}
     }
+    for limit in [&t.min, &t.max].into_iter().flatten() {
+        if !writable {
+            cx.err(
+                f,
+                limit.span(),
+                format!("tag '{name}': min and max are write limits; the tag is not writable"),
+            );
+        } else if !matches!(
+            t.value_kind(),
+            gridscada_tagdb::ValueKind::Int | gridscada_tagdb::ValueKind::Float
+        ) {
+            cx.err(
+                f,
+                limit.span(),
+                format!("tag '{name}': min and max apply to numeric tags only"),
+            );
+        } else if !limit.get_ref().is_finite() {
+            cx.err(
+                f,
+                limit.span(),
+                format!("tag '{name}': a limit must be a finite number"),
+            );
+        }
+    }
+    if let (Some(lo), Some(hi)) = (&t.min, &t.max) {
+        if lo.get_ref() > hi.get_ref() {
+            cx.err(
+                f,
+                hi.span(),
+                format!(
+                    "tag '{name}': max {} is below min {}",
+                    hi.get_ref(),
+                    lo.get_ref()
+                ),
+            );
+        }
+    }
     if let Some(a) = &t.alarm {
         check_alarms(cx, f, name, t.value_kind(), a);
     }

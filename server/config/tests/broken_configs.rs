@@ -194,6 +194,51 @@ fn writable_without_role_and_read_only_tables() {
 }
 
 #[test]
+fn write_limits_are_checked() {
+    let tags = format!(
+        "{DEVICE}\n[[tag]]\nname = \"A.Set\"\ndevice = \"D1\"\nkind = \"holding_register\"\naddress = 0\ntype = \"f32\"\nwritable = true\nwrite_role = \"operator\"\nmin = 10.0\nmax = 5.0\n\n[[tag]]\nname = \"A.Volts\"\ndevice = \"D1\"\nkind = \"input_register\"\naddress = 0\ntype = \"f32\"\nmax = 5.0\n\n[[tag]]\nname = \"A.Cmd\"\ndevice = \"D1\"\nkind = \"coil\"\naddress = 0\nwritable = true\nwrite_role = \"operator\"\nmin = 0.0\n"
+    );
+    assert_problems(
+        MAIN,
+        &tags,
+        &[
+            "DIR/tags.toml:15:7: error: tag 'A.Set': max 5 is below min 10",
+            "DIR/tags.toml:23:7: error: tag 'A.Volts': min and max are write limits; the tag is not writable",
+            "DIR/tags.toml:32:7: error: tag 'A.Cmd': min and max apply to numeric tags only",
+        ],
+    );
+    // A valid pair loads, and the plant reports it.
+    let dir = tempfile::tempdir().unwrap();
+    fs::write(dir.path().join("gridscada.toml"), MAIN).unwrap();
+    fs::write(
+        dir.path().join("tags.toml"),
+        format!("{DEVICE}\n[[tag]]\nname = \"A.Set\"\ndevice = \"D1\"\nkind = \"holding_register\"\naddress = 0\ntype = \"f32\"\nwritable = true\nwrite_role = \"operator\"\nmin = -5.0\nmax = 50.0\n"),
+    )
+    .unwrap();
+    let plant = load_path(dir.path()).unwrap();
+    assert_eq!(plant.write_limits("A.Set"), (Some(-5.0), Some(50.0)));
+    assert_eq!(plant.write_limits("Other"), (None, None));
+}
+
+#[test]
+fn microgrid_setpoints_are_limited_by_their_ratings() {
+    let plant =
+        load_path(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tags")).unwrap();
+    assert_eq!(
+        plant.write_limits("MG.PV1.Setpoint_kW"),
+        (Some(0.0), Some(100.0))
+    );
+    assert_eq!(
+        plant.write_limits("MG.BESS1.Setpoint_kW"),
+        (Some(-50.0), Some(60.0))
+    );
+    assert_eq!(
+        plant.write_limits("MG.DG1.Setpoint_kW"),
+        (Some(0.0), Some(150.0))
+    );
+}
+
+#[test]
 fn bad_enum_value_names_the_choices() {
     let tags = format!(
         "{DEVICE}\n[[tag]]\nname = \"A.B\"\ndevice = \"D1\"\nkind = \"register\"\naddress = 0\n"

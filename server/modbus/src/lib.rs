@@ -191,6 +191,38 @@ struct WriteTarget {
     tag: usize,
     codec: decode::Codec,
     writable: bool,
+    /// Engineering limits (`Plant::write_limits`), checked before anything
+    /// is sent, for every writer: HMI, control loops, northbound.
+    limits: (Option<f64>, Option<f64>),
+}
+
+/// Refuses a numeric value outside `limits`.
+fn check_limits(
+    name: &str,
+    value: &Value,
+    limits: (Option<f64>, Option<f64>),
+) -> Result<(), WriteError> {
+    let v = match value {
+        Value::Float(f) => *f,
+        Value::Int(i) => *i as f64,
+        _ => return Ok(()),
+    };
+    let (lo, hi) = limits;
+    let inside = !v.is_nan() && lo.is_none_or(|lo| v >= lo) && hi.is_none_or(|hi| v <= hi);
+    if inside {
+        return Ok(());
+    }
+    let limits = match (lo, hi) {
+        (Some(lo), Some(hi)) => format!("{lo} to {hi}"),
+        (Some(lo), None) => format!("at least {lo}"),
+        (None, Some(hi)) => format!("at most {hi}"),
+        (None, None) => "a number".to_string(),
+    };
+    Err(WriteError::OutOfLimits {
+        tag: name.to_string(),
+        value: value.to_string(),
+        limits,
+    })
 }
 
 struct Shared {
@@ -301,6 +333,7 @@ impl FieldIo {
                     tag: index,
                     codec: codec.clone(),
                     writable: *t.writable.get_ref() && codec.table.is_writable(),
+                    limits: plant.write_limits(t.name.get_ref()),
                 },
             );
             link_tags[li].push(LinkTag {
@@ -556,6 +589,7 @@ impl TagWriter for FieldWriter {
             if !target.writable {
                 return Err(WriteError::ReadOnly(name.to_string()));
             }
+            check_limits(name, &value, target.limits)?;
             let encoded =
                 decode::encode(&target.codec, &value).map_err(|reason| WriteError::BadValue {
                     tag: name.to_string(),
@@ -575,5 +609,29 @@ impl TagWriter for FieldWriter {
                 .map_err(|_| WriteError::Closed)?;
             rx.await.map_err(|_| WriteError::Closed)?
         })
+    }
+}
+
+#[cfg(test)]
+mod limit_tests {
+    use super::*;
+
+    #[test]
+    fn writes_outside_the_engineering_limits_are_refused() {
+        let pv = (Some(0.0), Some(100.0));
+        for bad in [-1e6, 1e30, -5.0, f64::NAN] {
+            let e = check_limits("MG.PV1.Setpoint_kW", &Value::Float(bad), pv).unwrap_err();
+            assert!(
+                e.to_string()
+                    .contains("outside the engineering limits of 'MG.PV1.Setpoint_kW' (0 to 100)"),
+                "{e}"
+            );
+        }
+        for good in [0.0, 42.5, 100.0] {
+            assert!(check_limits("T", &Value::Float(good), pv).is_ok());
+        }
+        assert!(check_limits("T", &Value::Int(-3), (Some(0.0), None)).is_err());
+        assert!(check_limits("T", &Value::Int(3), (None, Some(2.0))).is_err());
+        assert!(check_limits("T", &Value::Bool(true), pv).is_ok());
     }
 }

@@ -31,6 +31,15 @@ pub enum WriteError {
         value: String,
         reason: String,
     },
+    #[error(
+        "{value} is outside the engineering limits of '{tag}' ({limits}); nothing was written"
+    )]
+    OutOfLimits {
+        tag: String,
+        value: String,
+        /// In words, e.g. "0 to 100".
+        limits: String,
+    },
     #[error("device '{device}' did not take the write: {reason}")]
     Device { device: String, reason: String },
     #[error("read-back of '{tag}' gave {read_back}, not the written {written}")]

@@ -306,10 +306,14 @@ pub fn write_error(e: WriteError) -> ApiError {
     let status = match &e {
         WriteError::UnknownTag(_) => StatusCode::NOT_FOUND,
         WriteError::ReadOnly(_) => StatusCode::FORBIDDEN,
-        WriteError::BadValue { .. } => StatusCode::BAD_REQUEST,
+        WriteError::BadValue { .. } | WriteError::OutOfLimits { .. } => StatusCode::BAD_REQUEST,
         WriteError::Device { .. } | WriteError::Mismatch { .. } => StatusCode::BAD_GATEWAY,
         WriteError::Timeout(_) => StatusCode::GATEWAY_TIMEOUT,
         WriteError::Closed => StatusCode::SERVICE_UNAVAILABLE,
     };
-    ApiError::new(status, "write_failed", e.to_string())
+    let code = match &e {
+        WriteError::OutOfLimits { .. } => "out_of_limits",
+        _ => "write_failed",
+    };
+    ApiError::new(status, code, e.to_string())
 }
