@@ -93,6 +93,21 @@ fn another_plant_is_usable_whole() {
     );
     let mut admin = demo.login("administrator");
 
+    // The data folder and the database are the owner's only, whatever the umask.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode(&data), 0o700);
+        assert_eq!(mode(&data.join("gridscada.db")), 0o600);
+        assert_eq!(mode(&data.join("credentials.txt")), 0o600);
+        for side in ["gridscada.db-wal", "gridscada.db-shm"] {
+            if data.join(side).exists() {
+                assert_eq!(mode(&data.join(side)), 0o600, "{side}");
+            }
+        }
+    }
+
     // Its panels, by their ids and zone counts; no microgrid screens.
     let screens = admin.get_ok("/api/screens");
     let ids: Vec<&str> = screens["screens"]
