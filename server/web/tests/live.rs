@@ -24,7 +24,13 @@ async fn next_json(ws: &mut Ws) -> Option<Value> {
             .expect("a message within 5 s")?
             .ok()?;
         match msg {
-            Message::Text(t) => return Some(serde_json::from_str(&t).expect("JSON message")),
+            Message::Text(t) => {
+                let v: Value = serde_json::from_str(&t).expect("JSON message");
+                if v["type"] == "heartbeat" {
+                    continue;
+                }
+                return Some(v);
+            }
             Message::Close(frame) => {
                 return Some(json!({"closed": frame.map(|f| u16::from(f.code))}));
             }
@@ -114,4 +120,74 @@ async fn live_push_follows_the_session() {
         .unwrap();
     let err = tokio_tungstenite::connect_async(req).await.unwrap_err();
     assert!(err.to_string().contains("401"), "{err}");
+}
+
+/// A frozen server is told from a quiet plant by the heartbeat, and a
+/// screen on view keeps its session alive past the idle timeout (a wall
+/// display), while a socket that says nothing does not.
+#[tokio::test]
+async fn heartbeats_and_a_visible_screen_keep_a_watch_session() {
+    let h = Harness::new(Options {
+        policy: gridscada_web::auth::SessionPolicy {
+            idle: Duration::from_millis(1500),
+            absolute: Duration::from_secs(60),
+        },
+        ..Options::default()
+    })
+    .await;
+    let (addr, server) = gridscada_web::bind("127.0.0.1:0".parse().unwrap(), h.app.clone())
+        .await
+        .unwrap();
+    tokio::spawn(server);
+    let open = |cookie: String| {
+        let mut req = format!("ws://{addr}/api/live")
+            .into_client_request()
+            .unwrap();
+        req.headers_mut().insert("cookie", cookie.parse().unwrap());
+        req.headers_mut()
+            .insert("origin", format!("http://{addr}").parse().unwrap());
+        tokio_tungstenite::connect_async(req)
+    };
+    let watcher = h.login("guest", PASSWORD).await;
+    let idle = h.login("operator", PASSWORD).await;
+    let (mut ws, _) = open(watcher.clone()).await.unwrap();
+    let (mut quiet, _) = open(idle.clone()).await.unwrap();
+    // Heartbeats arrive every second, with the server's time.
+    let mut beats = 0;
+    let started = std::time::Instant::now();
+    while started.elapsed() < Duration::from_secs(4) {
+        ws.send(Message::Text(json!({"visible": true}).to_string().into()))
+            .await
+            .unwrap();
+        let msg = tokio::time::timeout(Duration::from_millis(1500), ws.next())
+            .await
+            .expect("a heartbeat within 1.5 s")
+            .unwrap()
+            .unwrap();
+        if let Message::Text(t) = msg {
+            let v: Value = serde_json::from_str(&t).unwrap();
+            if v["type"] == "heartbeat" {
+                assert!(v["ts"].as_i64().unwrap() > 0);
+                beats += 1;
+            }
+        }
+    }
+    assert!(beats >= 3, "{beats} heartbeats in 4 s");
+    // 4 s on a 1.5 s idle timeout: the visible screen's session lives...
+    let me = h
+        .call(Method::GET, "/api/session", Some(&watcher), None)
+        .await
+        .json();
+    assert_eq!(me["authenticated"], true);
+    // ...the silent one's does not, and its socket is closed.
+    let me = h
+        .call(Method::GET, "/api/session", Some(&idle), None)
+        .await
+        .json();
+    assert_eq!(me["authenticated"], false);
+    let mut closed = next_json(&mut quiet).await.unwrap();
+    if closed["type"] == "hello" {
+        closed = next_json(&mut quiet).await.unwrap();
+    }
+    assert_eq!(closed, json!({"closed": 4001}));
 }

@@ -56,7 +56,16 @@ pub async fn upgrade(
 #[serde(deny_unknown_fields)]
 struct ClientMessage {
     subscribe: Option<Subscribe>,
+    /// Sent now and then by a screen that is on view: it keeps the session
+    /// from idling out, so a wall display watching the plant stays logged
+    /// in (a hidden tab does not send it).
+    #[serde(default)]
+    visible: Option<bool>,
 }
+
+/// How often the server says it is alive on the socket, so a client can tell
+/// a frozen server from a quiet plant.
+const HEARTBEAT: Duration = Duration::from_secs(1);
 
 #[derive(Deserialize, Default)]
 #[serde(deny_unknown_fields)]
@@ -123,6 +132,7 @@ async fn run(
     let mut pending_snapshot = false;
     let mut tick = tokio::time::interval(FLUSH);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let mut last_heartbeat = std::time::Instant::now();
 
     let readable = s.readable(&who);
     let hello = json!({"type": "hello", "user": who.user, "role": who.role});
@@ -134,7 +144,13 @@ async fn run(
                 let Some(msg) = msg else { return Ok(()) };
                 match msg? {
                     Message::Text(text) => match serde_json::from_str::<ClientMessage>(&text) {
-                        Ok(ClientMessage { subscribe: Some(sub_req) }) => {
+                        Ok(ClientMessage { visible: Some(true), subscribe: None }) => {
+                            if let Some(t) = token.as_deref() {
+                                // Touches the idle timer; an ended session closes below.
+                                let _ = s.auth.sessions.user(t);
+                            }
+                        }
+                        Ok(ClientMessage { subscribe: Some(sub_req), .. }) => {
                             let mut ids: Vec<TagId> = sub_req.tags.iter().filter_map(|t| s.db.id(t)).collect();
                             for p in sub_req.prefixes.iter().filter(|p| !p.is_empty()) {
                                 ids.extend(s.db.ids_with_prefix(p));
@@ -180,6 +196,11 @@ async fn run(
                 }
             }
             _ = tick.tick() => {
+                if last_heartbeat.elapsed() >= HEARTBEAT {
+                    last_heartbeat = std::time::Instant::now();
+                    let beat = json!({"type": "heartbeat", "ts": s.clock.now()});
+                    socket.send(Message::Text(beat.to_string().into())).await?;
+                }
                 if !pending.is_empty() || pending_snapshot {
                     let msg = tags_message(&s, &pending, pending_snapshot);
                     pending.clear();
