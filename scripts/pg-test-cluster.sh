@@ -103,3 +103,10 @@ as_user "'$BINDIR/pg_ctl' -D '$DIR/data' -l '$DIR/log' -w -t 60 start \
 as_user "'$BINDIR/createdb' -h $HOST -p $PORT -U postgres $DB" >&2
 log "started; stop with: su -s /bin/sh $RUNAS -c \"$BINDIR/pg_ctl -D $DIR/data stop\""
 echo "export GRIDSCADA_TEST_PG_URL=postgres://postgres@$HOST:$PORT/$DB"
+# How to stop it (and remove its folder), for the caller's exit trap.
+if [ "$(id -u)" = 0 ]; then
+    stop="su -s /bin/sh $RUNAS -c \"'$BINDIR/pg_ctl' -D '$DIR/data' -m fast stop\"; rm -rf '$DIR'"
+else
+    stop="'$BINDIR/pg_ctl' -D '$DIR/data' -m fast stop; rm -rf '$DIR'"
+fi
+printf 'export GRIDSCADA_TEST_PG_STOP=%q\n' "$stop"

@@ -10,12 +10,26 @@ export CARGO_TERM_COLOR=never
 
 step() { printf '\n==> %s\n' "$*"; }
 
+# Every stage runs under an outer time limit (seconds), so a hung stage fails
+# with its name instead of eating CI's 90 minutes.
+limit() {
+    local secs=$1; shift
+    timeout --kill-after=30 "$secs" "$@"
+    local rc=$?
+    if [ "$rc" -eq 124 ] || [ "$rc" -eq 137 ]; then
+        echo "test-all: '$*' did not finish within $secs s" >&2
+    fi
+    return "$rc"
+}
+
 as_root() {
     if [ "$(id -u)" -eq 0 ]; then "$@"; else sudo "$@"; fi
 }
 
 # --- 1. Debian packages the tests use ------------------------------------
-debian_packages=(postgresql socat mbpoll libmodbus-dev pkg-config curl)
+debian_packages=(postgresql socat mbpoll libmodbus-dev pkg-config curl python3-venv)
+# Debian's nodejs comes without npm (the browser tests install playwright-core with it).
+command -v npm >/dev/null 2>&1 || debian_packages+=(npm)
 missing=()
 for p in "${debian_packages[@]}"; do
     dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
@@ -28,39 +42,47 @@ fi
 
 # --- 2. Python test peers, in a venv of their own -------------------------
 venv="$root/target/test-venv"
-if [ ! -x "$venv/bin/python" ]; then
+# A half-made venv (no pip, or a python that no longer runs) is made afresh.
+if [ ! -x "$venv/bin/python" ] || ! "$venv/bin/python" -m pip --version >/dev/null 2>&1; then
     step "creating the Python test venv"
+    rm -rf "$venv"
     python3 -m venv "$venv"
 fi
 step "installing Python test peers"
-"$venv/bin/pip" install -q --disable-pip-version-check -r tests/requirements.txt
+limit 900 "$venv/bin/pip" install -q --disable-pip-version-check -r tests/requirements.txt
 export PATH="$venv/bin:$PATH"
 
 # --- 3. PostgreSQL for the store tests ------------------------------------
 step "PostgreSQL"
-eval "$(bash scripts/pg-test-cluster.sh)"
+# Not `eval "$(...)"`: that would hide the script's failure.
+pg_env=$(limit 600 bash scripts/pg-test-cluster.sh) || { echo "test-all: no PostgreSQL for the tests" >&2; exit 1; }
+eval "$pg_env"
+# A throwaway cluster started for this run is stopped when the run ends.
+if [ -n "${GRIDSCADA_TEST_PG_STOP:-}" ]; then
+    trap 'eval "$GRIDSCADA_TEST_PG_STOP" >/dev/null 2>&1 || true' EXIT
+fi
 export GRIDSCADA_REQUIRE_PG=1
 
 # --- 4. Rust: format, lint, tests -----------------------------------------
 step "cargo fmt --check"
-cargo fmt --all -- --check
+limit 300 cargo fmt --all -- --check
 step "cargo clippy"
-cargo clippy --workspace --all-targets -- -D warnings
+limit 1800 cargo clippy --workspace --all-targets -- -D warnings
 step "cargo test"
-cargo test --workspace --no-fail-fast
+limit 2400 cargo test --workspace --no-fail-fast
 
 # --- 5. End-to-end tests against third-party peers ------------------------
 # A release build: scenario replay runs whole simulated days through the
 # Modbus stack, and a debug build would take most of CI's time doing it.
 step "building the release binary for end-to-end tests"
-cargo build --release -p gridscada
+limit 1500 cargo build --release -p gridscada
 export GRIDSCADA_BIN="${CARGO_TARGET_DIR:-$root/target}/release/gridscada"
 failed_e2e=()
 for t in tests/e2e/*.sh; do
     [ -e "$t" ] || continue
     step "end-to-end: $t"
     started=$(date +%s)
-    if bash "$t"; then
+    if limit 1200 bash "$t"; then
         echo "end-to-end: $t passed in $(( $(date +%s) - started )) s"
     else
         echo "end-to-end: $t FAILED after $(( $(date +%s) - started )) s"

@@ -391,6 +391,75 @@ impl Store {
         })
     }
 
+    /// The schema as the database has it: one line per table with its
+    /// columns (`table events: id, kind, ...`) and one per explicit index
+    /// (`index events_ts on events`), sorted, without the migration
+    /// bookkeeping and without indexes that back a key constraint. The two
+    /// backends must give the same lines (see the migration tests).
+    pub async fn schema_summary(&self) -> Result<Vec<String>> {
+        let (columns, indexes): (Vec<(String, String)>, Vec<(String, String)>) = match &self
+            .inner
+            .backend
+        {
+            Backend::Sqlite(s) => {
+                let p = s.reader();
+                let cols = sqlx::query_as(
+                        "SELECT m.name, c.name FROM sqlite_master m, pragma_table_info(m.name) c \
+                         WHERE m.type = 'table' AND m.name NOT LIKE 'sqlite_%' AND m.name NOT LIKE '_sqlx%'",
+                    )
+                    .fetch_all(p)
+                    .await
+                    .map_err(db("reading the schema"))?;
+                let idx = sqlx::query_as(
+                        "SELECT name, tbl_name FROM sqlite_master WHERE type = 'index' AND sql IS NOT NULL",
+                    )
+                    .fetch_all(p)
+                    .await
+                    .map_err(db("reading the schema"))?;
+                (cols, idx)
+            }
+            Backend::Postgres(p) => {
+                let cols = sqlx::query_as(
+                    "SELECT table_name::text, column_name::text FROM information_schema.columns \
+                         WHERE table_schema = current_schema() AND table_name NOT LIKE '\\_sqlx%'",
+                )
+                .fetch_all(p)
+                .await
+                .map_err(db("reading the schema"))?;
+                let idx = sqlx::query_as(
+                        "SELECT i.relname::text, t.relname::text FROM pg_index x \
+                         JOIN pg_class i ON i.oid = x.indexrelid \
+                         JOIN pg_class t ON t.oid = x.indrelid \
+                         JOIN pg_namespace n ON n.oid = t.relnamespace \
+                         WHERE n.nspname = current_schema() AND t.relname NOT LIKE '\\_sqlx%' \
+                         AND NOT EXISTS (SELECT 1 FROM pg_constraint c WHERE c.conindid = x.indexrelid)",
+                    )
+                    .fetch_all(p)
+                    .await
+                    .map_err(db("reading the schema"))?;
+                (cols, idx)
+            }
+        };
+        let mut tables: std::collections::BTreeMap<String, Vec<String>> = Default::default();
+        for (t, c) in columns {
+            tables.entry(t).or_default().push(c);
+        }
+        let mut out: Vec<String> = tables
+            .into_iter()
+            .map(|(t, mut cols)| {
+                cols.sort();
+                format!("table {t}: {}", cols.join(", "))
+            })
+            .collect();
+        out.extend(
+            indexes
+                .into_iter()
+                .map(|(i, t)| format!("index {i} on {t}")),
+        );
+        out.sort();
+        Ok(out)
+    }
+
     /// Checks the database answers (for a health endpoint).
     pub async fn ping(&self) -> Result<()> {
         on_backend!(self, reader, |p| {
@@ -538,5 +607,63 @@ mod tests {
         assert!(!valid_schema("Site"));
         assert!(!valid_schema("a;drop"));
         assert!(!valid_schema("1a"));
+    }
+}
+
+#[cfg(test)]
+mod migration_lists {
+    use super::*;
+
+    /// The migrations compiled in are exactly the files of each folder, in
+    /// version order, with the same text.
+    #[test]
+    fn the_lists_match_the_folders() {
+        for (folder, list) in [
+            ("sqlite", SQLITE_MIGRATIONS),
+            ("postgres", POSTGRES_MIGRATIONS),
+        ] {
+            let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("migrations")
+                .join(folder);
+            let mut files: Vec<(i64, String)> = std::fs::read_dir(&dir)
+                .unwrap()
+                .map(|e| e.unwrap().path())
+                .filter(|p| p.extension().is_some_and(|x| x == "sql"))
+                .map(|p| {
+                    let name = p.file_name().unwrap().to_string_lossy().to_string();
+                    let version: i64 = name
+                        .split('_')
+                        .next()
+                        .and_then(|v| v.parse().ok())
+                        .unwrap_or_else(|| panic!("{folder}/{name}: no version number"));
+                    (version, std::fs::read_to_string(&p).unwrap())
+                })
+                .collect();
+            files.sort();
+            let listed: Vec<(i64, String)> = list
+                .iter()
+                .map(|(v, _, sql)| (*v, sql.to_string()))
+                .collect();
+            assert_eq!(
+                files.iter().map(|f| f.0).collect::<Vec<_>>(),
+                listed.iter().map(|f| f.0).collect::<Vec<_>>(),
+                "{folder}: the folder's versions and the list in store.rs differ"
+            );
+            assert_eq!(
+                files, listed,
+                "{folder}: a listed migration's text is not its file's"
+            );
+        }
+        assert_eq!(
+            SQLITE_MIGRATIONS
+                .iter()
+                .map(|m| (m.0, m.1))
+                .collect::<Vec<_>>(),
+            POSTGRES_MIGRATIONS
+                .iter()
+                .map(|m| (m.0, m.1))
+                .collect::<Vec<_>>(),
+            "the two backends have different migrations"
+        );
     }
 }

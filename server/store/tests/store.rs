@@ -884,6 +884,28 @@ async fn events_escape_control_characters(db: TestDb) {
 }
 both_backends!(event_escaping, events_escape_control_characters);
 
+/// Both backends end their migrations with the same tables, columns and
+/// indexes.
+#[tokio::test]
+async fn both_backends_have_the_same_schema() {
+    let lite = TestDb::new(common::Engine::Sqlite, "same_schema")
+        .await
+        .unwrap();
+    let sqlite = lite.store.schema_summary().await.unwrap();
+    assert!(
+        sqlite.iter().any(|l| l.starts_with("table events:")),
+        "{sqlite:?}"
+    );
+    assert!(sqlite.iter().any(|l| l.starts_with("index ")), "{sqlite:?}");
+    lite.cleanup().await;
+    let Some(pg) = TestDb::new(common::Engine::Postgres, "same_schema").await else {
+        return;
+    };
+    let postgres = pg.store.schema_summary().await.unwrap();
+    pg.cleanup().await;
+    assert_eq!(sqlite, postgres);
+}
+
 async fn wait_for(what: &str, mut cond: impl FnMut() -> bool) {
     for _ in 0..1000 {
         if cond() {
