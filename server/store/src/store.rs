@@ -397,10 +397,8 @@ impl Store {
     /// bookkeeping and without indexes that back a key constraint. The two
     /// backends must give the same lines (see the migration tests).
     pub async fn schema_summary(&self) -> Result<Vec<String>> {
-        let (columns, indexes): (Vec<(String, String)>, Vec<(String, String)>) = match &self
-            .inner
-            .backend
-        {
+        type Pairs = Vec<(String, String)>;
+        let (columns, indexes): (Pairs, Pairs) = match &self.inner.backend {
             Backend::Sqlite(s) => {
                 let p = s.reader();
                 let cols = sqlx::query_as(
