@@ -6,9 +6,9 @@
 //!   each unit's measured power follows its setpoint.
 //! - In process (the simulator's environment is steered through its handle,
 //!   which the API does not expose), on a 5x compressed clock with a 1 s
-//!   dispatch period: a surplus is served with no shedding and the diesel
-//!   off (charging the battery from it is an ignored test: a product gap); a dark, windless evening starts the diesel, which then
-//!   carries the load with nothing unserved.
+//!   dispatch period: a surplus is served with no shedding, the diesel off
+//!   and the battery charging from it; a dark, windless evening starts the
+//!   diesel, which then carries the load with nothing unserved.
 
 mod common;
 
