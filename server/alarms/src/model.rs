@@ -414,3 +414,26 @@ impl AlarmError {
         }
     }
 }
+
+// --- alarm keys (stable names, persisted and used in the API) ---------------
+
+/// The key of a tag's limit alarm, e.g. `SS1.PA.V_L1:lo`.
+pub fn limit_key(tag: &str, kind: AlarmKind) -> String {
+    format!("{tag}:{kind}")
+}
+
+/// The key of a tag's `index`-th discrete alarm: `TAG:discrete` for the first,
+/// `TAG:discrete2`, `TAG:discrete3`... for further ones (so adding one does
+/// not rename the first).
+pub fn discrete_key(tag: &str, index: usize) -> String {
+    if index == 0 {
+        format!("{tag}:discrete")
+    } else {
+        format!("{tag}:discrete{}", index + 1)
+    }
+}
+
+/// The key of a device's communication-failure alarm, e.g. `SS1.IO1:comm`.
+pub fn comm_key(device: &str) -> String {
+    format!("{device}:comm")
+}

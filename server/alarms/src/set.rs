@@ -17,6 +17,7 @@ use gridscada_tagdb::{Sample, Timestamp, Value};
 
 use crate::events::{Event, EventType};
 use crate::machine::{format_value, Alarm, AlarmDef, Condition};
+use crate::model::{comm_key, discrete_key, limit_key};
 use crate::model::{
     AlarmError, AlarmFilter, AlarmId, AlarmKind, AlarmStateRecord, AlarmTransition, AlarmView,
     TransitionCause,
@@ -830,27 +831,6 @@ fn system_def(key: &str, priority: u32, selection: &str, message: &str) -> Alarm
         on_delay: Duration::ZERO,
         off_delay: Duration::ZERO,
     }
-}
-
-/// The key of a tag's limit alarm, e.g. `SS1.PA.V_L1:lo`.
-pub fn limit_key(tag: &str, kind: AlarmKind) -> String {
-    format!("{tag}:{kind}")
-}
-
-/// The key of a tag's `index`-th discrete alarm: `TAG:discrete` for the first,
-/// `TAG:discrete2`, `TAG:discrete3`... for further ones (so adding one does
-/// not rename the first).
-pub fn discrete_key(tag: &str, index: usize) -> String {
-    if index == 0 {
-        format!("{tag}:discrete")
-    } else {
-        format!("{tag}:discrete{}", index + 1)
-    }
-}
-
-/// The key of a device's communication-failure alarm, e.g. `SS1.IO1:comm`.
-pub fn comm_key(device: &str) -> String {
-    format!("{device}:comm")
 }
 
 /// The first segment of a dotted name (`SS1.PA.V_L1` -> `SS1`).

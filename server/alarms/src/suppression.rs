@@ -82,7 +82,7 @@ fn panel_rule(plant: &Plant, panel: &PanelConfig) -> Option<SuppressionRule> {
     let low = [AlarmKind::Lo, AlarmKind::LoLo];
     Some(SuppressionRule {
         name: format!("{}: ELCB trip", panel.id.get_ref()),
-        trigger: crate::set::discrete_key(&io.elcb_closed, index),
+        trigger: crate::model::discrete_key(&io.elcb_closed, index),
         targets: vec![
             AlarmMatch::new(format!("{p}.Zone"), &[]),
             AlarmMatch::new(format!("{p}.PA.V_"), &low),

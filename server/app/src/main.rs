@@ -4,6 +4,7 @@
 //! components together ([`runtime`]). It holds no domain logic of its own: each
 //! subcommand hands its work to the crate that owns it.
 
+mod data;
 mod demo_plant;
 mod dispatch_cmd;
 mod logging;
@@ -168,7 +169,7 @@ fn main() -> ExitCode {
         } => {
             let live = match scenario {
                 Some(file) => match replay::LiveScenario::load(&file, speed) {
-                    Ok(l) => Some(l),
+                    Ok(l) => Some(Box::new(l) as Box<dyn runtime::LiveDriver>),
                     Err(e) => {
                         eprintln!("{e:#}");
                         return ExitCode::from(2);

@@ -34,7 +34,8 @@ use gridscada_sim::{Profile, SimHandle, SimSnapshot, ZoneLoad};
 use gridscada_tagdb::{Clock, ScaledClock, SleepFuture, Timestamp};
 use tokio::sync::oneshot;
 
-use crate::runtime::{open_store, Stack, StackOptions};
+use crate::data::open_store;
+use crate::runtime::{LiveDriver, Stack, StackOptions};
 use crate::{demo_plant, sinks};
 
 // ----- Clocks ------------------------------------------------------------------
@@ -1412,6 +1413,18 @@ impl LiveScenario {
             clock_start(&self.scenario),
             self.speed,
         )))
+    }
+}
+
+impl LiveDriver for LiveScenario {
+    fn plant(&self) -> &Plant {
+        &self.plant
+    }
+    fn clock(&self) -> Arc<dyn Clock> {
+        LiveScenario::clock(self)
+    }
+    fn start(self: Box<Self>, stack: &Stack) {
+        spawn_live(stack, *self);
     }
 }
 

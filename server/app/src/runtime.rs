@@ -13,12 +13,13 @@ use anyhow::{anyhow, Context};
 use gridscada_config::Plant;
 use gridscada_control::dispatch::{self, DispatchStatus};
 use gridscada_control::fault_isolation::{self, PanelNotice, PanelStatus};
-use gridscada_store::{NewEvent, OpenOptions, Store};
+use gridscada_store::{NewEvent, Store};
 use gridscada_tagdb::{Clock, SystemClock, TagDb, TagMeta};
 use gridscada_web::api::panels::PanelHandle;
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinSet;
 
+use crate::data::open_store;
 use crate::{demo_plant, sinks, users};
 
 pub fn block_on(fut: impl Future<Output = ExitCode>) -> ExitCode {
@@ -71,18 +72,28 @@ impl Mode {
     }
 }
 
+/// Something that drives a running demo: a scenario replayed live. It gives
+/// the plant and the clock the stack starts with, then starts once the stack
+/// runs. (Defined here and implemented by `replay`, so the wiring does not
+/// depend on the replay runner, which depends on the wiring.)
+pub trait LiveDriver: Send {
+    fn plant(&self) -> &Plant;
+    fn clock(&self) -> Arc<dyn Clock>;
+    fn start(self: Box<Self>, stack: &Stack);
+}
+
 /// `gridscada demo`: the embedded plant, on loopback; with a scenario, the
 /// scenario's plant driven by its timeline on a compressed clock.
 pub async fn demo(
     http: String,
     data: PathBuf,
     config: Option<PathBuf>,
-    scenario: Option<crate::replay::LiveScenario>,
+    scenario: Option<Box<dyn LiveDriver>>,
 ) -> ExitCode {
     report(
         async {
             let plant = match (&scenario, &config) {
-                (Some(live), _) => live.plant.clone(),
+                (Some(live), _) => live.plant().clone(),
                 (None, Some(c)) => gridscada_config::load_path(c)
                     .map_err(|d| diagnostics("the configuration", d))?,
                 (None, None) => {
@@ -140,27 +151,6 @@ pub async fn sim(config: Option<PathBuf>) -> ExitCode {
         }
         .await,
     )
-}
-
-/// Opens (and migrates) the plant's store. A relative SQLite path lives in
-/// the data folder.
-pub async fn open_store(plant: &Plant, data: &Path) -> anyhow::Result<Store> {
-    std::fs::create_dir_all(data)
-        .with_context(|| format!("cannot create the data folder {}", data.display()))?;
-    // The folder holds the database (password hashes, audit log) and the
-    // demo's credentials: its owner's only, whatever the umask.
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        std::fs::set_permissions(data, std::fs::Permissions::from_mode(0o700))
-            .with_context(|| format!("cannot restrict the data folder {}", data.display()))?;
-    }
-    let url = plant.storage.url.get_ref();
-    let store = Store::open(url, &OpenOptions::new(data))
-        .await
-        .with_context(|| format!("opening the database {url}"))?;
-    store.migrate().await.context("migrating the database")?;
-    Ok(store)
 }
 
 /// Checks the plant's `screens/*.json` against its tags (derived ones
@@ -507,7 +497,7 @@ async fn run(
     http: SocketAddr,
     data: &Path,
     mode: Mode,
-    scenario: Option<crate::replay::LiveScenario>,
+    scenario: Option<Box<dyn LiveDriver>>,
 ) -> anyhow::Result<()> {
     let store = open_store(&plant, data).await?;
     let clock: Arc<dyn Clock> = match &scenario {
@@ -569,7 +559,7 @@ async fn run(
         }
     }
     if let Some(live) = scenario {
-        crate::replay::spawn_live(&stack, live);
+        live.start(&stack);
     }
     println!("Press Ctrl-C to stop.");
 

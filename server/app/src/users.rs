@@ -9,8 +9,6 @@ use gridscada_config::Role;
 use gridscada_store::{NewUser, Store};
 use gridscada_tagdb::{Clock, SystemClock};
 
-use crate::runtime;
-
 pub struct Credentials {
     pub file: PathBuf,
     pub accounts: Vec<(&'static str, &'static str, String)>,
@@ -147,7 +145,7 @@ pub async fn add(
         gridscada_web::auth::check_password_strength(&piped).map_err(|e| anyhow!(e))?;
         (piped, false)
     };
-    let store = runtime::open_store(&plant, &data).await?;
+    let store = crate::data::open_store(&plant, &data).await?;
     let hash = gridscada_web::auth::hash_password(password.clone())
         .await
         .map_err(|e| anyhow!("hashing the password: {e}"))?;

@@ -14,7 +14,7 @@ pub(crate) fn row(out: &mut String, s: &RawSample) {
         let _ = write!(out, "{v}");
     }
     out.push(',');
-    out.push_str(crate::historian::label(s.quality));
+    out.push_str(quality_label(s.quality));
     out.push('\n');
 }
 
@@ -64,6 +64,15 @@ pub(crate) fn iso_utc(out: &mut String, ms: i64) {
         sod % 3600 / 60,
         sod % 60
     );
+}
+
+/// The quality column's text.
+fn quality_label(q: gridscada_tagdb::QualityCode) -> &'static str {
+    match q {
+        gridscada_tagdb::QualityCode::Good => "good",
+        gridscada_tagdb::QualityCode::Uncertain => "uncertain",
+        gridscada_tagdb::QualityCode::Bad => "bad",
+    }
 }
 
 #[cfg(test)]

@@ -100,14 +100,6 @@ pub fn quality_from_code(c: i32) -> QualityCode {
     }
 }
 
-fn quality_label(q: QualityCode) -> &'static str {
-    match q {
-        QualityCode::Good => "good",
-        QualityCode::Uncertain => "uncertain",
-        QualityCode::Bad => "bad",
-    }
-}
-
 fn check_range(from: Timestamp, to: Timestamp) -> Result<()> {
     if to <= from {
         return Err(StoreError::Invalid(format!(
@@ -514,8 +506,4 @@ impl Store {
 /// The keyset cursor that starts at `from` inclusive.
 fn f_start(from: Timestamp) -> i64 {
     from.as_millis().saturating_sub(1)
-}
-
-pub(crate) fn label(q: QualityCode) -> &'static str {
-    quality_label(q)
 }
