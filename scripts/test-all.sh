@@ -66,6 +66,11 @@ export GRIDSCADA_REQUIRE_PG=1
 # --- 4. Rust: format, lint, tests -----------------------------------------
 step "cargo fmt --check"
 limit 300 cargo fmt --all -- --check
+step "unused dependencies (cargo-machete)"
+if ! command -v cargo-machete >/dev/null 2>&1; then
+    limit 900 cargo install --locked --quiet cargo-machete
+fi
+limit 300 cargo machete
 step "cargo clippy"
 limit 1800 cargo clippy --workspace --all-targets -- -D warnings
 step "cargo test"
