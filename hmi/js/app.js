@@ -1,7 +1,7 @@
 // The HMI's frame: session, toolbar, clock, communication light, the live
 // alarm footer, and the router that mounts one screen at a time.
 
-import { get, del, post, setUnauthorizedHandler, enc } from './api.js';
+import { get, del, post, setUnauthorizedHandler, enc, qs } from './api.js';
 import { h, replace } from './dom.js';
 import { fmtTime } from './format.js';
 import { live } from './live.js';
@@ -16,19 +16,35 @@ import alarms from './screens/alarms.js';
 import events from './screens/events.js';
 import trends from './screens/trends.js';
 import users from './screens/users.js';
+import tagBrowser from './screens/tags.js';
+import devices from './screens/devices.js';
+import editor from './screens/editor.js';
+import { customScreen } from './screens/custom.js';
 
-/** Every screen the HMI has, in toolbar order; the server says which ones a user may open. */
-const SCREENS = [
-  ['main', 'Main', mainScreen],
-  ['ss1', 'SS1 panel', panelScreen('ss1')],
-  ['css1', 'CSS1 panel', panelScreen('css1')],
-  ['microgrid', 'Microgrid', microgrid],
-  ['units', 'Units', units],
-  ['alarms', 'Alarms', alarms],
-  ['events', 'Events', events],
-  ['trends', 'Trends', trends],
-  ['users', 'Users', users],
-];
+/** The built-in screens by id. Which exist, their order and labels come
+ * from the server (/api/screens): the plant's panels, the microgrid screens
+ * only with a microgrid, and the screens users drew. */
+const BUILTIN = {
+  main: mainScreen,
+  microgrid,
+  units,
+  tags: tagBrowser,
+  devices,
+  alarms,
+  events,
+  trends,
+  editor,
+  users,
+};
+
+/** The screens of this plant the user may open: [id, label, module]. */
+let SCREENS = [];
+
+function moduleFor(entry) {
+  if (entry.kind === 'panel') return panelScreen(entry.panel || entry.id);
+  if (entry.kind === 'custom') return customScreen(entry.id.slice('custom:'.length));
+  return BUILTIN[entry.id] || null;
+}
 
 const state = {
   session: { authenticated: false, user: null, role: 'guest', screens: [] },
@@ -50,14 +66,37 @@ async function loadSession() {
     state.session = { authenticated: false, user: null, role: 'guest', screens: [] };
     toast(`Cannot read the session: ${e.detail}`, 'error');
   }
+  await loadScreens();
   renderFrame();
+}
+
+/** The plant's screens this user may open, in toolbar order. */
+async function loadScreens() {
+  SCREENS = [];
+  if (!state.session.authenticated) return;
+  try {
+    const { screens } = await get('/api/screens');
+    SCREENS = screens.filter((e) => e.allowed).map((e) => [e.id, e.label, moduleFor(e)]).filter((e) => e[2]);
+  } catch (e) {
+    toast(`Cannot list the screens: ${e.detail}`, 'error');
+  }
+}
+
+/** Reloads the screen list (after a screen was saved, renamed or deleted). */
+export async function refreshScreens() {
+  try { state.session = await get('/api/session'); } catch { /* keep the last session */ }
+  await loadScreens();
+  renderToolbar();
+}
+
+function renderToolbar() {
+  replace($('toolbar'), SCREENS.filter(([id]) => allowed(id)).map(([id, label]) =>
+    h('a', { href: `#/${id}`, class: 'tool', dataset: { screen: id }, text: label })));
 }
 
 function renderFrame() {
   const s = state.session;
-  const nav = $('toolbar');
-  replace(nav, SCREENS.filter(([id]) => allowed(id)).map(([id, label]) =>
-    h('a', { href: `#/${id}`, class: 'tool', dataset: { screen: id }, text: label })));
+  renderToolbar();
 
   const box = $('user-box');
   if (s.authenticated) {
@@ -92,8 +131,13 @@ function renderFrame() {
   route();
 }
 
+/** The screen id of the hash: `#/id`, `#/custom:id`, `#/id/sub`, `#/id?query`. */
+function hashScreen() {
+  return (location.hash.match(/^#\/([\w-]+(?::[\w-]+)?)/) || [])[1];
+}
+
 function route() {
-  const wanted = (location.hash.match(/^#\/([\w-]+)/) || [])[1];
+  const wanted = hashScreen();
   let id;
   if (!state.session.authenticated) id = 'login';
   else if (wanted && allowed(wanted)) id = wanted;
@@ -123,7 +167,7 @@ function mount(id) {
     el.append(h('p', { class: 'empty', text: 'Your group may not open any screen. Ask an administrator.' }));
     return;
   }
-  const ctx = { session: state.session, onLogin: loadSession, rerender: () => mount(id) };
+  const ctx = { session: state.session, onLogin: loadSession, rerender: () => mount(id), refreshScreens };
   try {
     state.unmount = screen.mount(el, ctx) || null;
   } catch (e) {
@@ -157,7 +201,8 @@ async function startCommLight() {
   const light = $('comm-light');
   let tags = [];
   try {
-    const list = await get('/api/tags');
+    // Only the devices' status tags, found on the server (a plant may have 100,000 tags).
+    const list = await get(`/api/tags${qs({ search: '.comm.connected', limit: 1000 })}`);
     tags = list.tags.map((t) => t.name).filter((n) => n.endsWith('.Comm.Connected'));
   } catch (e) {
     light.className = 'comm-light comm-unknown';
@@ -191,6 +236,16 @@ async function startCommLight() {
   const offStatus = live.onStatus(draw);
   draw();
   state.offComm = () => { offWant(); offTags(); offStatus(); };
+}
+
+// The communication light opens the devices screen (for those who may).
+function wireCommLight() {
+  const light = $('comm-light');
+  const open = () => { if (allowed('devices')) location.hash = '#/devices'; };
+  light.addEventListener('click', open);
+  light.addEventListener('keydown', (e) => { if (e.key === 'Enter' || e.key === ' ') { e.preventDefault(); open(); } });
+  light.tabIndex = 0;
+  light.title = 'Communication status: open the devices screen';
 }
 
 function tickClock() {
@@ -245,8 +300,10 @@ setUnauthorizedHandler(() => {
   }
 });
 
-window.addEventListener('hashchange', () => { if (state.session) route(); });
+// A change of the hash's query (e.g. the trend's pens) stays on the screen.
+window.addEventListener('hashchange', () => { if (state.session && hashScreen() !== state.current) route(); });
 tickClock();
 setInterval(tickClock, 1000);
+wireCommLight();
 watchConnection();
 loadSession();

@@ -29,39 +29,72 @@ cd "$here/browser"
 if [ -f package-lock.json ]; then npm ci --no-audit --no-fund --loglevel=error; else npm install --no-audit --no-fund --loglevel=error; fi
 
 mkdir -p "$artifacts"
-rm -f "$artifacts"/*.png "$artifacts"/*.csv "$artifacts"/*.log
-data="$(mktemp -d -t gridscada-e2e-XXXXXX)"
-port="$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1]); s.close()')"
-"$bin" demo --http "127.0.0.1:$port" --data "$data" >"$artifacts/server.log" 2>&1 &
-server=$!
+rm -f "$artifacts"/*.png "$artifacts"/*.csv "$artifacts"/*.log "$artifacts"/*.tap
+
+free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1]); s.close()'; }
+
+servers=()
+datas=()
 cleanup() {
-  kill "$server" 2>/dev/null || true
-  wait "$server" 2>/dev/null || true
-  rm -rf "$data"
+  for p in "${servers[@]}"; do kill "$p" 2>/dev/null || true; wait "$p" 2>/dev/null || true; done
+  for d in "${datas[@]}"; do rm -rf "$d"; done
 }
 trap cleanup EXIT
 
-# Wait for the server and its generated credentials.
-for _ in $(seq 1 150); do
-  if [ -s "$data/credentials.txt" ] && curl -fsS "http://127.0.0.1:$port/healthz" >/dev/null 2>&1; then break; fi
-  if ! kill -0 "$server" 2>/dev/null; then echo "browser.sh: the server exited:"; cat "$artifacts/server.log"; exit 1; fi
-  sleep 0.2
-done
-[ -s "$data/credentials.txt" ] || { echo "browser.sh: no credentials.txt after 30 s"; cat "$artifacts/server.log"; exit 1; }
+# start NAME PORT [demo args...]: a server with a fresh data folder; sets $data.
+start() {
+  local name=$1 port=$2; shift 2
+  data="$(mktemp -d -t gridscada-e2e-XXXXXX)"
+  datas+=("$data")
+  "$bin" demo --http "127.0.0.1:$port" --data "$data" "$@" >"$artifacts/server-$name.log" 2>&1 &
+  local pid=$!
+  servers+=("$pid")
+  for _ in $(seq 1 150); do
+    if [ -s "$data/credentials.txt" ] && curl -fsS "http://127.0.0.1:$port/healthz" >/dev/null 2>&1; then return 0; fi
+    if ! kill -0 "$pid" 2>/dev/null; then echo "browser.sh: the $name server exited:"; cat "$artifacts/server-$name.log"; exit 1; fi
+    sleep 0.2
+  done
+  echo "browser.sh: the $name server gave no credentials.txt after 30 s"; cat "$artifacts/server-$name.log"; exit 1
+}
+
+total_passed=0
+total_failed=0
+# run NAME PORT DATA FILES...: the test files against one server, under a time limit.
+run() {
+  local name=$1 port=$2 dir=$3; shift 3
+  local tap="$artifacts/results-$name.tap"
+  set +e
+  GRIDSCADA_URL="http://127.0.0.1:$port" GRIDSCADA_CREDENTIALS="$dir/credentials.txt" GRIDSCADA_ARTIFACTS="$artifacts" \
+    timeout --kill-after=20 900 node --test --test-concurrency=1 \
+      --test-reporter=spec --test-reporter-destination=stdout \
+      --test-reporter=tap --test-reporter-destination="$tap" \
+      "$@"
+  local rc=$?
+  set -e
+  local p f
+  p="$(grep -E '^# pass ' "$tap" 2>/dev/null | awk '{print $3}' | tail -1)"
+  f="$(grep -E '^# fail ' "$tap" 2>/dev/null | awk '{print $3}' | tail -1)"
+  [ "$rc" -ne 0 ] && [ "${f:-0}" -eq 0 ] && f=1
+  total_passed=$((total_passed + ${p:-0}))
+  total_failed=$((total_failed + ${f:-0}))
+}
+
+# The demo plant.
+port1="$(free_port)"
+start demo "$port1"
+data1=$data
 # Let the demo record a few seconds of history for the trend test.
 sleep 3
+run demo "$port1" "$data1" tests/*.test.js
 
-tap="$artifacts/results.tap"
-set +e
-GRIDSCADA_URL="http://127.0.0.1:$port" GRIDSCADA_CREDENTIALS="$data/credentials.txt" GRIDSCADA_ARTIFACTS="$artifacts" \
-  node --test --test-concurrency=1 \
-    --test-reporter=spec --test-reporter-destination=stdout \
-    --test-reporter=tap --test-reporter-destination="$tap" \
-    tests/*.test.js
-rc=$?
-set -e
-passed="$(grep -E '^# pass ' "$tap" | awk '{print $3}' | tail -1)"
-failed="$(grep -E '^# fail ' "$tap" | awk '{print $3}' | tail -1)"
+# Another plant (tests/plants/three-panels: other panel ids and zone
+# counts, no microgrid, a plain device): nothing may depend on the demo.
+port2="$(free_port)"
+start plant2 "$port2" --config "$root/tests/plants/three-panels"
+data2=$data
+sleep 2
+run plant2 "$port2" "$data2" plant2/*.test.js
+
 echo "screenshots: $artifacts"
-echo "${passed:-0} passed, ${failed:-0} failed"
-[ "$rc" -eq 0 ] && [ "${failed:-1}" -eq 0 ]
+echo "${total_passed} passed, ${total_failed} failed"
+[ "$total_failed" -eq 0 ]

@@ -7,8 +7,10 @@
 import { s } from '../dom.js';
 import { fmtNumber, qualityOf } from '../format.js';
 
-const W = 640;
+const MIN_W = 640;
 const H = 400;
+/** Room per zone, so labels stay legible from 1 to 32 zones (wide panels scroll). */
+const ZONE_W = 72;
 
 /** Breaker state from its feedback and (if any) its command tag. */
 export function breakerState(closed, cmd, connected, isElcb = false) {
@@ -27,7 +29,10 @@ export function breakerState(closed, cmd, connected, isElcb = false) {
  * communication status. `onBreaker(name)` (optional) makes breakers clickable.
  */
 export function singleLine(binder, { prefix, title, zones = 4, devices = [], onBreaker }) {
-  const svg = s('svg', { viewBox: `0 0 ${W} ${H}`, class: 'single-line', role: 'img', 'aria-label': `Single-line diagram of ${title}` });
+  const W = Math.max(MIN_W, 90 + zones * ZONE_W);
+  const svg = s('svg', { viewBox: `0 0 ${W} ${H}`, class: 'single-line', role: 'img', 'aria-label': `Single-line diagram of ${title}`, dataset: { zones: String(zones) } });
+  // Wider than the standard panel: keep the text size and let it scroll.
+  if (W > MIN_W) { svg.classList.add('single-line-wide'); svg.style.width = `${W}px`; svg.style.maxWidth = 'none'; }
   svg.append(s('title', {}, `Single-line diagram of ${title}`));
   const cx = 130;
   // Supply.
@@ -141,5 +146,9 @@ export function singleLine(binder, { prefix, title, zones = 4, devices = [], onB
     status.append(g);
   });
   svg.append(s('line', { x1: 10, y1: 330, x2: W - 10, y2: 330, class: 'sl-sep' }), status);
-  return svg;
+  // A wide panel scrolls sideways inside its card instead of shrinking its text.
+  const box = document.createElement('div');
+  box.className = 'sl-scroll';
+  box.append(svg);
+  return box;
 }

@@ -12,33 +12,26 @@ import { tagList } from './common.js';
 const DISPATCH_POLL_MS = 5000;
 
 /**
- * The microgrid's units: the configured ones (names, kinds) from
- * /api/microgrid/units, matched to their tags by prefix; units found only in
- * the tag list (a unit with a power reading) are shown by their prefix.
+ * The microgrid's units as configured (/api/microgrid/units: names, kinds,
+ * tag prefixes), with the tags each has; and the demand tag and its load
+ * meter's prefix. Nothing here assumes a plant's tag names.
  */
-export async function microgridUnits() {
+export async function microgridConfig() {
   const tags = await tagList();
   const byName = new Map(tags.map((t) => [t.name, t]));
-  let configured = [];
-  try {
-    configured = (await get('/api/microgrid/units')).units || [];
-  } catch {
-    // No configured list (no microgrid, or no access): discover from the tags.
-  }
-  const byPrefix = new Map(configured.map((u) => [u.prefix, u]));
-  return tags
-    .map((t) => t.name.match(/^(MG\.[^.]+)\.P_kW$/))
-    .filter((m) => m && m[1] !== 'MG.Load')
-    .map((m) => {
-      const id = m[1].slice(3);
-      const c = byPrefix.get(m[1]);
-      return {
-        prefix: m[1], id, label: c ? `${c.name} (${id})` : id, kind: c ? c.kind : '',
-        description: (byName.get(`${m[1]}.P_kW`) || {}).description || '',
-        stateDescription: (byName.get(`${m[1]}.State`) || {}).description || '',
-        has: (q) => byName.has(`${m[1]}.${q}`),
-      };
-    });
+  const r = await get('/api/microgrid/units');
+  const units = (r.units || []).map((c) => ({
+    prefix: c.prefix, id: c.id, label: `${c.name} (${c.id})`, kind: c.kind,
+    description: (byName.get(`${c.prefix}.P_kW`) || {}).description || '',
+    stateDescription: (byName.get(`${c.prefix}.State`) || {}).description || '',
+    has: (q) => byName.has(`${c.prefix}.${q}`),
+  }));
+  return { units, demandTag: r.demand_tag, loadPrefix: r.load_prefix, has: (n) => byName.has(n) };
+}
+
+/** The configured units (see microgridConfig). */
+export async function microgridUnits() {
+  return (await microgridConfig()).units;
 }
 
 /**
@@ -92,7 +85,8 @@ export default {
 
     (async () => {
       let units;
-      try { units = await microgridUnits(); } catch (e) {
+      let mg;
+      try { mg = await microgridConfig(); units = mg.units; } catch (e) {
         replace(unitsBox, h('p', { class: 'error', text: `Cannot list the units: ${e.detail}` }));
         return;
       }
@@ -134,12 +128,13 @@ export default {
         h('div', { class: 'table-wrap' }, h('table', { class: 'data', id: 'mg-units-table' },
           h('thead', {}, h('tr', {}, head.map((t) => h('th', { scope: 'col', text: t })))), h('tbody', {}, rows))));
 
+      // The demand tag, and the load meter's other readings beside it where they exist.
+      const load = [['Active power', mg.demandTag, 'kW'],
+        ['Reactive power', `${mg.loadPrefix}.Q_kvar`, 'kvar'], ['Voltage', `${mg.loadPrefix}.V`, 'V'], ['Frequency', `${mg.loadPrefix}.Hz`, 'Hz']]
+        .filter(([, tag], i) => tag && (i === 0 || mg.has(tag)));
       replace(demandBox, h('h2', { id: 'mg-demand', text: 'Demand' }),
-        h('dl', { class: 'kv' },
-          h('dt', { text: 'Active power' }), h('dd', {}, valueEl(binder, 'MG.Load.P_kW', { units: 'kW' })),
-          h('dt', { text: 'Reactive power' }), h('dd', {}, valueEl(binder, 'MG.Load.Q_kvar', { units: 'kvar' })),
-          h('dt', { text: 'Voltage' }), h('dd', {}, valueEl(binder, 'MG.Load.V', { units: 'V' })),
-          h('dt', { text: 'Frequency' }), h('dd', {}, valueEl(binder, 'MG.Load.Hz', { units: 'Hz', digits: 2 }))));
+        h('dl', { class: 'kv' }, load.map(([label, tag, u]) => [h('dt', { text: label }),
+          h('dd', {}, valueEl(binder, tag, { units: u, digits: u === 'Hz' ? 2 : undefined }))])));
 
       // Today's maxima from the recorded history (at most 16 pens per request).
       const tags = [...maxEls.keys()];

@@ -17,10 +17,28 @@ const DURATIONS = [
 ];
 const LIVE_RELOAD_MS = 5000;
 const MAX_PENS = 8;
-const DEFAULT_PENS = ['SS1.PA.V_L1', 'SS1.PA.I_L1'];
+const PENS_KEY = 'gridscada.trend.pens';
 
 const dateValue = (d) => `${d.getFullYear()}-${pad(d.getMonth() + 1)}-${pad(d.getDate())}`;
 const timeValue = (d) => `${pad(d.getHours())}:${pad(d.getMinutes())}:${pad(d.getSeconds())}`;
+
+/**
+ * The pens to start with: those named in the address (`#/trends?pens=A,B`,
+ * as "Add to trend" opens it), else the last ones used here, else the first
+ * two numeric tags with units (voltage and current first).
+ */
+function initialPens(meta) {
+  const q = new URLSearchParams((location.hash.split('?')[1]) || '');
+  const named = (q.get('pens') || '').split(',').map((t) => t.trim()).filter(Boolean);
+  if (named.length) return named;
+  try {
+    const last = JSON.parse(localStorage.getItem(PENS_KEY) || '[]');
+    if (Array.isArray(last) && last.some((t) => meta.has(t))) return last;
+  } catch { /* ignore a bad stored value */ }
+  const numeric = [...meta.values()].filter((t) => (t.kind === 'float' || t.kind === 'int') && t.units);
+  const rank = (t) => (t.units === 'V' ? 0 : t.units === 'A' ? 1 : 2);
+  return numeric.sort((a, b) => rank(a) - rank(b) || a.name.localeCompare(b.name)).slice(0, 2).map((t) => t.name);
+}
 
 export default {
   mount(el) {
@@ -41,7 +59,7 @@ export default {
     const yAuto = h('input', { type: 'checkbox', id: 'trend-y-auto', checked: true });
     const yMin = h('input', { type: 'number', id: 'trend-y-min', step: 'any', disabled: true, size: 6 });
     const yMax = h('input', { type: 'number', id: 'trend-y-max', step: 'any', disabled: true, size: 6 });
-    const penInput = h('input', { id: 'trend-pen-input', list: 'trend-tag-list', placeholder: 'Tag name, e.g. SS1.PA.V_L2', size: 24 });
+    const penInput = h('input', { id: 'trend-pen-input', list: 'trend-tag-list', placeholder: 'Tag name (type to search)', size: 24 });
     const datalist = h('datalist', { id: 'trend-tag-list' });
     const penList = h('ul', { class: 'pen-list', id: 'trend-pens', 'aria-label': 'Pens' });
     const readout = h('dl', { class: 'kv cursor-readout', id: 'trend-cursor', 'aria-live': 'polite' });
@@ -117,6 +135,7 @@ export default {
     }
 
     function drawPens() {
+      try { localStorage.setItem(PENS_KEY, JSON.stringify(pens.map((p) => p.tag))); } catch { /* private mode */ }
       replace(penList, pens.map((p) => {
         const sw = h('span', { class: 'pen-swatch' });
         sw.style.background = p.color;
@@ -239,7 +258,7 @@ export default {
         status.textContent = `Cannot list tags: ${e.detail}`;
       }
       if (disposed) return;
-      for (const t of DEFAULT_PENS) if (meta.has(t)) addPen(t);
+      for (const t of initialPens(meta)) if (meta.has(t) && pens.length < MAX_PENS) addPen(t);
       setLive(true);
       load();
     })();

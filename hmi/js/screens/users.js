@@ -6,10 +6,6 @@ import { h, replace, select, field } from '../dom.js';
 import { ROLES, fmtTime } from '../format.js';
 import { attempt, formDialog, toast } from '../ui.js';
 
-const SCREEN_LABELS = {
-  main: 'Main', ss1: 'Service substation', css1: 'Customer substation', microgrid: 'Microgrid', units: 'Units',
-  alarms: 'Alarms', events: 'Events', trends: 'Trends', users: 'Users',
-};
 
 export default {
   mount(el, ctx) {
@@ -143,10 +139,12 @@ export default {
       const g = groupSel.value.trim();
       if (!g) return;
       try {
-        const r = await get(`/api/groups/${enc(g)}/screens`);
+        // Every screen of this plant, with its label (panels by name, drawn screens by title).
+        const [r, catalog] = await Promise.all([get(`/api/groups/${enc(g)}/screens`), get('/api/screens')]);
         const on = new Set(r.screens);
-        replace(screensBox, (r.available || Object.keys(SCREEN_LABELS)).map((s) => h('label', { class: 'check' },
-          h('input', { type: 'checkbox', value: s, checked: on.has(s) }), SCREEN_LABELS[s] || s)));
+        const label = new Map(catalog.screens.map((x) => [x.id, x.label]));
+        replace(screensBox, (r.available || catalog.screens.map((x) => x.id)).map((s) => h('label', { class: 'check' },
+          h('input', { type: 'checkbox', value: s, checked: on.has(s) }), label.get(s) || s)));
       } catch (e) {
         replace(screensBox, h('p', { class: 'error', text: `Cannot read group ${g}: ${e.detail}` }));
       }

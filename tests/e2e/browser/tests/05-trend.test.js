@@ -11,8 +11,10 @@ test('trend: pens, cursor reading, table with reload, CSV export', async () => {
   const page = b.page;
   try {
     await login(page, c.user, c.password);
-    await page.goto(`${BASE}/#/trends`);
+    // The pens are named in the address, as "Add to trend" opens the screen.
+    await page.goto(`${BASE}/#/trends?pens=SS1.PA.V_L1,SS1.PA.I_L1`);
     await page.locator('#trend-pens li[data-pen="SS1.PA.V_L1"]').waitFor();
+    await page.locator('#trend-pens li[data-pen="SS1.PA.I_L1"]').waitFor();
     // A third pen, added by name.
     await page.locator('#trend-pen-input').fill('SS1.PA.V_L2');
     await page.locator('#trend-add-pen button[type="submit"]').click();

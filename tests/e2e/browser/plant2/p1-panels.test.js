@@ -1,0 +1,41 @@
+// A plant that is not the demo (tests/plants/three-panels): every panel
+// screen draws with its own configured zone count, and nothing else is there.
+import test from 'node:test';
+import assert from 'node:assert/strict';
+import { launch, login, toolbar, credentials, adminApi, requireOk, BASE } from '../lib.js';
+
+test('every panel of another plant has its screen with its own zones', async () => {
+  const api = await adminApi();
+  const { panels } = requireOk(await api.call('GET', '/api/panels'), 'panels');
+  assert.ok(panels.length >= 3, 'the test plant has three panels');
+  const c = credentials().operator;
+  const b = await launch('p1-panels');
+  const page = b.page;
+  try {
+    await login(page, c.user, c.password);
+    const bar = await toolbar(page);
+    for (const p of panels) assert.ok(bar.includes(p.id), `toolbar has panel ${p.id}: ${bar}`);
+    assert.ok(!bar.includes('microgrid'), 'no microgrid screen without a microgrid');
+    assert.ok(bar.includes('tags') && bar.includes('devices'), 'tag browser and devices screens');
+    for (const p of panels) {
+      await page.goto(`${BASE}/#/${p.id}`);
+      await page.locator(`svg.single-line[data-zones="${p.zones}"]`).waitFor();
+      await page.locator('.sl-breaker[data-breaker="elcb"]').first().waitFor();
+      const zones = await page.locator('.panel-left .sl-breaker[data-breaker^="zone"]').count();
+      assert.equal(zones, p.zones, `${p.id}: zone breakers drawn`);
+      assert.equal(await page.locator('tr[data-breaker-row^="zone"]').count(), p.zones, `${p.id}: zone rows`);
+      assert.equal(await page.locator('h1.screen-title').textContent(), p.name);
+      // Every zone's state is in words once the poller has read it.
+      await page.waitForFunction((n) => [...document.querySelectorAll('.panel-left .sl-breaker[data-breaker^="zone"] .sl-state')]
+        .filter((t) => /CLOSED|OPEN|TRIPPED/.test(t.textContent)).length === n, p.zones);
+      await b.screenshot(`panel-${p.id}`);
+    }
+    await page.goto(`${BASE}/#/main`);
+    await page.locator('.panel-card').nth(panels.length - 1).waitFor();
+    assert.equal(await page.locator('.panel-card').count(), panels.length);
+    await b.screenshot('main');
+    assert.deepEqual(b.problems, []);
+  } finally {
+    await b.close();
+  }
+});
