@@ -213,8 +213,10 @@ async function startCommLight() {
   const draw = () => {
     if (!live.connected) {
       light.className = 'comm-light comm-lost';
-      light.textContent = 'Server connection lost';
-      light.title = 'The live connection to the server is down; reconnecting.';
+      light.textContent = live.silent ? 'Server not answering' : 'Server connection lost';
+      light.title = live.silent
+        ? 'The server stopped sending its heartbeat: values are not live; reconnecting.'
+        : 'The live connection to the server is down; reconnecting.';
       return;
     }
     const lost = tags.filter((t) => {
@@ -266,7 +268,7 @@ function watchConnection() {
       if (!state.disconnectedAt) state.disconnectedAt = Date.now();
       banner.hidden = false;
       banner.className = 'banner banner-lost';
-      banner.textContent = `Disconnected from the server since ${fmtTime(state.disconnectedAt)}: reconnecting. Values shown are not live.`;
+      banner.textContent = `${live.silent ? 'The server is not answering' : 'Disconnected from the server'} since ${fmtTime(state.disconnectedAt)}: reconnecting. Values shown are not live.`;
     } else if (connected && state.disconnectedAt) {
       const secs = Math.round((Date.now() - state.disconnectedAt) / 1000);
       state.disconnectedAt = null;

@@ -5,6 +5,12 @@
 
 const RETRY_MIN_MS = 500;
 const RETRY_MAX_MS = 10_000;
+/** The server sends a heartbeat every second: silence this long means it is not answering. */
+const SILENCE_MS = 2200;
+/** A connection not open by then is given up and tried again. */
+const CONNECT_TIMEOUT_MS = 5000;
+/** How often a screen on view tells the server it is watched (keeps a wall display logged in). */
+const VISIBLE_MS = 60_000;
 
 export class Live {
   constructor() {
@@ -23,6 +29,30 @@ export class Live {
     this.stopped = true;
     this.onSessionEnded = () => {};
     this.onConnectFailed = () => {};
+    this.lastMessage = 0;
+    this.silent = false;
+    // A frozen server keeps its socket open and says nothing: the heartbeat's
+    // absence is what tells. A screen on view also says it is watched.
+    this.watchdog = setInterval(() => this.check(), 250);
+  }
+
+  check() {
+    if (!this.ws || this.stopped) return;
+    const now = Date.now();
+    if (this.connected && now - this.lastMessage > SILENCE_MS) {
+      this.silent = true;
+      const ws = this.ws;
+      ws.onclose = null;
+      try { ws.close(4000, 'no heartbeat'); } catch { /* already closing */ }
+      this.ws = null;
+      this.setConnected(false);
+      this.scheduleReconnect();
+      return;
+    }
+    if (this.connected && document.visibilityState === 'visible' && now - (this.lastVisible || 0) > VISIBLE_MS) {
+      this.lastVisible = now;
+      try { this.ws.send(JSON.stringify({ visible: true })); } catch { /* reconnecting */ }
+    }
   }
 
   start() {
@@ -47,14 +77,19 @@ export class Live {
     try { ws = new WebSocket(url); } catch { this.scheduleReconnect(); return; }
     this.ws = ws;
     let opened = false;
+    const giveUp = setTimeout(() => { if (!opened && this.ws === ws) { ws.close(); } }, CONNECT_TIMEOUT_MS);
     ws.onopen = () => {
       opened = true;
+      clearTimeout(giveUp);
       this.retry = RETRY_MIN_MS;
+      this.lastMessage = Date.now();
+      this.silent = false;
       this.setConnected(true);
       this.sendSubscription();
     };
-    ws.onmessage = (ev) => this.handle(ev.data);
+    ws.onmessage = (ev) => { this.lastMessage = Date.now(); this.handle(ev.data); };
     ws.onclose = (ev) => {
+      clearTimeout(giveUp);
       this.ws = null;
       this.setConnected(false);
       if (ev.code === 4001) { this.onSessionEnded(); return; }

@@ -48,6 +48,7 @@ start() {
   datas+=("$data")
   "$bin" demo --http "127.0.0.1:$port" --data "$data" "$@" >"$artifacts/server-$name.log" 2>&1 &
   local pid=$!
+  server_pid=$pid
   servers+=("$pid")
   for _ in $(seq 1 150); do
     if [ -s "$data/credentials.txt" ] && curl -fsS "http://127.0.0.1:$port/healthz" >/dev/null 2>&1; then return 0; fi
@@ -65,6 +66,7 @@ run() {
   local tap="$artifacts/results-$name.tap"
   set +e
   GRIDSCADA_URL="http://127.0.0.1:$port" GRIDSCADA_CREDENTIALS="$dir/credentials.txt" GRIDSCADA_ARTIFACTS="$artifacts" \
+  GRIDSCADA_PID="$server_pid" \
     timeout --kill-after=20 900 node --test --test-concurrency=1 \
       --test-reporter=spec --test-reporter-destination=stdout \
       --test-reporter=tap --test-reporter-destination="$tap" \

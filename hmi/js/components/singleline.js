@@ -10,7 +10,7 @@ import { fmtNumber, qualityOf } from '../format.js';
 const MIN_W = 640;
 const H = 400;
 /** Room per zone, so labels stay legible from 1 to 32 zones (wide panels scroll). */
-const ZONE_W = 72;
+const ZONE_W = 100;
 
 /** Breaker state from its feedback and (if any) its command tag. */
 export function breakerState(closed, cmd, connected, isElcb = false) {

@@ -15,14 +15,14 @@ const snap = (v) => Math.max(0, Math.round(v / GRID) * GRID);
 
 /** What the palette places, with a sensible size and the fields it needs. */
 const PALETTE = [
-  ['text', 'Text', { w: 160, h: 30, text: 'Label', size: 16 }],
+  ['text', 'Text', { w: 200, h: 40, text: 'Label', size: 16 }],
   ['line', 'Line / busbar', { w: 200, h: 10, busbar: false }],
   ['rect', 'Rectangle', { w: 200, h: 120, label: '' }],
   ['breaker', 'Breaker', { w: 150, h: 50, tag: '', label: 'Breaker' }],
-  ['value', 'Value', { w: 180, h: 30, tag: '', label: '' }],
+  ['value', 'Value', { w: 180, h: 50, tag: '', label: '' }],
   ['bar', 'Bar', { w: 200, h: 40, tag: '', label: '', min: 0, max: 100 }],
-  ['multistate', 'Multi-state', { w: 180, h: 30, tag: '', label: '', states: [{ value: 0, label: 'Off' }, { value: 1, label: 'On' }] }],
-  ['button', 'Command button', { w: 160, h: 40, tag: '', label: 'Command', value: true }],
+  ['multistate', 'Multi-state', { w: 180, h: 50, tag: '', label: '', states: [{ value: 0, label: 'Off' }, { value: 1, label: 'On' }] }],
+  ['button', 'Command button', { w: 180, h: 60, tag: '', label: 'Command', value: true }],
   ['trend', 'Small trend', { w: 320, h: 180, pens: [], span_s: 600, label: '' }],
   ['link', 'Link to screen', { w: 160, h: 36, screen: 'main', label: 'Open' }],
   ['panel', 'Panel diagram', { w: 660, h: 420, panel: '' }],

@@ -681,8 +681,12 @@ impl StackDevices {
             .entry(device.to_string())
             .or_insert((now, scans, f64::NAN));
         let secs = now.duration_since(entry.0).as_secs_f64();
+        let rate = scans.saturating_sub(entry.1) as f64 / secs;
         if secs >= 2.0 {
-            *entry = (now, scans, scans.saturating_sub(entry.1) as f64 / secs);
+            *entry = (now, scans, rate);
+        } else if entry.2.is_nan() && secs >= 0.5 {
+            // No full window yet: what the time since the first look shows.
+            return rate;
         }
         entry.2
     }
