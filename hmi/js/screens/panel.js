@@ -7,6 +7,7 @@ import { h, replace, table } from '../dom.js';
 import { fmtDuration, roleAtLeast } from '../format.js';
 import { Binder, attempt, confirmDialog, toast, valueEl } from '../ui.js';
 import { breakerState, singleLine } from '../components/singleline.js';
+import { live } from '../live.js';
 import { devicesUnder, panelPrefix } from './common.js';
 
 const POLL_MS = 1000;
@@ -178,7 +179,9 @@ export function panelScreen(id) {
         timer = setInterval(refresh, POLL_MS);
       })();
 
-      return () => { disposed = true; clearInterval(timer); binder.dispose(); };
+      // Without the live connection the sequence's status is not live either.
+      const offStatus = live.onStatus((connected) => seqBox.classList.toggle('stale', !connected));
+      return () => { disposed = true; clearInterval(timer); binder.dispose(); offStatus(); };
     },
   };
 }
