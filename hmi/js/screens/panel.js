@@ -1,4 +1,4 @@
-// Panel screens (ss1, css1): breakers with manual commands, the mode, the
+// Panel screens (one per configured panel): breakers with manual commands, the mode, the
 // fault-isolation sequence (step, count_L_cur_c, count_L_cur_sv, isolated
 // zones), Reset, and the power analyzer readings.
 
