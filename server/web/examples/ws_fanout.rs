@@ -15,8 +15,9 @@
 //! Run: `cargo run --release -p gridscada-web --example ws_fanout -- [TAGS] [CLIENTS] [SECONDS]`
 //! (defaults 10000 100 15).
 
+mod bench_state;
+
 use std::net::SocketAddr;
-use std::path::Path;
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
@@ -26,11 +27,7 @@ use axum::response::Response;
 use axum::routing::get;
 use axum::Router;
 use futures::{SinkExt, StreamExt};
-use gridscada_config::Role;
-use gridscada_store::{NewUser, OpenOptions, Store};
-use gridscada_tagdb::{Sample, SystemClock, TagDb, TagId, TagMeta, Timestamp, ValueKind};
-use gridscada_web::auth::{self, SessionPolicy, Sessions};
-use gridscada_web::{Auth, Components, WebState};
+use gridscada_tagdb::{Sample, TagDb, TagId, TagMeta, Timestamp, ValueKind};
 use parking_lot::Mutex;
 use serde_json::json;
 use tokio::sync::broadcast;
@@ -95,60 +92,6 @@ fn cpu_seconds() -> f64 {
     };
     // f[0] is field 3 (state), so field n is f[n - 3]. Linux USER_HZ is 100.
     (ticks(11) + ticks(12)) / 100.0
-}
-
-const MAIN: &str = "tag_files = [\"tags.toml\"]\n";
-const TAGS: &str = "[[device]]\nname = \"D1\"\nprotocol = \"tcp\"\naddress = \"127.0.0.1:1502\"\n";
-
-async fn web_state(db: Arc<TagDb>, dir: &Path) -> (WebState, String) {
-    let read = |p: &Path| -> std::io::Result<String> {
-        match p.file_name().and_then(|f| f.to_str()) {
-            Some("gridscada.toml") => Ok(MAIN.into()),
-            Some("tags.toml") => Ok(TAGS.into()),
-            _ => Err(std::io::ErrorKind::NotFound.into()),
-        }
-    };
-    let plant = gridscada_config::load_with(Path::new("/bench/gridscada.toml"), &read)
-        .expect("bench plant");
-    let store = Store::open("sqlite://bench.db", &OpenOptions::new(dir))
-        .await
-        .expect("store");
-    store.migrate().await.expect("migrate");
-    store
-        .create_user(&NewUser {
-            name: "bench".into(),
-            // An operator's screens include the tag browser, so every tag is
-            // readable (a Guest would only read the tags of its screens).
-            role: Role::Operator,
-            password_hash: auth::hash_password("bench password".into()).await.unwrap(),
-            group: "operator".into(),
-            created_at: Timestamp::now_utc(),
-        })
-        .await
-        .expect("user");
-    let sessions = Arc::new(Sessions::new(SessionPolicy::default()));
-    let token = sessions.create("bench", None);
-    let plant_ref = plant.clone();
-    let state = WebState {
-        db,
-        plant: Arc::new(plant),
-        store,
-        auth: Auth {
-            sessions,
-            ..Auth::new(SessionPolicy::default(), false).await
-        },
-        clock: Arc::new(SystemClock),
-        writer: None,
-        started: Instant::now(),
-        components: Components::default(),
-        sim: None,
-        http_metrics: Default::default(),
-        metrics: None,
-        screens: Default::default(),
-        tag_index: Arc::new(gridscada_web::access::TagIndex::new(&plant_ref)),
-        devices: None,
-    };
-    (state, format!("{}={token}", auth::COOKIE))
 }
 
 /// The peer: serialize once, broadcast text to every socket.
@@ -333,7 +276,7 @@ async fn main() {
     );
     let ids: Vec<TagId> = (0..tags).map(|i| TagId(i as u32)).collect();
     let dir = tempfile::tempdir().expect("temp dir");
-    let (state, cookie) = web_state(db.clone(), dir.path()).await;
+    let (state, cookie) = bench_state::web_state(db.clone(), dir.path()).await;
 
     let any: SocketAddr = "127.0.0.1:0".parse().unwrap();
     let (addr, server) = gridscada_web::bind(any, gridscada_web::router(state))

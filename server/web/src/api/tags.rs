@@ -130,8 +130,8 @@ pub async fn list(
         m.name.starts_with(q.prefix.as_str())
             && readable.may_read(&m.name)
             && (needle.is_empty()
-                || m.name.to_lowercase().contains(&needle)
-                || m.description.to_lowercase().contains(&needle))
+                || contains_ignoring_case(&m.name, &needle)
+                || contains_ignoring_case(&m.description, &needle))
     });
     let mut total = 0;
     let mut tags = vec![];
@@ -148,6 +148,16 @@ pub async fn list(
         offset: q.offset,
         limit: q.limit,
     }))
+}
+
+/// Whether `hay` contains `needle` (already lowercase), ignoring case; no
+/// allocation for ASCII text, which searching 100,000 tags per keystroke needs.
+fn contains_ignoring_case(hay: &str, needle: &str) -> bool {
+    if hay.is_ascii() && needle.is_ascii() {
+        let (h, n) = (hay.as_bytes(), needle.as_bytes());
+        return n.len() <= h.len() && h.windows(n.len()).any(|w| w.eq_ignore_ascii_case(n));
+    }
+    hay.to_lowercase().contains(needle)
 }
 
 #[derive(Deserialize)]
