@@ -74,8 +74,9 @@ run() {
   local rc=$?
   set -e
   local p f
-  p="$(grep -E '^# pass ' "$tap" 2>/dev/null | awk '{print $3}' | tail -1)"
-  f="$(grep -E '^# fail ' "$tap" 2>/dev/null | awk '{print $3}' | tail -1)"
+  # A run that died before its summary has none: counted as failed below.
+  p="$(grep -E '^# pass ' "$tap" 2>/dev/null | awk '{print $3}' | tail -1 || true)"
+  f="$(grep -E '^# fail ' "$tap" 2>/dev/null | awk '{print $3}' | tail -1 || true)"
   [ "$rc" -ne 0 ] && [ "${f:-0}" -eq 0 ] && f=1
   total_passed=$((total_passed + ${p:-0}))
   total_failed=$((total_failed + ${f:-0}))
