@@ -10,7 +10,7 @@ set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 root="$(cd "$here/../.." && pwd)"
 bin="${GRIDSCADA_BIN:-$root/target/debug/gridscada}"
-artifacts="$here/artifacts"
+artifacts="${GRIDSCADA_E2E_ARTIFACTS:-$here/artifacts}"
 
 if [ ! -x /usr/bin/chromium ]; then
   echo "browser.sh: installing Debian's chromium"
