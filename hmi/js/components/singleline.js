@@ -6,6 +6,7 @@
 
 import { s } from '../dom.js';
 import { fmtNumber, qualityOf } from '../format.js';
+import { live } from '../live.js';
 
 const MIN_W = 640;
 const H = 400;
@@ -34,6 +35,13 @@ export function singleLine(binder, { prefix, title, zones = 4, devices = [], onB
   // Wider than the standard panel: keep the text size and let it scroll.
   if (W > MIN_W) { svg.classList.add('single-line-wide'); svg.style.width = `${W}px`; svg.style.maxWidth = 'none'; }
   svg.append(s('title', {}, `Single-line diagram of ${title}`));
+  // What the panel's sequence says (set through box.panelStatus): faulty
+  // zones it isolated, and manual mode (automatic isolation off).
+  const marks = { faulty: new Set(), manual: false };
+  const redraws = [];
+  const manualText = s('text', { x: 12, y: 76, class: 'sl-manual', visibility: 'hidden' });
+  replaceText(manualText, [['MANUAL ', 0], ['automatic ', 15], ['isolation off', 14]], 12);
+  svg.append(manualText);
   const cx = 130;
   // Supply.
   svg.append(
@@ -84,18 +92,28 @@ export function singleLine(binder, { prefix, title, zones = 4, devices = [], onB
       breaker(x, 225, `zone${z}`, `Zone ${z}`, `${prefix}.Zone${z}.Closed`, `${prefix}.Zone${z}.Cmd`, false),
       s('line', { x1: x, y1: 238, x2: x, y2: 268, class: 'sl-wire' }));
     // The zone's load, green when energised.
-    const load = s('g', { class: 'sl-load' });
+    const load = s('g', { class: 'sl-load', dataset: { zone: String(z) } });
     const tri = s('path', { d: `M ${x - 12} 270 L ${x + 12} 270 L ${x} 290 Z` });
     const txt = s('text', { x, y: 308, class: 'sl-state sl-middle' }, '');
     const tip = s('title', {}, '');
     load.append(tip, tri, txt);
-    binder.on(`${prefix}.Zone${z}.Energised`, (smp, connected) => {
+    const energisedTag = `${prefix}.Zone${z}.Energised`;
+    const drawLoad = (smp, connected) => {
       const q = qualityOf(smp, connected);
       const on = q.usable && smp.value === true;
+      if (marks.faulty.has(z)) {
+        // Isolated by the sequence as faulty: say so, on two lines to stay legible.
+        load.setAttribute('class', 'sl-load io-faulty');
+        replaceText(txt, [['FAULTY – ', 0], ['ISOLATED', 13]], x);
+        tip.textContent = `Zone ${z}: found faulty and isolated by the sequence; repair it before Reset`;
+        return;
+      }
       load.setAttribute('class', `sl-load ${!q.usable ? 'io-unknown' : on ? 'io-true' : 'io-false'}`);
       txt.textContent = !q.usable ? '? UNKNOWN' : on ? 'ENERGISED' : 'DEAD';
       tip.textContent = `Zone ${z} load: ${txt.textContent}${q.reason ? ` (${q.reason})` : ''}`;
-    });
+    };
+    binder.on(energisedTag, drawLoad);
+    redraws.push(() => drawLoad(binder.sample(energisedTag), live.connected));
     svg.append(load);
   }
 
@@ -150,5 +168,23 @@ export function singleLine(binder, { prefix, title, zones = 4, devices = [], onB
   const box = document.createElement('div');
   box.className = 'sl-scroll';
   box.append(svg);
+  /** Marks the faulty zones the sequence isolated, and manual mode, from the panel's status. */
+  box.panelStatus = (status) => {
+    if (!status) return;
+    const faulty = new Set((status.faulty_zones || []).map(Number));
+    const manual = status.mode === 'manual';
+    const changed = manual !== marks.manual || faulty.size !== marks.faulty.size || [...faulty].some((z) => !marks.faulty.has(z));
+    if (!changed) return;
+    marks.faulty = faulty;
+    marks.manual = manual;
+    manualText.setAttribute('visibility', manual ? 'visible' : 'hidden');
+    svg.classList.toggle('sl-is-manual', manual);
+    for (const f of redraws) f();
+  };
   return box;
+}
+
+/** Sets an SVG text to lines of [text, dy] tspans (textContent stays the words joined). */
+function replaceText(el, lines, x) {
+  el.replaceChildren(...lines.map(([t, dy]) => s('tspan', { x, dy: dy || 0 }, t)));
 }

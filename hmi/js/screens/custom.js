@@ -155,7 +155,15 @@ export function drawElement(e, i, live) {
           const p = await get(`/api/panels/${enc(e.panel)}`);
           const prefix = panelPrefix(p);
           const devices = await devicesUnder(prefix).catch(() => []);
-          replace(holder, singleLine(binder, { prefix, title: p.name, zones: p.zones, devices }));
+          const diagram = singleLine(binder, { prefix, title: p.name, zones: p.zones, devices });
+          diagram.panelStatus(p);
+          replace(holder, diagram);
+          // The panel's mode and isolated zones, as on its own screen.
+          const t = setInterval(() => {
+            if (!holder.isConnected) { clearInterval(t); return; } // the screen was left meanwhile
+            get(`/api/panels/${enc(e.panel)}`).then((st) => diagram.panelStatus(st)).catch(() => {});
+          }, 2000);
+          live.cleanups.push(() => clearInterval(t));
         } catch (err) {
           replace(holder, h('p', { class: 'error', text: `Panel ${e.panel}: ${err.detail || err.message}` }));
         }

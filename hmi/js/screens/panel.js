@@ -5,7 +5,7 @@
 import { get, post, enc } from '../api.js';
 import { h, replace, table } from '../dom.js';
 import { fmtDuration, roleAtLeast } from '../format.js';
-import { Binder, attempt, confirmDialog, toast, valueEl } from '../ui.js';
+import { Binder, attempt, confirmDialog, formDialog, toast, valueEl } from '../ui.js';
 import { breakerState, singleLine } from '../components/singleline.js';
 import { live } from '../live.js';
 import { devicesUnder, panelPrefix } from './common.js';
@@ -19,6 +19,31 @@ const ANALYZER = [
   ['Frequency', 'Hz', 'Hz'], ['Energy', 'kWh', 'kWh'],
 ];
 
+/** The zones (and busbar) the sequence isolated as faulty, in words. */
+export function isolatedZones(status) {
+  if (!status) return [];
+  const out = (status.faulty_zones || []).map((z) => `Zone ${z}`);
+  if (status.load0_faulty) out.unshift('the busbar (load 0)');
+  return out;
+}
+
+/** The last sequence in words: nothing before the first fault, "running" during one. */
+export function lastSequence(status) {
+  const ls = (status && status.last_sequence) || {};
+  const outcome = String(ls.outcome || 'none').toLowerCase();
+  if (outcome === 'none') return 'none since start';
+  if (outcome === 'running') return 'a sequence is running now';
+  const took = Number(ls.restore_s) > 0 ? ` in ${fmtDuration(Number(ls.restore_s))}` : '';
+  const parts = [{
+    restored: `every zone restored${took}`,
+    isolated: `faulty zones isolated, healthy zones restored${took}`,
+    lockout: 'lockout: the sequence gave up',
+    stopped: 'stopped by the operator (manual mode)',
+  }[outcome] || outcome];
+  parts.push(`${ls.switching_ops} switching ops`, `${ls.trips} trips`, `${ls.elcb_resets} ELCB resets`);
+  return parts.join(', ');
+}
+
 const breakerLabel = (name) => (name === 'elcb' ? 'ELCB' : name === 'mccb' ? 'MCCB' : name.replace(/^zone(\d+)$/, 'Zone $1'));
 
 export function panelScreen(id) {
@@ -29,6 +54,7 @@ export function panelScreen(id) {
       const canMode = roleAtLeast(role, 'supervisor');
       const binder = new Binder();
       let status = null;
+      let diagram = null;
       let timer = null;
       let disposed = false;
 
@@ -100,10 +126,8 @@ export function panelScreen(id) {
         f.lockout.className = status.lockout ? 'badge badge-bad' : '';
         f.comm.textContent = status.comm_ok ? 'all signals Good' : 'signals with Bad quality';
         f.comm.className = status.comm_ok ? '' : 'badge badge-bad';
-        const ls = status.last_sequence || {};
-        f.last.textContent = ls.outcome
-          ? `${ls.outcome}: restored in ${fmtDuration(Number(ls.restore_s))}, ${ls.switching_ops} switching ops, ${ls.trips} trips, ${ls.elcb_resets} ELCB resets`
-          : 'none yet';
+        f.last.textContent = lastSequence(status);
+        if (diagram) diagram.panelStatus(status);
         if (modeBtns) {
           modeBtns.children[0].setAttribute('aria-pressed', String(!manual));
           modeBtns.children[1].setAttribute('aria-pressed', String(manual));
@@ -152,7 +176,20 @@ export function panelScreen(id) {
       }
 
       async function reset() {
-        const ok = await confirmDialog('Reset panel', `Reset the fault-isolation sequence of ${status ? status.name : id}? It clears the isolated zones and the lockout.`, { submitLabel: 'Reset', danger: false });
+        const name = status ? status.name : id;
+        const isolated = isolatedZones(status);
+        let ok;
+        if (isolated.length) {
+          // Reset re-energises what the sequence isolated: if the fault is still
+          // there, the ELCB trips again and the whole panel goes dark.
+          ok = (await formDialog(`Reset ${name}`, (form) => form.append(
+            h('p', { id: `${id}-reset-zones`, text: `Reset re-energises ${isolated.join(', ')}, isolated as faulty.` }),
+            h('p', { class: 'note', text: 'If the fault is not repaired, the ELCB trips again and the whole panel loses supply.' }),
+            h('label', { class: 'check' }, h('input', { type: 'checkbox', name: 'repaired', id: `${id}-reset-repaired`, required: true }),
+              ` The fault on ${isolated.join(', ')} is repaired`)), { submitLabel: 'Reset and re-energise', danger: true })) !== null;
+        } else {
+          ok = await confirmDialog(`Reset ${name}`, `Reset the fault-isolation sequence of ${name}? No zone is isolated; it clears the lockout and the last sequence's state.`, { submitLabel: 'Reset', danger: false });
+        }
         if (!ok) return;
         const r = await attempt('Reset', () => post(`/api/panels/${enc(id)}/reset`));
         if (r) { status = r; draw(); toast('Reset accepted.', 'ok'); }
@@ -169,7 +206,8 @@ export function panelScreen(id) {
         const prefix = panelPrefix(status);
         title.textContent = status.name;
         const devices = await devicesUnder(prefix).catch(() => []);
-        replace(diagramBox, singleLine(binder, { prefix, title: status.name, zones: status.zones, devices }));
+        diagram = singleLine(binder, { prefix, title: status.name, zones: status.zones, devices });
+        replace(diagramBox, diagram);
         const names = ['elcb', 'mccb'].concat(Array.from({ length: status.zones }, (_, i) => `zone${i + 1}`));
         drawBreakerRows(prefix, names);
         replace(paBox, h('h2', { id: `pa-${id}`, text: 'Power analyzer' }),
