@@ -110,7 +110,13 @@ export default {
     });
     for (const i of [yMin, yMax]) i.addEventListener('change', applyY);
     liveBox.addEventListener('change', () => { setLive(liveBox.checked); load(); });
-    for (const i of [startDate, startTime, duration]) i.addEventListener('change', () => { if (i !== duration) { liveBox.checked = false; setLive(false); } load(); });
+    // Editing the start leaves Live and keeps what was typed (the window starts there).
+    for (const i of [startDate, startTime, duration]) {
+      i.addEventListener('change', () => {
+        if (i !== duration && liveBox.checked) { liveBox.checked = false; setLive(false, false); }
+        load();
+      });
+    }
     reloadBtn.addEventListener('click', () => load());
     tableBtn.addEventListener('click', () => {
       tableBox.hidden = !tableBox.hidden;
@@ -207,12 +213,15 @@ export default {
         chart.setData(data.series, data.from, data.to);
       }
     }
-    function setLive(on) {
+    function setLive(on, freeze = true) {
       clearInterval(liveTimer);
       liveTimer = on ? setInterval(load, LIVE_RELOAD_MS) : null;
-      if (!on) {
-        // Freeze the window where it is, so the fields say what is shown.
-        const d = new Date(data ? data.from : Date.now() - Number(duration.value) * 1000);
+      if (!on && freeze) {
+        // Freeze the window that was on view (never one reaching into the
+        // future), so the fields say what is shown.
+        const dur = Number(duration.value) * 1000;
+        const latest = Math.floor((Date.now() - dur) / 1000) * 1000;
+        const d = new Date(Math.min(data ? data.from : latest, latest));
         startDate.value = dateValue(d);
         startTime.value = timeValue(d);
       }
