@@ -7,6 +7,7 @@ import { fmtTime } from './format.js';
 import { live } from './live.js';
 import { toast, attempt, formDialog } from './ui.js';
 import { AlarmFooter } from './components/alarmfooter.js';
+import { beeper } from './components/beeper.js';
 import login from './screens/login.js';
 import mainScreen from './screens/main.js';
 import { panelScreen } from './screens/panel.js';
@@ -119,6 +120,7 @@ function renderFrame() {
     startCommLight();
   } else {
     live.stop();
+    beeper.setUser(null); // a log out ends the horn's mute: it belonged to the session
     state.disconnectedAt = null;
     $('banner').hidden = true;
     document.body.classList.remove('disconnected');

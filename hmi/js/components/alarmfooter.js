@@ -3,7 +3,7 @@
 
 import { post } from '../api.js';
 import { h, select } from '../dom.js';
-import { roleAtLeast } from '../format.js';
+import { fmtTime, roleAtLeast } from '../format.js';
 import { live } from '../live.js';
 import { attempt, toast } from '../ui.js';
 import { beeper } from './beeper.js';
@@ -19,6 +19,7 @@ export class AlarmFooter {
     this.selection = '';
     this.minPriority = '';
     this.build();
+    this.root.dataset.horn = beeper.state;
     this.offWant = live.want({ alarms: true });
     this.offAlarms = live.onAlarms((list) => this.draw(list));
     this.draw(live.alarms);
@@ -31,13 +32,24 @@ export class AlarmFooter {
     this.count = h('span', { class: 'alarm-count', id: 'footer-count', role: 'status' });
     this.selSelect.addEventListener('change', () => { this.selection = this.selSelect.value; this.draw(live.alarms); });
     this.prioSelect.addEventListener('change', () => { this.minPriority = this.prioSelect.value; this.draw(live.alarms); });
+    // The horn: Silence quiets the alarms sounding now; Mute quiets it for a while, for this session.
+    beeper.setUser(this.session.user);
+    const silenceBtn = h('button', { type: 'button', class: 'btn btn-small', id: 'footer-silence', text: 'Silence', title: 'Silence the horn for the alarms sounding now (a new alarm sounds again)' });
     const muteBtn = h('button', { type: 'button', class: 'btn btn-small', id: 'footer-mute', 'aria-pressed': String(beeper.muted) });
-    const drawMute = () => {
-      muteBtn.textContent = beeper.muted ? 'Horn muted' : 'Mute horn';
-      muteBtn.setAttribute('aria-pressed', String(beeper.muted));
+    const drawMute = (state = beeper.state) => {
+      const until = beeper.mutedUntil;
+      muteBtn.textContent = until ? `Horn muted to ${fmtTime(until).slice(11, 16)}` : 'Mute horn';
+      muteBtn.title = until ? 'Muted for this session until then; press to unmute' : 'Mute the horn for 15 minutes (this session only)';
+      muteBtn.setAttribute('aria-pressed', String(!!until));
+      silenceBtn.disabled = state !== 'sounding';
+      this.root.dataset.horn = state;
+      this.root.dataset.hornBeeps = String(beeper.beeps);
     };
-    drawMute();
-    muteBtn.addEventListener('click', () => { beeper.setMuted(!beeper.muted); drawMute(); });
+    this.offHorn = beeper.onChange(drawMute);
+    // The mute ends by itself: redraw when it does.
+    this.muteTimer = setInterval(() => drawMute(), 5000);
+    muteBtn.addEventListener('click', () => { beeper.setMuted(!beeper.muted); });
+    silenceBtn.addEventListener('click', () => beeper.silence());
     const buttons = [];
     if (canAck) {
       buttons.push(
@@ -46,7 +58,7 @@ export class AlarmFooter {
     }
     buttons.push(
       h('button', { type: 'button', class: 'btn btn-small', id: 'footer-print', onclick: () => this.print(), text: 'Print' }),
-      muteBtn);
+      silenceBtn, muteBtn);
     this.tbody = h('tbody');
     this.root.replaceChildren(
       h('div', { class: 'footer-bar' },
@@ -78,14 +90,9 @@ export class AlarmFooter {
     this.sound(list);
   }
 
-  // Beeps once for every alarm that became unacknowledged since the last list.
+  // The horn sounds while any active alarm is unacknowledged and not silenced.
   sound(list) {
-    const now = new Set(list.filter((a) => !a.acked && a.active).map((a) => a.id));
-    if (this.known) {
-      const fresh = list.filter((a) => now.has(a.id) && !this.known.has(a.id));
-      if (fresh.length) beeper.beep(Math.max(...fresh.map((a) => a.priority)));
-    }
-    this.known = now;
+    beeper.setAlarms(list.filter((a) => !a.acked && a.active).map((a) => ({ id: a.id, priority: a.priority })));
   }
 
   async ack(which) {
@@ -105,5 +112,8 @@ export class AlarmFooter {
   dispose() {
     this.offWant();
     this.offAlarms();
+    this.offHorn();
+    clearInterval(this.muteTimer);
+    beeper.setAlarms([]);
   }
 }
