@@ -51,8 +51,10 @@ export function qualityOf(sample, live = true) {
  * Shows a sample in an element: the value and units, or "?" greyed with the
  * reason in its title when the value may not be trusted.
  */
-export function showSample(el, sample, { units = '', digits, live = true, format } = {}) {
+export function showSample(el, sample, { units = '', digits, live = true, format, kind } = {}) {
   const q = qualityOf(sample, live);
+  // An integer tag (a counter) is shown without decimals.
+  if (digits === undefined && kind === 'int') digits = 0;
   el.classList.remove('q-good', 'q-uncertain', 'q-bad');
   el.classList.add('value', q.cls);
   const shown = sample && sample.value !== undefined && sample.value !== null

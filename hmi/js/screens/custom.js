@@ -72,7 +72,7 @@ export function drawElement(e, i, live) {
       const v = h('span', { class: 'value el-value-text' });
       box.append(label(e.label), v);
       const meta = live.tags.get(e.tag);
-      binder.show(v, e.tag, { units: e.units ?? (meta ? meta.units : ''), digits: e.digits ?? undefined });
+      binder.show(v, e.tag, { units: e.units ?? (meta ? meta.units : ''), digits: e.digits ?? undefined, kind: meta ? meta.kind : undefined });
       break;
     }
     case 'bar': {
@@ -82,7 +82,7 @@ export function drawElement(e, i, live) {
       box.append(label(e.label), track, text);
       const meta = live.tags.get(e.tag);
       binder.on(e.tag, (smp, connected) => {
-        showSample(text, smp, { units: meta ? meta.units : '', live: connected });
+        showSample(text, smp, { units: meta ? meta.units : '', kind: meta ? meta.kind : undefined, live: connected });
         const q = qualityOf(smp, connected);
         const ok = q.usable && typeof smp.value === 'number';
         const frac = ok ? Math.min(1, Math.max(0, (smp.value - e.min) / (e.max - e.min))) : 0;

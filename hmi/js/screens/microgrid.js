@@ -73,7 +73,8 @@ export default {
       const el2 = maxEls.get(tag);
       if (!el2) return;
       const m = maxima.get(tag);
-      el2.textContent = m === undefined ? '—' : fmtNumber(m);
+      const u = el2.dataset.units;
+      el2.textContent = m === undefined ? '—' : `${fmtNumber(m)}${u ? ` ${u}` : ''}`;
       el2.title = m === undefined ? 'no value recorded today' : `highest value since ${fmtTime(startOfToday())}`;
     }
 
@@ -97,7 +98,7 @@ export default {
           ? h('a', { href: `#/units/${u.id}`, text: u.label }) : u.label, )];
         for (const [q, units_] of [['V', 'V'], ['I', 'A'], ['P_kW', 'kW']]) {
           const tag = `${u.prefix}.${q}`;
-          const mx = h('span', { class: 'value', dataset: { max: tag } });
+          const mx = h('span', { class: 'value', dataset: { max: tag, units: units_ } });
           maxEls.set(tag, mx);
           cells.push(h('td', { class: 'num' }, valueEl(binder, tag, { units: units_ })), h('td', { class: 'num' }, mx));
           binder.on(tag, (s) => bump(tag, s));

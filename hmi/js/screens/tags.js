@@ -166,7 +166,7 @@ export default {
       replace(rows, shown.map(([i, t]) => {
         const value = h('span', { class: 'value' });
         const s = live.get(t.name) || t;
-        showSample(value, s, { units: t.units, live: live.connected });
+        showSample(value, s, { units: t.units, kind: t.kind, live: live.connected });
         const row = h('div', {
           class: ['vlist-row', selected === t.name && 'selected'], role: 'option', 'aria-selected': String(selected === t.name),
           dataset: { tag: t.name }, tabindex: '-1',
@@ -202,7 +202,7 @@ export default {
       const quality = h('dd', { id: 'tag-quality' });
       const stamp = h('dd', { id: 'tag-timestamp' });
       detailBinder.on(t.name, (smp, connected) => {
-        showSample(value, smp, { units: t.units, live: connected });
+        showSample(value, smp, { units: t.units, kind: t.kind, live: connected });
         const q = qualityOf(smp, connected);
         quality.textContent = q.cls === 'q-good' ? 'Good' : `${q.cls === 'q-uncertain' ? 'Uncertain' : 'Bad'}: ${q.reason}`;
         quality.className = q.cls === 'q-good' ? '' : q.cls === 'q-uncertain' ? 'badge badge-warn' : 'badge badge-bad';

@@ -42,7 +42,7 @@ export default {
         h('section', { class: 'card', 'aria-label': `${u.id} values` }, h('h2', { text: u.label }),
           h('table', { class: 'data' }, h('tbody', {}, tags.map((t) => h('tr', {},
             h('th', { scope: 'row', title: t.name, text: t.description || t.name.slice(u.prefix.length + 1) }),
-            h('td', { class: 'num' }, valueEl(binder, t.name, { units: t.units, format: t.name.endsWith('.State') ? stateFormat(t.description) : undefined })))))))));
+            h('td', { class: 'num' }, valueEl(binder, t.name, { units: t.units, kind: t.kind, format: t.name.endsWith('.State') ? stateFormat(t.description) : undefined })))))))));
       const load = async () => {
         const to = Date.now();
         try {
