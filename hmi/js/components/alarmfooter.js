@@ -86,6 +86,7 @@ export class AlarmFooter {
     const unacked = shown.filter((a) => !a.acked).length;
     this.count.textContent = `${shown.length} shown${shown.length !== list.length ? ` of ${list.length}` : ''}, ${unacked} unacked`;
     this.root.classList.toggle('has-unacked', list.some((a) => !a.acked));
+    this.shown = shown;
     drawAlarmRows(this.tbody, shown);
     this.sound(list);
   }
@@ -96,8 +97,16 @@ export class AlarmFooter {
   }
 
   async ack(which) {
-    const body = which === 'top' ? { top: true, filter: this.filter() } : { all: true, filter: this.filter() };
-    const r = await attempt(which === 'top' ? 'Ack Top' : 'Ack All', () => post('/api/alarms/ack', body));
+    if (which === 'top') {
+      // Exactly the row shown at the top (the order is sortAlarms', in one place):
+      // the first unacknowledged one, by its id.
+      const top = (this.shown || []).find((a) => !a.acked);
+      if (!top) { toast('Nothing to acknowledge.', 'ok'); return; }
+      const r = await attempt('Ack Top', () => post('/api/alarms/ack', { ids: [top.id] }));
+      if (r) toast(`Acknowledged: ${top.message}`, 'ok');
+      return;
+    }
+    const r = await attempt('Ack All', () => post('/api/alarms/ack', { all: true, filter: this.filter() }));
     if (r) toast(r.count ? `${r.count} alarm${r.count === 1 ? '' : 's'} acknowledged.` : 'Nothing to acknowledge.', 'ok');
   }
 
