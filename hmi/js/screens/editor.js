@@ -277,7 +277,12 @@ export default {
     function drag(ev, i, mode) {
       ev.preventDefault();
       ev.stopPropagation();
-      if (selected !== i) { selected = i; draw(); }
+      if (selected !== i) {
+        // Select without redrawing the canvas, so the box dragged below is the one on view.
+        selected = i;
+        canvas.querySelectorAll('.el').forEach((b) => b.classList.toggle('el-selected', Number(b.dataset.elementIndex) === i));
+        drawProps();
+      }
       const e0 = { ...screen.elements[i] };
       const x0 = ev.clientX;
       const y0 = ev.clientY;

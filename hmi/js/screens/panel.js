@@ -4,7 +4,7 @@
 
 import { get, post, enc } from '../api.js';
 import { h, replace, table } from '../dom.js';
-import { fmtDuration, roleAtLeast } from '../format.js';
+import { fmtDuration, qualityOf, roleAtLeast } from '../format.js';
 import { Binder, attempt, confirmDialog, formDialog, toast, valueEl } from '../ui.js';
 import { breakerState, singleLine } from '../components/singleline.js';
 import { live } from '../live.js';
@@ -18,6 +18,26 @@ const ANALYZER = [
   ['Active power', 'P_kW', 'kW'], ['Reactive power', 'Q_kvar', 'kvar'], ['Power factor', 'PF', ''],
   ['Frequency', 'Hz', 'Hz'], ['Energy', 'kWh', 'kWh'],
 ];
+
+/** A step of the sequence in plain words; `c` is the load being switched (count_L_cur_c). */
+export function stepWords(code, c) {
+  const load = Number(c) === 0 ? 'the busbar (load 0, MCCB)' : `zone ${c}`;
+  switch (code) {
+    case 'idle': return 'Idle: watching for a trip';
+    case 'tripped': return 'ELCB tripped: opening the MCCB and every zone';
+    case 'reclose_wait': return 'Waiting to reclose the ELCB';
+    case 'elcb_reset': return 'Resetting the ELCB';
+    case 'oluc': return `Testing ${load}: closing it`;
+    case 'oluc_dwell': return `Testing ${load}: waiting to see it hold`;
+    case 'oldc': return 'Closing the remaining healthy zones';
+    case 'oldc_dwell': return 'Closing the remaining healthy zones: waiting to see each hold';
+    case 'isolated': return 'Done: faulty zones isolated, the others restored';
+    case 'lockout': return 'Locked out: too many trips; repair, then Reset';
+    case 'suspended': return 'Suspended: signals with Bad quality';
+    case 'manual': return 'Manual mode: the sequence does not act';
+    default: return code ? String(code) : '—';
+  }
+}
 
 /** The zones (and busbar) the sequence isolated as faulty, in words. */
 export function isolatedZones(status) {
@@ -55,6 +75,7 @@ export function panelScreen(id) {
       const binder = new Binder();
       let status = null;
       let diagram = null;
+      let prefix = null;
       let timer = null;
       let disposed = false;
 
@@ -80,8 +101,8 @@ export function panelScreen(id) {
         h('dl', { class: 'kv' },
           h('dt', { text: 'Mode' }), dd('mode'),
           h('dt', { text: 'Step' }), dd('step'),
-          h('dt', { text: 'count_L_cur_c' }), dd('count_c'),
-          h('dt', { text: 'count_L_cur_sv' }), dd('count_sv'),
+          h('dt', { text: 'Load being switched', title: 'count_L_cur_c' }), dd('count_c'),
+          h('dt', { text: 'Saved faulty load', title: 'count_L_cur_sv' }), dd('count_sv'),
           h('dt', { text: 'Isolated zones' }), dd('faulty'),
           h('dt', { text: 'Lockout' }), dd('lockout'),
           h('dt', { text: 'Communication' }), dd('comm'),
@@ -115,9 +136,7 @@ export function panelScreen(id) {
         const manual = status.mode === 'manual';
         f.mode.textContent = manual ? 'MANUAL' : 'AUTO';
         f.mode.className = manual ? 'badge badge-warn' : 'badge badge-ok';
-        f.step.textContent = status.step;
-        f.count_c.textContent = String(status.count_L_cur_c);
-        f.count_sv.textContent = String(status.count_L_cur_sv);
+        drawSeq();
         const faulty = (status.faulty_zones || []).map((z) => `Zone ${z}`);
         if (status.load0_faulty) faulty.unshift('Busbar (load 0)');
         f.faulty.textContent = faulty.length ? faulty.join(', ') : 'none';
@@ -135,6 +154,25 @@ export function panelScreen(id) {
         const hint = document.getElementById(`${id}-bk-hint`);
         if (hint) hint.textContent = canOperate ? (manual ? 'Manual mode: breakers may be operated.' : 'Auto mode: the sequence operates the breakers. Switch to Manual to operate them.') : '';
         for (const b of bkBody.querySelectorAll('button[data-breaker]')) b.disabled = !manual;
+      }
+
+      // The step and counters, pushed live from the derived tags {prefix}.Seq.*
+      // (every step is seen), else from the polled status.
+      function liveSeq(k) {
+        if (!prefix) return undefined;
+        const smp = binder.sample(`${prefix}.Seq.${k}`);
+        return smp && qualityOf(smp, live.connected).usable ? smp.value : undefined;
+      }
+      function drawSeq() {
+        if (!status) return;
+        const code = liveSeq('Step') ?? status.step;
+        const c = liveSeq('count_L_cur_c') ?? status.count_L_cur_c;
+        const sv = liveSeq('count_L_cur_sv') ?? status.count_L_cur_sv;
+        f.step.textContent = stepWords(code, c);
+        f.step.title = `step ${code}, count_L_cur_c ${c}, count_L_cur_sv ${sv}`;
+        f.step.dataset.step = String(code);
+        f.count_c.textContent = String(c);
+        f.count_sv.textContent = String(sv);
       }
 
       function drawBreakerRows(prefix, names) {
@@ -203,8 +241,9 @@ export function panelScreen(id) {
           return;
         }
         if (disposed) return;
-        const prefix = panelPrefix(status);
+        prefix = panelPrefix(status);
         title.textContent = status.name;
+        for (const k of ['Step', 'count_L_cur_c', 'count_L_cur_sv']) binder.on(`${prefix}.Seq.${k}`, drawSeq);
         const devices = await devicesUnder(prefix).catch(() => []);
         diagram = singleLine(binder, { prefix, title: status.name, zones: status.zones, devices });
         replace(diagramBox, diagram);
