@@ -460,6 +460,11 @@ impl Link {
             bump(&counters.late_scans);
         }
         let mut batch: Vec<(TagId, Sample)> = Vec::new();
+        // The observation ticket of each sample in `batch`, taken when its
+        // block's answer arrived: a write confirmed between two blocks of
+        // this scan is newer, and the scan's older reading of it is dropped
+        // when the batch is applied (TagDb::apply_observed).
+        let mut tickets: Vec<u64> = Vec::new();
         let mut answered = false;
         let mut lost = false;
         let nblocks = self.devices[d].classes[c].blocks.len();
@@ -476,7 +481,9 @@ impl Link {
                 Ok(answer) => {
                     answered = true;
                     let ts = self.clock.now();
+                    let ticket = self.db.ticket();
                     self.block_samples(&block, answer, ts, &mut batch);
+                    tickets.resize(batch.len(), ticket);
                 }
                 Err(_) => {
                     if self.transport.is_connected() {
@@ -505,8 +512,17 @@ impl Link {
             next = next.add(period * missed as u32);
         }
         class.next_due = next;
-        batch.extend(status_samples(&self.devices[d], now));
-        self.db.apply(batch);
+        let status_ticket = self.db.ticket();
+        let status = status_samples(&self.devices[d], now)
+            .into_iter()
+            .map(|(id, s)| (id, s, status_ticket));
+        self.db.apply_observed(
+            batch
+                .into_iter()
+                .zip(tickets)
+                .map(|((id, s), t)| (id, s, t))
+                .chain(status),
+        );
     }
 
     /// Decodes one block's answer into samples (exceptions make its tags Bad).

@@ -554,3 +554,63 @@ async fn status_tags_are_registered_and_kept() {
     assert!(err.to_string().contains("D.Comm.Connected"), "{err}");
     io.shutdown().await;
 }
+
+/// A write confirmed in the middle of a slow scan, after the scan read the
+/// written register's block, must not be rolled back when the scan applies
+/// its (older) batch: the tag never shows the old value again, and its
+/// timestamps never go backwards. Deterministic: writes are served between
+/// two blocks of a scan, and each request takes 60 ms.
+#[tokio::test]
+async fn a_write_interleaved_with_a_slow_scan_is_never_rolled_back() {
+    let bank = Bank::with_units(&[1]);
+    bank.unit(1, |u| {
+        u.delay = Duration::from_millis(60);
+        u.holding[0] = 333;
+    });
+    let (addr, _server) = serve(Arc::clone(&bank), "127.0.0.1:0").await;
+    // Block 0 holds the setpoint; eight more blocks make a scan of ~0.5 s.
+    let mut tags = String::from(
+        "[[tag]]\nname = \"D.Set\"\ndevice = \"D\"\nkind = \"holding_register\"\naddress = 0\nwritable = true\nwrite_role = \"operator\"\n\n",
+    );
+    for i in 1..9 {
+        tags += &format!(
+            "[[tag]]\nname = \"D.R{i}\"\ndevice = \"D\"\nkind = \"holding_register\"\naddress = {}\n\n",
+            i * 100
+        );
+    }
+    let text = format!("{}{tags}", device("D", addr, 1, 3000, 500))
+        .replace("retries = 1", "retries = 1\nmax_gap = 4");
+    let plant = plant(&text);
+    let (db, io) = start(&plant);
+    eventually("the first reading", 10 * SECOND, || {
+        value(&db, "D.Set") == Some(Value::Int(333))
+    })
+    .await;
+    // The second scan has read block 0 (the setpoint) and goes on with the others.
+    eventually("a scan past its first block", 10 * SECOND, || {
+        bank.log
+            .lock()
+            .iter()
+            .filter(|(_, fc, a)| *fc == 3 && *a == 0)
+            .count()
+            >= 2
+    })
+    .await;
+    let confirmed = io.writer().write("D.Set", Value::Int(411)).await.unwrap();
+    assert_eq!(confirmed.value, Value::Int(411));
+    // Watch through the end of that scan and into the next.
+    let mut last_ts = confirmed.timestamp;
+    let until = std::time::Instant::now() + Duration::from_millis(1500);
+    while std::time::Instant::now() < until {
+        let s = db.get_by_name("D.Set").unwrap();
+        assert_eq!(
+            s.value,
+            Value::Int(411),
+            "the written value was rolled back"
+        );
+        assert!(s.timestamp >= last_ts, "the tag's time went backwards");
+        last_ts = s.timestamp;
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    io.shutdown().await;
+}

@@ -107,7 +107,12 @@ impl Update {
 
 struct Live {
     samples: Vec<Sample>,
+    /// Per tag, the observation ticket of its current sample (see
+    /// [`TagDb::ticket`]): a sample observed earlier never replaces it.
+    tickets: Vec<u64>,
     seq: u64,
+    /// The next observation ticket.
+    next_ticket: u64,
 }
 
 /// The tag database. Cheap to share behind an `Arc`.
@@ -137,7 +142,7 @@ impl TagDb {
             meta.push(tag);
         }
         let never_read = Quality::bad("no value yet");
-        let samples = meta
+        let samples: Vec<Sample> = meta
             .iter()
             .map(|m| Sample {
                 value: default_value(m.kind),
@@ -149,7 +154,12 @@ impl TagDb {
         Ok(TagDb {
             meta,
             by_name,
-            live: RwLock::new(Live { samples, seq: 0 }),
+            live: RwLock::new(Live {
+                tickets: vec![0; samples.len()],
+                samples,
+                seq: 0,
+                next_ticket: 1,
+            }),
             tx,
         })
     }
@@ -232,11 +242,49 @@ impl TagDb {
     /// Never blocks on subscribers.
     pub fn apply(&self, batch: impl IntoIterator<Item = (TagId, Sample)>) -> usize {
         let mut live = self.live.write();
+        // Observed now: newer than anything observed before.
+        let ticket = live.next_ticket;
+        live.next_ticket += 1;
+        self.apply_locked(&mut live, batch.into_iter().map(|(id, s)| (id, s, ticket)))
+    }
+
+    /// A ticket that orders observations: take it when a value is read from
+    /// the field (before the batch it goes into is applied). Later tickets
+    /// are larger. See [`TagDb::apply_observed`].
+    pub fn ticket(&self) -> u64 {
+        let mut live = self.live.write();
+        let t = live.next_ticket;
+        live.next_ticket += 1;
+        t
+    }
+
+    /// Applies samples each with the ticket taken when it was observed. A
+    /// sample observed before the tag's current one is dropped, whoever
+    /// applies it: so a scan that read a block before a confirmed write,
+    /// and applies its batch after it, cannot roll the written value back.
+    /// This is the one place every writer of field values goes through
+    /// ([`TagDb::apply`] observes "now").
+    pub fn apply_observed(&self, batch: impl IntoIterator<Item = (TagId, Sample, u64)>) -> usize {
+        let mut live = self.live.write();
+        self.apply_locked(&mut live, batch)
+    }
+
+    fn apply_locked(
+        &self,
+        live: &mut Live,
+        batch: impl IntoIterator<Item = (TagId, Sample, u64)>,
+    ) -> usize {
         let mut changes = Vec::new();
-        for (id, sample) in batch {
-            let Some(slot) = live.samples.get_mut(id.index()) else {
+        for (id, sample, ticket) in batch {
+            let i = id.index();
+            let (Some(slot), Some(seen)) = (live.samples.get_mut(i), live.tickets.get_mut(i))
+            else {
                 continue;
             };
+            if ticket < *seen {
+                continue;
+            }
+            *seen = ticket;
             if slot.differs_from(&sample) {
                 changes.push((id, sample.clone()));
             }

@@ -3,7 +3,9 @@
 
 use std::sync::Arc;
 
-use gridscada_tagdb::{Quality, QualityCode, Sample, TagDb, TagId, TagMeta, Timestamp, ValueKind};
+use gridscada_tagdb::{
+    Quality, QualityCode, Sample, TagDb, TagId, TagMeta, Timestamp, Value, ValueKind,
+};
 
 fn db(n: usize) -> Arc<TagDb> {
     Arc::new(
@@ -141,4 +143,25 @@ fn set_quality_keeps_last_value() {
     let s = db.get(TagId(0)).unwrap();
     assert_eq!(s.value.as_f64(), Some(42.0));
     assert_eq!(s.quality, Quality::bad("timeout"));
+}
+
+/// A scan that read a register before a confirmed write, and applies its
+/// batch after it, cannot roll the written value back.
+#[test]
+fn an_older_observation_never_replaces_a_newer_sample() {
+    let db = TagDb::new([TagMeta::new("A.Set", ValueKind::Float)]).unwrap();
+    let id = db.id("A.Set").unwrap();
+    let t = Timestamp::from_millis;
+    // A scan reads the register...
+    let scan_ticket = db.ticket();
+    // ...a write is confirmed meanwhile (observed now)...
+    db.apply([(id, Sample::good(41.1, t(2000)))]);
+    // ...and the scan's older batch arrives after it: dropped.
+    let changed = db.apply_observed([(id, Sample::good(33.3, t(1000)), scan_ticket)]);
+    assert_eq!(changed, 0);
+    assert_eq!(db.get(id).unwrap().value, Value::Float(41.1));
+    // A later observation does replace it.
+    let next = db.ticket();
+    db.apply_observed([(id, Sample::good(41.2, t(3000)), next)]);
+    assert_eq!(db.get(id).unwrap().value, Value::Float(41.2));
 }
