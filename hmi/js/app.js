@@ -53,6 +53,7 @@ const state = {
   current: null,
   footer: null,
   offComm: null,
+  modeTimer: null,
   disconnectedAt: null,
 };
 
@@ -112,12 +113,16 @@ function renderFrame() {
 
   if (state.footer) { state.footer.dispose(); state.footer = null; }
   if (state.offComm) { state.offComm(); state.offComm = null; }
+  clearInterval(state.modeTimer);
+  state.modeTimer = null;
+  $('mode-light').hidden = true;
   const footer = $('alarm-footer');
   if (s.authenticated) {
     live.start();
     footer.hidden = false;
     state.footer = new AlarmFooter(footer, s);
     startCommLight();
+    watchPanelModes();
   } else {
     live.stop();
     beeper.setUser(null); // a log out ends the horn's mute: it belonged to the session
@@ -240,6 +245,21 @@ async function startCommLight() {
   const offStatus = live.onStatus(draw);
   draw();
   state.offComm = () => { offWant(); offTags(); offStatus(); };
+}
+
+// Manual mode turns automatic isolation off: the header names every panel in it.
+function watchPanelModes() {
+  const light = $('mode-light');
+  const check = async () => {
+    let panels;
+    try { ({ panels } = await get('/api/panels')); } catch { return; } // no panels, or none readable
+    const manual = panels.filter((p) => p.mode === 'manual');
+    light.hidden = manual.length === 0;
+    light.textContent = manual.length ? `MANUAL: ${manual.map((p) => p.name).join(', ')}` : '';
+    light.title = manual.length ? `Automatic fault isolation is off on ${manual.map((p) => p.name).join(', ')}` : '';
+  };
+  check();
+  state.modeTimer = setInterval(check, 3000);
 }
 
 // The communication light opens the devices screen (for those who may).

@@ -53,6 +53,8 @@ export function lastSequence(status) {
   const outcome = String(ls.outcome || 'none').toLowerCase();
   if (outcome === 'none') return 'none since start';
   if (outcome === 'running') return 'a sequence is running now';
+  // A Reset with nothing tripped "restores" in no time: not a sequence worth reporting.
+  if (outcome === 'restored' && !Number(ls.trips) && !Number(ls.switching_ops)) return 'no fault since start or the last Reset';
   const took = Number(ls.restore_s) > 0 ? ` in ${fmtDuration(Number(ls.restore_s))}` : '';
   const parts = [{
     restored: `every zone restored${took}`,

@@ -3,6 +3,7 @@
 // "restored in 0.0 s"; manual mode shows on the panel's diagram and on Main;
 // a zone isolated as faulty reads FAULTY – ISOLATED on both; and Reset names
 // the isolated zones and wants the repair confirmed before it re-energises.
+// The header names a panel in manual mode too.
 import test from 'node:test';
 import assert from 'node:assert/strict';
 import { launch, login, credentials, adminApi, requireOk, until, BASE } from '../lib.js';
@@ -29,6 +30,7 @@ test('panel status: last sequence, manual mode, faulty zones, and the Reset dial
     // Manual mode, on the diagram and on Main.
     requireOk(await api.call('POST', `/api/panels/${id}/mode`, { mode: 'manual' }), 'manual mode');
     await page.locator('.panel-left .sl-manual[visibility="visible"]').waitFor({ timeout: 5000 });
+    await page.locator('#mode-light', { hasText: `MANUAL: ${p.name}` }).waitFor({ timeout: 8000 });
     await b.screenshot('manual');
     await page.goto(`${BASE}/#/main`);
     await page.locator(`[data-mode-of="${id}"]:not([hidden])`).waitFor({ timeout: 5000 });
@@ -38,6 +40,7 @@ test('panel status: last sequence, manual mode, faulty zones, and the Reset dial
     }
     requireOk(await api.call('POST', `/api/panels/${id}/mode`, { mode: 'auto' }), 'auto mode');
     await page.locator(`[data-mode-of="${id}"]`).waitFor({ state: 'hidden', timeout: 5000 });
+    await page.locator('#mode-light').waitFor({ state: 'hidden', timeout: 8000 });
 
     // A permanent fault: the sequence isolates the zone; the diagrams say so.
     requireOk(await api.call('POST', '/api/sim/faults', { panel: id, zone, kind: 'permanent' }), 'fault');
