@@ -107,6 +107,7 @@ pub fn load_with(
     let base = main.parent().unwrap_or(Path::new(""));
     let mut files = vec![];
     let mut devices = vec![];
+    let mut broken_devices = std::collections::HashSet::new();
     let mut tags = vec![];
     if let Some(main_cfg) = &parsed_main {
         for tf in &main_cfg.tag_files {
@@ -115,7 +116,8 @@ pub fn load_with(
                 Ok(text) => {
                     let file = SourceFile::new(&path, text);
                     let idx = files.len() + 1; // 0 is the main file
-                    let tf = parse_tag_file(&file, &mut diags);
+                    let (tf, broken) = parse_tag_file(&file, &mut diags);
+                    broken_devices.extend(broken);
                     devices.extend(tf.devices.into_iter().map(|d| (idx, d)));
                     tags.extend(tf.tags.into_iter().map(|t| (idx, t)));
                     files.push(file);
@@ -137,7 +139,14 @@ pub fn load_with(
     let Some(main_cfg) = parsed_main else {
         return Err(diags);
     };
-    validate::check(&all_files, &main_cfg, &devices, &tags, &mut diags);
+    validate::check(
+        &all_files,
+        &main_cfg,
+        &devices,
+        &broken_devices,
+        &tags,
+        &mut diags,
+    );
     if !diags.is_empty() {
         diags.sort_by(|a, b| (&a.file, a.line, a.column).cmp(&(&b.file, b.line, b.column)));
         diags.dedup();
@@ -278,14 +287,30 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
     })
 }
 
-fn parse_tag_file(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> TagFile {
+/// A tag file's devices and tags, and the names of the `[[device]]` entries
+/// that did not parse (already reported: their tags are not reported again
+/// as naming an unknown device).
+fn parse_tag_file(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> (TagFile, Vec<String>) {
     let Some(root) = parse_root(file, diags) else {
-        return TagFile::default();
+        return (TagFile::default(), vec![]);
     };
     let mut out = TagFile::default();
+    let mut broken = vec![];
     for (key, value) in root.iter() {
         match key.get_ref().as_ref() {
-            "device" => out.devices = de_each(file, value, "device", diags),
+            "device" => {
+                out.devices = de_each(file, value, "device", diags);
+                let named: Vec<String> = value
+                    .get_ref()
+                    .as_array()
+                    .map(|a| a.iter().filter_map(entry_label).collect())
+                    .unwrap_or_default();
+                broken.extend(named.into_iter().filter(|n| {
+                    !out.devices
+                        .iter()
+                        .any(|d: &DeviceConfig| d.name.get_ref() == n)
+                }));
+            }
             "tag" => out.tags = de_each(file, value, "tag", diags),
             other => diags.push(file.error_at(
                 key.span(),
@@ -293,5 +318,5 @@ fn parse_tag_file(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> TagFile {
             )),
         }
     }
-    out
+    (out, broken)
 }

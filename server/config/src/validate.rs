@@ -32,6 +32,7 @@ pub(crate) fn check(
     files: &[SourceFile],
     main: &MainFile,
     devices: &[(usize, DeviceConfig)],
+    broken_devices: &std::collections::HashSet<String>,
     tags: &[(usize, TagConfig)],
     diags: &mut Vec<Diagnostic>,
 ) {
@@ -70,6 +71,8 @@ pub(crate) fn check(
         }
         match device_by_name.get(t.device.get_ref().as_str()) {
             Some((_, d)) => check_tag(&mut cx, *f, t, Some(d)),
+            // Its device did not parse: that is reported once, at the device.
+            None if broken_devices.contains(t.device.get_ref()) => check_tag(&mut cx, *f, t, None),
             None => {
                 cx.err(
                     *f,

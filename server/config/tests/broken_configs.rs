@@ -194,6 +194,33 @@ fn writable_without_role_and_read_only_tables() {
 }
 
 #[test]
+fn a_broken_device_is_reported_once_not_per_tag() {
+    let mut tags = String::from(
+        "[[device]]\nname = \"P7\"\nprotocol = \"tcp\"\naddress = \"127.0.0.1:1502\"\nscan_rate_ms = 500\n",
+    );
+    for i in 0..42 {
+        tags += &format!(
+            "\n[[tag]]\nname = \"P7.R{i}\"\ndevice = \"P7\"\nkind = \"holding_register\"\naddress = {i}\n"
+        );
+    }
+    let got = problems(MAIN, &tags);
+    assert_eq!(got.len(), 1, "{got:#?}");
+    assert!(got[0].contains("scan_rate_ms"), "{got:#?}");
+    // A tag naming a device that exists nowhere is still an error.
+    let got = problems(
+        MAIN,
+        &format!(
+            "{tags}\n[[tag]]\nname = \"Q.R\"\ndevice = \"Q9\"\nkind = \"coil\"\naddress = 0\n"
+        ),
+    );
+    assert!(
+        got.iter().any(|e| e.contains("unknown device 'Q9'")),
+        "{got:#?}"
+    );
+    assert_eq!(got.len(), 2, "{got:#?}");
+}
+
+#[test]
 fn write_limits_are_checked() {
     let tags = format!(
         "{DEVICE}\n[[tag]]\nname = \"A.Set\"\ndevice = \"D1\"\nkind = \"holding_register\"\naddress = 0\ntype = \"f32\"\nwritable = true\nwrite_role = \"operator\"\nmin = 10.0\nmax = 5.0\n\n[[tag]]\nname = \"A.Volts\"\ndevice = \"D1\"\nkind = \"input_register\"\naddress = 0\ntype = \"f32\"\nmax = 5.0\n\n[[tag]]\nname = \"A.Cmd\"\ndevice = \"D1\"\nkind = \"coil\"\naddress = 0\nwritable = true\nwrite_role = \"operator\"\nmin = 0.0\n"

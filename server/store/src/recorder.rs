@@ -134,6 +134,12 @@ impl Recorder {
         if !t.policy.enabled || matches!(sample.value, Value::Str(_)) {
             return None;
         }
+        // A tag never read yet has no history to log: logging its start
+        // state would put a Bad sample at 1970-01-01 into every trend, for
+        // retention to delete later.
+        if sample.is_never_read() {
+            return None;
+        }
         // A Bad value is not a measurement: it is logged as a gap, so that
         // trend minima and averages never include it.
         let bad = sample.quality.code == gridscada_tagdb::QualityCode::Bad;
@@ -213,6 +219,19 @@ mod tests {
             },
         );
         r
+    }
+
+    #[test]
+    fn a_tag_never_read_is_not_logged_at_1970() {
+        let mut r = rec(0.0, Some(60));
+        let id = TagId(0);
+        assert!(r
+            .offer(id, &Sample::never_read(Value::Float(0.0)))
+            .is_none());
+        // Nor re-logged by the interval before its first reading.
+        assert!(r.tick(Timestamp::from_millis(3_600_000)).is_empty());
+        // Its first reading is.
+        assert!(r.offer(id, &at(5_000, 230.0)).is_some());
     }
 
     #[test]

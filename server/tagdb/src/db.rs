@@ -141,14 +141,9 @@ impl TagDb {
             }
             meta.push(tag);
         }
-        let never_read = Quality::bad("no value yet");
         let samples: Vec<Sample> = meta
             .iter()
-            .map(|m| Sample {
-                value: default_value(m.kind),
-                quality: never_read.clone(),
-                timestamp: Timestamp::from_millis(0),
-            })
+            .map(|m| Sample::never_read(default_value(m.kind)))
             .collect();
         let (tx, _) = broadcast::channel(RING_BATCHES);
         Ok(TagDb {

@@ -182,7 +182,26 @@ pub struct Sample {
     pub timestamp: Timestamp,
 }
 
+/// The reason of a tag that has never been read.
+pub const NEVER_READ: &str = "no value yet";
+
 impl Sample {
+    /// What a tag holds before its first reading: Bad, at time 0.
+    pub fn never_read(value: Value) -> Self {
+        Sample {
+            value,
+            quality: Quality::bad(NEVER_READ),
+            timestamp: Timestamp::from_millis(0),
+        }
+    }
+
+    /// Whether this is a tag's state before its first reading.
+    pub fn is_never_read(&self) -> bool {
+        self.timestamp.as_millis() == 0
+            && self.quality.code == QualityCode::Bad
+            && self.quality.reason.as_deref() == Some(NEVER_READ)
+    }
+
     pub fn good(value: impl Into<Value>, timestamp: Timestamp) -> Self {
         Sample {
             value: value.into(),
