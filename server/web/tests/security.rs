@@ -317,3 +317,40 @@ async fn one_session_cannot_open_hundreds_of_live_sockets() {
         .insert("origin", format!("http://{addr}").parse().unwrap());
     assert!(tokio_tungstenite::connect_async(req).await.is_ok());
 }
+
+#[tokio::test]
+async fn writes_are_audited_with_what_was_asked_and_confirmed_and_refusals_too() {
+    let h = Harness::new(Options::default()).await;
+    let op = h.login("operator", PASSWORD).await;
+    let path = format!("/api/tags/{TAG_SUP}/write");
+    // An operator may not write a supervisor's setpoint: refused and logged.
+    let r = h
+        .call(Method::POST, &path, Some(&op), Some(json!({"value": 5.0})))
+        .await;
+    assert_eq!(r.status, StatusCode::FORBIDDEN);
+    let path_op = format!("/api/tags/{TAG_OP}/write");
+    let r = h
+        .call(
+            Method::POST,
+            &path_op,
+            Some(&op),
+            Some(json!({"value": true})),
+        )
+        .await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text());
+    let admin = h.login("administrator", PASSWORD).await;
+    let events = h
+        .call(Method::GET, "/api/events?limit=100", Some(&admin), None)
+        .await
+        .json()
+        .to_string();
+    assert!(events.contains("write_refused"), "{events}");
+    assert!(
+        events.contains("may not write T.BESS.Setpoint_kW"),
+        "{events}"
+    );
+    assert!(
+        events.contains("requested true, confirmed true"),
+        "{events}"
+    );
+}

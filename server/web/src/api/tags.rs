@@ -260,15 +260,28 @@ pub async fn write(
         s.db.meta(id)
             .cloned()
             .ok_or_else(|| ApiError::not_found(format!("no tag named '{name}'")))?;
+    // A refusal is audited too: who tried to command what.
+    let refuse = |why: String| async {
+        audit(
+            &s,
+            &who,
+            "write_refused",
+            &name,
+            format!("{} may not write {name}: {why}", who.audit_name()),
+        )
+        .await;
+        Err(ApiError::forbidden(why))
+    };
     let Some(required) = s.write_role(&name) else {
-        return Err(ApiError::forbidden(format!("tag '{name}' is read-only")));
+        return refuse(format!("tag '{name}' is read-only")).await;
     };
     if who.role < required {
-        return Err(ApiError::forbidden(format!(
+        return refuse(format!(
             "writing '{name}' needs the {} role or above; you are {}",
             required.label(),
             who.role.label()
-        )));
+        ))
+        .await;
     }
     let value = body.value.coerce(meta.kind).ok_or_else(|| {
         ApiError::bad_request(format!(
@@ -285,13 +298,19 @@ pub async fn write(
             .map(|o| o.value.to_string())
             .unwrap_or_default();
     match writer.write(&name, value.clone()).await {
-        Ok(_) => {
+        Ok(confirmed) => {
+            // The device may hold the value at its own resolution (a scaled
+            // register): record what was asked and what it confirmed.
             audit(
                 &s,
                 &who,
                 "write",
                 &name,
-                format!("{} wrote {name}: {old} -> {value}", who.audit_name()),
+                format!(
+                    "{} wrote {name}: {old} -> requested {value}, confirmed {}",
+                    who.audit_name(),
+                    confirmed.value
+                ),
             )
             .await;
             s.tag_view(id, &meta)
@@ -323,6 +342,7 @@ pub fn write_error(e: WriteError) -> ApiError {
     };
     let code = match &e {
         WriteError::OutOfLimits { .. } => "out_of_limits",
+        WriteError::BadValue { .. } => "bad_value",
         _ => "write_failed",
     };
     ApiError::new(status, code, e.to_string())
