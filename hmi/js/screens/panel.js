@@ -165,9 +165,14 @@ export function panelScreen(id) {
         const smp = binder.sample(`${prefix}.Seq.${k}`);
         return smp && qualityOf(smp, live.connected).usable ? smp.value : undefined;
       }
+      let lastPushed;
       function drawSeq() {
         if (!status) return;
-        const code = liveSeq('Step') ?? status.step;
+        const pushed = liveSeq('Step');
+        // A new step pushed live: fetch the rest of the status (outcome, isolated zones) at once.
+        if (pushed !== undefined && lastPushed !== undefined && pushed !== lastPushed) refresh();
+        lastPushed = pushed;
+        const code = pushed ?? status.step;
         const c = liveSeq('count_L_cur_c') ?? status.count_L_cur_c;
         const sv = liveSeq('count_L_cur_sv') ?? status.count_L_cur_sv;
         f.step.textContent = stepWords(code, c);
