@@ -92,7 +92,9 @@ export default {
         return;
       }
       if (disposed) return;
-      const head = ['Unit', 'V', 'V max today', 'I', 'I max today', 'P', 'P max today', 'Ratio P / max', 'Setpoint', 'State'];
+      // A state of charge column when a unit (a battery) has one.
+      const anySoc = units.some((u) => u.has('SoC_pct'));
+      const head = ['Unit', 'V', 'V max today', 'I', 'I max today', 'P', 'P max today', 'Ratio P / max', anySoc ? 'SoC' : null, 'Setpoint', 'State'].filter(Boolean);
       const rows = units.map((u) => {
         const cells = [h('th', { scope: 'row' }, ctx.session.screens.includes('units')
           ? h('a', { href: `#/units/${u.id}`, text: u.label }) : u.label, )];
@@ -120,7 +122,9 @@ export default {
           pct.textContent = `${(r * 100).toFixed(0)} %`; pct.className = 'value q-good'; pct.title = `${fmtNumber(s.value)} / ${fmtNumber(m)} kW`;
           fill.style.width = `${Math.min(100, r * 100)}%`;
         });
-        cells.push(h('td', {}, ratio),
+        cells.push(h('td', {}, ratio));
+        if (anySoc) cells.push(h('td', { class: 'num', dataset: { soc: u.id } }, u.has('SoC_pct') ? valueEl(binder, `${u.prefix}.SoC_pct`, { units: '%', digits: 1 }) : '—'));
+        cells.push(
           h('td', { class: 'num' }, u.has('Setpoint_kW') ? valueEl(binder, `${u.prefix}.Setpoint_kW`, { units: 'kW' }) : '—'),
           h('td', { class: 'unit-state' }, u.has('State') ? valueEl(binder, `${u.prefix}.State`, { format: stateFormat(u.stateDescription) }) : '—'));
         return h('tr', { dataset: { unit: u.id } }, cells);

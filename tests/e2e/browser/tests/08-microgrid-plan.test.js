@@ -14,6 +14,9 @@ test('microgrid: the look-ahead plan, its forecast and the value of stored energ
     await plan.waitFor({ timeout: 30_000 });
     // The demo plant plans 16 periods of 15 minutes (4 h).
     await page.locator('#mg-plan', { hasText: '4.0 h' }).waitFor();
+    // The overview shows the battery's state of charge, and units on today's maxima.
+    await page.locator('#mg-units-table [data-soc] .value', { hasText: '%' }).first().waitFor();
+    await page.locator('#mg-units-table [data-max]', { hasText: 'kW' }).first().waitFor();
     const rows = page.locator('#dispatch-plan-table tbody tr');
     await rows.first().waitFor();
     assert.equal(await rows.count(), 16);
