@@ -44,7 +44,7 @@ use link::{ClassRt, Counters, DeviceRt, Link, LinkCounters, LinkTag, StatusIds, 
 use transport::{RtuLine, TcpLine, Transport};
 
 /// Names of a device's communication status tags.
-pub fn status_tag_names(device: &str) -> [(String, ValueKind, &'static str, &'static str); 7] {
+pub fn status_tag_names(device: &str) -> [(String, ValueKind, &'static str, &'static str); 8] {
     [
         (
             format!("{device}.Comm.Connected"),
@@ -87,6 +87,12 @@ pub fn status_tag_names(device: &str) -> [(String, ValueKind, &'static str, &'st
             ValueKind::Int,
             "",
             "Scan periods missed because the previous scan ran over",
+        ),
+        (
+            format!("{device}.Comm.Retries"),
+            ValueKind::Int,
+            "",
+            "Reads repeated at once after no answer (the device's retries)",
         ),
     ]
 }
@@ -374,6 +380,7 @@ impl FieldIo {
                     errors: status_id(&names[4].0)?,
                     timeouts: status_id(&names[5].0)?,
                     overruns: status_id(&names[6].0)?,
+                    retries: status_id(&names[7].0)?,
                 };
                 let counters = Arc::new(Counters::default());
                 stats.push(StatsSource {

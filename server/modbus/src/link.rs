@@ -53,6 +53,7 @@ pub(crate) struct StatusIds {
     pub errors: TagId,
     pub timeouts: TagId,
     pub overruns: TagId,
+    pub retries: TagId,
 }
 
 /// Counters shared with [`crate::PollStats`].
@@ -66,6 +67,8 @@ pub(crate) struct Counters {
     pub late_scans: AtomicU64,
     pub overruns: AtomicU64,
     pub writes: AtomicU64,
+    /// Reads repeated at once after no answer (the device's `retries`).
+    pub retries: AtomicU64,
     pub response_us: AtomicU64,
     pub connected: AtomicBool,
 }
@@ -420,8 +423,9 @@ impl Link {
         let now = self.clock.now();
         let dev = &mut self.devices[d];
         dev.failures += 1;
-        if dev.failing || dev.failures <= dev.retries {
-            return dev.failing;
+        // The scan has already retried the read `retries` times.
+        if dev.failing {
+            return true;
         }
         dev.failing = true;
         dev.answering = false;
@@ -477,15 +481,30 @@ impl Link {
             }
             let block = self.devices[d].classes[c].blocks[b].clone();
             let req = frame::read_request(block.table, block.start, block.count);
-            match self.request(d, &req).await {
-                Ok(answer) => {
+            // A read without an answer is repeated at once, up to the
+            // device's `retries`, before the device counts as failing.
+            let mut retried = 0;
+            let answer = loop {
+                match self.request(d, &req).await {
+                    Ok(answer) => break Some(answer),
+                    Err(_)
+                        if self.transport.is_connected() && retried < self.devices[d].retries =>
+                    {
+                        retried += 1;
+                        bump(&counters.retries);
+                    }
+                    Err(_) => break None,
+                }
+            };
+            match answer {
+                Some(answer) => {
                     answered = true;
                     let ts = self.clock.now();
                     let ticket = self.db.ticket();
                     self.block_samples(&block, answer, ts, &mut batch);
                     tickets.resize(batch.len(), ticket);
                 }
-                Err(_) => {
+                None => {
                     if self.transport.is_connected() {
                         self.no_answer(d);
                     }
@@ -842,5 +861,6 @@ fn status_samples(dev: &DeviceRt, ts: Timestamp) -> Vec<(TagId, Sample)> {
         (s.errors, Sample::good(n(&c.errors), ts)),
         (s.timeouts, Sample::good(n(&c.timeouts), ts)),
         (s.overruns, Sample::good(n(&c.overruns), ts)),
+        (s.retries, Sample::good(n(&c.retries), ts)),
     ]
 }

@@ -525,7 +525,8 @@ async fn status_tags_are_registered_and_kept() {
             "D.Comm.Requests",
             "D.Comm.Errors",
             "D.Comm.Timeouts",
-            "D.Comm.Overruns"
+            "D.Comm.Overruns",
+            "D.Comm.Retries"
         ]
     );
     let (db, io) = start(&plant);
@@ -613,4 +614,40 @@ async fn a_write_interleaved_with_a_slow_scan_is_never_rolled_back() {
         tokio::time::sleep(Duration::from_millis(5)).await;
     }
     io.shutdown().await;
+}
+
+/// `retries` repeats a read without an answer at once, before the device
+/// counts as failing: the device receives exactly 1 + retries reads, the
+/// repeats are counted in `Comm.Retries`, and only then do its tags go Bad.
+#[tokio::test]
+async fn retries_repeat_a_read_at_once_before_the_device_fails() {
+    for retries in [0u32, 1, 3] {
+        let bank = Bank::with_units(&[1]);
+        bank.unit(1, |u| u.holding[0] = 7);
+        let (addr, _server) = serve(Arc::clone(&bank), "127.0.0.1:0").await;
+        let tags =
+            "[[tag]]\nname = \"A.V\"\ndevice = \"A\"\nkind = \"holding_register\"\naddress = 0\n";
+        let text = format!("{}{tags}", device("A", addr, 1, 1000, 80))
+            .replace("retries = 1", &format!("retries = {retries}"));
+        let (db, io) = start(&plant(&text));
+        eventually("a first reading", 5 * SECOND, || {
+            value(&db, "A.V") == Some(Value::Int(7))
+        })
+        .await;
+        bank.unit(1, |u| u.silent = true);
+        let from = bank.log.lock().len();
+        eventually("A bad", 5 * SECOND, || bad_reason(&db, "A.V").is_some()).await;
+        // Before the first probe (at least 500 ms after failing).
+        let reads = bank.log.lock()[from..]
+            .iter()
+            .filter(|(_, fc, _)| *fc == 3)
+            .count();
+        assert_eq!(reads as u32, 1 + retries, "retries = {retries}");
+        assert_eq!(
+            db.get_by_name("A.Comm.Retries").map(|s| s.value),
+            Some(Value::Int(i64::from(retries))),
+            "retries = {retries}"
+        );
+        io.shutdown().await;
+    }
 }
