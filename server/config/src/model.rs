@@ -131,6 +131,11 @@ pub struct DeviceConfig {
     /// Retries of a failed read before the device counts as failing.
     #[serde(default = "default_retries")]
     pub retries: u32,
+    /// Longest wait between probes of a failing device, in ms. Default:
+    /// twice its fastest scan period, at least 2000 ms, so a device that
+    /// recovers shows Good again within two scans and one probe interval.
+    #[serde(default)]
+    pub backoff_max_ms: Option<Spanned<u64>>,
     /// Most registers the device accepts in one read (protocol limit 125).
     #[serde(default = "default_max_registers")]
     pub max_read_registers: Spanned<u16>,
@@ -360,6 +365,17 @@ pub struct TagConfig {
 
 fn one() -> Spanned<f64> {
     Spanned::new(0..0, 1.0)
+}
+
+impl DeviceConfig {
+    /// The longest wait between probes of this device while it fails, given
+    /// its fastest scan period.
+    pub fn backoff_max(&self, fastest_scan: std::time::Duration) -> std::time::Duration {
+        match &self.backoff_max_ms {
+            Some(ms) => std::time::Duration::from_millis(*ms.get_ref()),
+            None => (fastest_scan * 2).max(std::time::Duration::from_secs(2)),
+        }
+    }
 }
 
 impl TagConfig {

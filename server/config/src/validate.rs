@@ -232,6 +232,15 @@ fn check_device(cx: &mut Ctx<'_>, f: usize, d: &DeviceConfig) {
             format!("device '{name}': timeout_ms must be positive"),
         );
     }
+    if let Some(b) = &d.backoff_max_ms {
+        if !(100..=600_000).contains(b.get_ref()) {
+            cx.err(
+                f,
+                b.span(),
+                format!("device '{name}': backoff_max_ms must be 100 to 600000"),
+            );
+        }
+    }
     limit_range(
         cx,
         f,

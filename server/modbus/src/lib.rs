@@ -388,6 +388,11 @@ impl FieldIo {
                     link: key.clone(),
                     counters: Arc::clone(&counters),
                 });
+                let fastest_scan = classes
+                    .iter()
+                    .map(|c| Duration::from_millis(c.period_ms))
+                    .min()
+                    .unwrap_or(Duration::from_secs(1));
                 devices.push(DeviceRt {
                     name: dname,
                     unit: *d.unit_id.get_ref(),
@@ -411,6 +416,7 @@ impl FieldIo {
                     failures: 0,
                     failing: false,
                     probe_wait: Duration::ZERO,
+                    probe_cap: d.backoff_max(fastest_scan),
                     next_probe: now,
                     last_error: String::new(),
                     response_ms: 0.0,

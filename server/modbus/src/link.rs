@@ -29,8 +29,6 @@ use crate::transport::{LinkError, Transport};
 /// First wait before reconnecting a dropped connection; doubles to the cap.
 const RECONNECT_FIRST: Duration = Duration::from_millis(250);
 const RECONNECT_CAP: Duration = Duration::from_secs(10);
-/// Longest wait between probes of a failing device.
-const PROBE_CAP: Duration = Duration::from_secs(15);
 /// A scan that starts more than this share of its period late counts as late.
 const LATE_SHARE: f64 = 0.1;
 
@@ -104,6 +102,8 @@ pub(crate) struct DeviceRt {
     pub failures: u32,
     pub failing: bool,
     pub probe_wait: Duration,
+    /// Longest wait between probes (the device's `backoff_max_ms`).
+    pub probe_cap: Duration,
     pub next_probe: Timestamp,
     pub last_error: String,
     pub response_ms: f64,
@@ -436,7 +436,9 @@ impl Link {
             .map(|c| c.period)
             .min()
             .unwrap_or(Duration::from_secs(1));
-        dev.probe_wait = (fastest * 2).max(Duration::from_millis(500)).min(PROBE_CAP);
+        dev.probe_wait = (fastest * 2)
+            .max(Duration::from_millis(500))
+            .min(dev.probe_cap);
         dev.next_probe = now.add(dev.probe_wait);
         tracing::warn!(device = %dev.name, error = %dev.last_error, "device not answering; backing off");
         let q = Quality::bad(format!("device not answering: {}", dev.last_error));
@@ -622,7 +624,7 @@ impl Link {
         let now = self.clock.now();
         let dev = &mut self.devices[d];
         if result.is_err() && dev.failing {
-            dev.probe_wait = (dev.probe_wait * 2).min(PROBE_CAP);
+            dev.probe_wait = (dev.probe_wait * 2).min(dev.probe_cap);
             dev.next_probe = now.add(dev.probe_wait);
         }
         let status = status_samples(&self.devices[d], now);

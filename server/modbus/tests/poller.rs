@@ -651,3 +651,43 @@ async fn retries_repeat_a_read_at_once_before_the_device_fails() {
         io.shutdown().await;
     }
 }
+
+/// A device that answers again after a long silence shows Good within two
+/// scans and one probe interval: probes back off only up to the device's
+/// `backoff_max_ms` (default twice its fastest scan, at least 2 s).
+#[tokio::test]
+async fn a_recovered_device_is_back_within_two_scans_and_one_probe_interval() {
+    for (extra, cap) in [
+        ("", Duration::from_secs(2)),
+        ("backoff_max_ms = 500\n", Duration::from_millis(500)),
+    ] {
+        let bank = Bank::with_units(&[1]);
+        bank.unit(1, |u| u.holding[0] = 5);
+        let (addr, _server) = serve(Arc::clone(&bank), "127.0.0.1:0").await;
+        let tags =
+            "[[tag]]\nname = \"A.V\"\ndevice = \"A\"\nkind = \"holding_register\"\naddress = 0\n";
+        let text = format!("{}{extra}{tags}", device("A", addr, 1, 200, 60));
+        let (db, io) = start(&plant(&text));
+        eventually("a first reading", 5 * SECOND, || {
+            value(&db, "A.V") == Some(Value::Int(5))
+        })
+        .await;
+        bank.unit(1, |u| u.silent = true);
+        eventually("A bad", 5 * SECOND, || bad_reason(&db, "A.V").is_some()).await;
+        // Long enough for an uncapped back-off to wait over 8 s.
+        tokio::time::sleep(10 * SECOND).await;
+        bank.unit(1, |u| u.silent = false);
+        let back = tokio::time::Instant::now();
+        let bound = 2 * Duration::from_millis(200) + cap + Duration::from_millis(600);
+        eventually("A good again", bound, || {
+            value(&db, "A.V") == Some(Value::Int(5))
+        })
+        .await;
+        assert!(
+            back.elapsed() <= bound,
+            "back after {:?} (cap {cap:?})",
+            back.elapsed()
+        );
+        io.shutdown().await;
+    }
+}
