@@ -117,10 +117,16 @@ enum Command {
 
 #[derive(Subcommand)]
 enum UserCommand {
-    /// Create a user. The password is read from standard input when piped;
-    /// otherwise one is generated and printed once.
+    /// Create a user. The password is read from standard input when piped
+    /// (at least 10 characters, at most 1024 bytes); otherwise one is
+    /// generated and printed once.
     Add {
+        /// The user's login name.
         name: String,
+        /// guest (views only), operator (acknowledges alarms, operates
+        /// breakers in manual mode, writes operator tags), supervisor (also
+        /// switches modes, shelves alarms, writes supervisor tags) or
+        /// administrator (also manages users, screen access and screens).
         #[arg(long, value_parser = parse_role)]
         role: gridscada_config::Role,
         /// Screen-access group; the role's name by default.
