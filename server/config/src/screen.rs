@@ -72,7 +72,8 @@ pub enum ElementKind {
         #[serde(default, skip_serializing_if = "Option::is_none")]
         size: Option<i64>,
     },
-    /// From (x, y) to (x + w, y + h); a busbar is drawn thick.
+    /// A wire or a busbar (drawn thick) along the longer side of its box,
+    /// through its middle: horizontal when w >= h, else vertical.
     Line {
         #[serde(default)]
         busbar: bool,
