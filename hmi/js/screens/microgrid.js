@@ -94,7 +94,7 @@ export default {
       if (disposed) return;
       // A state of charge column when a unit (a battery) has one.
       const anySoc = units.some((u) => u.has('SoC_pct'));
-      const head = ['Unit', 'V', 'V max today', 'I', 'I max today', 'P', 'P max today', 'Ratio P / max', anySoc ? 'SoC' : null, 'Setpoint', 'State'].filter(Boolean);
+      const head = ['Unit', 'V', 'V max today', 'I', 'I max today', 'P', 'P max today', 'P / max', anySoc ? 'SoC' : null, 'Setpoint', 'State'].filter(Boolean);
       const rows = units.map((u) => {
         const cells = [h('th', { scope: 'row' }, ctx.session.screens.includes('units')
           ? h('a', { href: `#/units/${u.id}`, text: u.label }) : u.label, )];
