@@ -119,15 +119,9 @@ impl PasswordPool {
 
     /// Hashes a password with Argon2id and a random salt.
     pub async fn hash(&self, password: String) -> Result<String, String> {
-        self.run(move || {
-            let salt = SaltString::generate(&mut OsRng);
-            Argon2::default()
-                .hash_password(password.as_bytes(), &salt)
-                .map(|h| h.to_string())
-                .map_err(|e| e.to_string())
-        })
-        .await
-        .map_err(|_| "the server is busy checking passwords; try again".to_string())?
+        self.run(move || make_hash(&password))
+            .await
+            .map_err(|_| "the server is busy checking passwords; try again".to_string())?
     }
 
     /// Checks a password against a stored hash.
@@ -182,15 +176,18 @@ fn check_hash(password: &str, hash: &str) -> bool {
 /// Hashes a password with Argon2id and a random salt, off the async runtime
 /// (for tools and tests; the server goes through its [`PasswordPool`]).
 pub async fn hash_password(password: String) -> Result<String, String> {
-    tokio::task::spawn_blocking(move || {
-        let salt = SaltString::generate(&mut OsRng);
-        Argon2::default()
-            .hash_password(password.as_bytes(), &salt)
-            .map(|h| h.to_string())
-            .map_err(|e| e.to_string())
-    })
-    .await
-    .map_err(|e| e.to_string())?
+    tokio::task::spawn_blocking(move || make_hash(&password))
+        .await
+        .map_err(|e| e.to_string())?
+}
+
+/// An Argon2id PHC string of `password` with a fresh random salt.
+fn make_hash(password: &str) -> Result<String, String> {
+    let salt = SaltString::generate(&mut OsRng);
+    Argon2::default()
+        .hash_password(password.as_bytes(), &salt)
+        .map(|h| h.to_string())
+        .map_err(|e| e.to_string())
 }
 
 /// Checks a password against a stored hash, off the async runtime (for

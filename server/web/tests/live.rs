@@ -135,23 +135,11 @@ async fn heartbeats_and_a_visible_screen_keep_a_watch_session() {
         ..Options::default()
     })
     .await;
-    let (addr, server) = gridscada_web::bind("127.0.0.1:0".parse().unwrap(), h.app.clone())
-        .await
-        .unwrap();
-    tokio::spawn(server);
-    let open = |cookie: String| {
-        let mut req = format!("ws://{addr}/api/live")
-            .into_client_request()
-            .unwrap();
-        req.headers_mut().insert("cookie", cookie.parse().unwrap());
-        req.headers_mut()
-            .insert("origin", format!("http://{addr}").parse().unwrap());
-        tokio_tungstenite::connect_async(req)
-    };
+    let addr = h.serve().await;
     let watcher = h.login("guest", PASSWORD).await;
     let idle = h.login("operator", PASSWORD).await;
-    let (mut ws, _) = open(watcher.clone()).await.unwrap();
-    let (mut quiet, _) = open(idle.clone()).await.unwrap();
+    let mut ws = live_socket(addr, &watcher).await.unwrap();
+    let mut quiet = live_socket(addr, &idle).await.unwrap();
     // Heartbeats arrive every second, with the server's time.
     let mut beats = 0;
     let started = std::time::Instant::now();

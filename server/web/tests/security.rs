@@ -278,24 +278,14 @@ async fn a_forged_login_name_cannot_add_a_line_to_the_log() {
 
 #[tokio::test]
 async fn one_session_cannot_open_hundreds_of_live_sockets() {
-    use tokio_tungstenite::tungstenite::client::IntoClientRequest;
     let h = Harness::new(Options::default()).await;
-    let (addr, server) = gridscada_web::bind("127.0.0.1:0".parse().unwrap(), h.app.clone())
-        .await
-        .unwrap();
-    tokio::spawn(server);
+    let addr = h.serve().await;
     let cookie = h.login("operator", PASSWORD).await;
     let mut open = vec![];
     let mut refused = 0;
     for _ in 0..12 {
-        let mut req = format!("ws://{addr}/api/live")
-            .into_client_request()
-            .unwrap();
-        req.headers_mut().insert("cookie", cookie.parse().unwrap());
-        req.headers_mut()
-            .insert("origin", format!("http://{addr}").parse().unwrap());
-        match tokio_tungstenite::connect_async(req).await {
-            Ok((ws, _)) => open.push(ws),
+        match live_socket(addr, &cookie).await {
+            Ok(ws) => open.push(ws),
             Err(e) => {
                 assert!(e.to_string().contains("429"), "{e}");
                 refused += 1;
@@ -309,13 +299,7 @@ async fn one_session_cannot_open_hundreds_of_live_sockets() {
     first.close(None).await.unwrap();
     drop(first);
     tokio::time::sleep(std::time::Duration::from_millis(200)).await;
-    let mut req = format!("ws://{addr}/api/live")
-        .into_client_request()
-        .unwrap();
-    req.headers_mut().insert("cookie", cookie.parse().unwrap());
-    req.headers_mut()
-        .insert("origin", format!("http://{addr}").parse().unwrap());
-    assert!(tokio_tungstenite::connect_async(req).await.is_ok());
+    assert!(live_socket(addr, &cookie).await.is_ok());
 }
 
 #[tokio::test]

@@ -283,6 +283,15 @@ impl Harness {
         h
     }
 
+    /// Serves the app on a loopback port (for real sockets); its address.
+    pub async fn serve(&self) -> SocketAddr {
+        let (addr, server) = gridscada_web::bind("127.0.0.1:0".parse().unwrap(), self.app.clone())
+            .await
+            .unwrap();
+        tokio::spawn(server);
+        addr
+    }
+
     /// Creates a user directly in the store (as `gridscada demo` does).
     pub async fn add_user(&self, name: &str, role: Role, group: &str) {
         let hash = auth::hash_password(PASSWORD.into()).await.expect("hash");
@@ -385,4 +394,25 @@ pub fn seg(s: &str) -> String {
             }
         })
         .collect()
+}
+
+/// A live socket.
+#[allow(dead_code)]
+pub type LiveSocket =
+    tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+/// Opens `/api/live` on `addr` with the session `cookie`, from our own origin.
+#[allow(dead_code)]
+pub async fn live_socket(
+    addr: SocketAddr,
+    cookie: &str,
+) -> Result<LiveSocket, tokio_tungstenite::tungstenite::Error> {
+    use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+    let mut req = format!("ws://{addr}/api/live").into_client_request()?;
+    req.headers_mut().insert("cookie", cookie.parse().unwrap());
+    req.headers_mut()
+        .insert("origin", format!("http://{addr}").parse().unwrap());
+    tokio_tungstenite::connect_async(req)
+        .await
+        .map(|(ws, _)| ws)
 }
