@@ -20,8 +20,11 @@ export async function askValue(tag, current) {
     ? select({ name: 'value', id: 'write-value' }, [['true', 'TRUE (1)'], ['false', 'FALSE (0)']], current === true ? 'true' : 'false')
     : h('input', {
       name: 'value', id: 'write-value', required: true,
-      type: tag.kind === 'str' ? 'text' : 'number',
-      step: tag.kind === 'int' ? '1' : 'any',
+      // An integer is typed as digits: a number input rounds beyond 2^53.
+      type: tag.kind === 'float' ? 'number' : 'text',
+      step: tag.kind === 'float' ? 'any' : undefined,
+      inputmode: tag.kind === 'int' ? 'numeric' : undefined,
+      pattern: tag.kind === 'int' ? '[-+]?[0-9]+' : undefined,
       value: current === undefined || current === null ? '' : String(current),
     });
   const data = await formDialog(`Write ${tag.name}`, (f) => f.append(
@@ -30,7 +33,12 @@ export async function askValue(tag, current) {
   if (!data) return undefined;
   const raw = data.get('value');
   if (tag.kind === 'bool') return raw === 'true';
-  if (tag.kind === 'int') return Number.parseInt(raw, 10);
+  // An integer beyond 2^53 goes as its digits, which the server takes exactly.
+  if (tag.kind === 'int') {
+    const t = String(raw).trim();
+    const n = Number.parseInt(t, 10);
+    return /^[-+]?\d+$/.test(t) && !Number.isSafeInteger(n) ? t : n;
+  }
   if (tag.kind === 'float') return Number(raw);
   return String(raw);
 }
@@ -239,7 +247,8 @@ export default {
           h('dt', { text: 'Data type' }), h('dd', { text: src.data_type }),
           h('dt', { text: 'Word order' }), h('dd', { text: src.word_order }),
           h('dt', { text: 'Byte order' }), h('dd', { text: src.byte_order }),
-          h('dt', { text: 'Scaling' }), h('dd', { text: `× ${src.scale} + ${src.offset}` }))
+          h('dt', { text: 'Scaling' }), h('dd', { text: `× ${src.scale} + ${src.offset}` }),
+          h('dt', { text: 'Timestamp' }), h('dd', { id: 'tag-time-source', text: src.time_tag ? `device clock ${src.time_tag}` : 'receive time' }))
           : h('p', { class: 'hint', id: 'tag-source', text: 'Derived by the server (device status, sequence or dispatch), not read from a register.' }),
         h('div', { class: 'btn-row' }, writeBtn,
           numeric ? h('a', { class: 'btn', id: 'tag-add-trend', href: `#/trends?pens=${enc(t.name)}`, text: 'Add to trend' }) : null),

@@ -569,10 +569,14 @@ impl Alarm {
 pub fn discrete_equals(value: &Value, when: &Value) -> Option<bool> {
     match when {
         Value::Bool(w) => value.as_bool().map(|b| b == *w),
-        Value::Int(w) => value
-            .as_f64()
-            .filter(|v| !v.is_nan())
-            .map(|v| v == *w as f64),
+        // Integers compare exactly, whatever their width.
+        Value::Int(_) | Value::UInt(_) => match (value.as_i128(), when.as_i128()) {
+            (Some(v), Some(w)) if !matches!(value, Value::Str(_)) => Some(v == w),
+            _ => value
+                .as_f64()
+                .filter(|v| !v.is_nan())
+                .map(|v| Some(v) == when.as_f64()),
+        },
         Value::Float(w) => value.as_f64().filter(|v| !v.is_nan()).map(|v| v == *w),
         Value::Str(w) => match value {
             Value::Str(s) => Some(s == w),

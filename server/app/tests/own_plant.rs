@@ -189,6 +189,36 @@ fn another_plant_is_usable_whole() {
             .is_some_and(|m| m.contains("engineering limits"))),
         "{refused:?}"
     );
+    // A u64 beyond 2^53 is exact end to end: written as a JSON number or as
+    // its digits, read back over the API as digits, logged exactly.
+    let big = "12345678901234567891";
+    let (status, body) = op.post(
+        "/api/tags/RTU1.Energy_Wh/write",
+        json!({"value": 12_345_678_901_234_567_890u64}),
+    );
+    assert_eq!(status, 200, "{body}");
+    assert_eq!(body["value"], "12345678901234567890", "{body}");
+    let (status, body) = op.post("/api/tags/RTU1.Energy_Wh/write", json!({"value": big}));
+    assert_eq!(status, 200, "{body}");
+    assert_eq!(body["value"], big, "{body}");
+    assert_eq!(op.get_ok("/api/tags/RTU1.Energy_Wh")["value"], big);
+    let csv = wait_for(
+        "the meter in the historian",
+        Duration::from_secs(20),
+        || {
+            let to = now_ms() + 60_000;
+            let (_, text) = admin.get(&format!(
+                "/api/trends.csv?tags=RTU1.Energy_Wh&from=0&to={to}"
+            ));
+            let text = text.as_str().unwrap_or_default().to_string();
+            text.contains(&format!(",RTU1.Energy_Wh,{big},good"))
+                .then_some(text)
+        },
+    );
+    assert!(
+        csv.contains(",RTU1.Energy_Wh,12345678901234567890,good"),
+        "{csv}"
+    );
     let found = op.get_ok("/api/tags?search=rtu1.set&limit=10");
     assert_eq!(found["total"], 1);
     assert_eq!(found["tags"][0]["source"]["device"], "RTU1");

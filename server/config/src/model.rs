@@ -149,6 +149,11 @@ pub struct DeviceConfig {
     /// save a request.
     #[serde(default = "default_max_gap")]
     pub max_gap: u16,
+    /// A tag of this device that holds the device's own clock (Unix seconds,
+    /// or a `datetime`). The device's other tags read in the same scan take
+    /// their timestamp from it instead of the time their reply arrived.
+    #[serde(default)]
+    pub time_tag: Option<Spanned<String>>,
 }
 
 fn default_unit_id() -> Spanned<u8> {
@@ -253,6 +258,9 @@ pub enum DataType {
     F32,
     F64,
     String,
+    /// A device clock as six registers: year, month, day, hour, minute,
+    /// second (UTC), read as RFC 3339 text. Read-only.
+    DateTime,
 }
 
 impl DataType {
@@ -263,6 +271,7 @@ impl DataType {
             DataType::I32 | DataType::U32 | DataType::F32 => 2,
             DataType::I64 | DataType::U64 | DataType::F64 => 4,
             DataType::String => string_len,
+            DataType::DateTime => 6,
         }
     }
     pub fn label(self) -> &'static str {
@@ -277,6 +286,7 @@ impl DataType {
             DataType::F32 => "f32",
             DataType::F64 => "f64",
             DataType::String => "string",
+            DataType::DateTime => "datetime",
         }
     }
 }
@@ -358,6 +368,10 @@ pub struct TagConfig {
     pub max: Option<Spanned<f64>>,
     /// Scan period of this tag, overriding the device's.
     pub scan_ms: Option<Spanned<u64>>,
+    /// The device clock tag this tag takes its timestamp from, overriding
+    /// the device's `time_tag`; `"receive"` keeps the time the reply arrived.
+    #[serde(default)]
+    pub time_tag: Option<Spanned<String>>,
     pub alarm: Option<AlarmConfig>,
     #[serde(default)]
     pub history: HistoryConfig,
@@ -402,13 +416,25 @@ impl TagConfig {
         let scaled = *self.scale.get_ref() != 1.0 || self.offset != 0.0;
         match self.data_type() {
             DataType::Bool => ValueKind::Bool,
-            DataType::String => ValueKind::Str,
+            DataType::String | DataType::DateTime => ValueKind::Str,
             DataType::F32 | DataType::F64 => ValueKind::Float,
             _ if scaled => ValueKind::Float,
             _ => ValueKind::Int,
         }
     }
     /// The effective scan period.
+    /// The device clock tag that stamps this tag's samples, if any: the
+    /// tag's own `time_tag`, else its device's; never the clock itself.
+    /// `None` means the receive time.
+    pub fn time_tag<'a>(&'a self, device: &'a DeviceConfig) -> Option<&'a str> {
+        let name = self
+            .time_tag
+            .as_ref()
+            .or(device.time_tag.as_ref())
+            .map(|t| t.get_ref().as_str())?;
+        (name != RECEIVE_TIME && name != self.name.get_ref()).then_some(name)
+    }
+
     pub fn scan_ms(&self, device: &DeviceConfig) -> u64 {
         self.scan_ms
             .as_ref()
@@ -416,6 +442,9 @@ impl TagConfig {
             .unwrap_or(*device.scan_ms.get_ref())
     }
 }
+
+/// The `time_tag` value that keeps a tag's receive time.
+pub const RECEIVE_TIME: &str = "receive";
 
 /// Alarm settings of a tag.
 #[derive(Debug, Clone, Default, Deserialize, Serialize)]

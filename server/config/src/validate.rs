@@ -84,6 +84,7 @@ pub(crate) fn check(
         }
     }
     check_overlaps(&mut cx, tags);
+    check_time_tags(&mut cx, devices, tags, &device_by_name, &tag_by_name);
 
     let lookup = |name: &str| tag_by_name.get(name).map(|(_, t)| *t);
     let device = |name: &str| device_by_name.get(name).map(|(_, d)| *d);
@@ -386,7 +387,9 @@ fn check_tag(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, device: Option<&DeviceCo
             format!("tag '{name}': scale must be a non-zero number"),
         );
     }
-    if (scale != 1.0 || t.offset != 0.0) && matches!(ty, DataType::Bool | DataType::String) {
+    if (scale != 1.0 || t.offset != 0.0)
+        && matches!(ty, DataType::Bool | DataType::String | DataType::DateTime)
+    {
         cx.err(
             f,
             t.scale.span(),
@@ -407,6 +410,13 @@ fn check_tag(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, device: Option<&DeviceCo
     }
     // Writes.
     let writable = *t.writable.get_ref();
+    if writable && ty == DataType::DateTime {
+        cx.err(
+            f,
+            t.writable.span(),
+            format!("tag '{name}': a datetime is a device clock, read-only; it cannot be writable"),
+        );
+    }
     if writable && !kind.is_writable() {
         cx.err(f, t.writable.span(), format!("tag '{name}': a {} is read-only in Modbus; only coils and holding registers can be writable", kind.label()));
     }
@@ -610,6 +620,90 @@ fn check_overlaps(cx: &mut Ctx<'_>, tags: &[(usize, TagConfig)]) {
                 }
             }
             open.push(cur);
+        }
+    }
+}
+
+/// Device clocks: a `time_tag` (of a device, or of a tag) names a numeric or
+/// `datetime` tag of the same device, read at the same scan period, so each
+/// scan stamps its values with the clock it read with them.
+fn check_time_tags(
+    cx: &mut Ctx<'_>,
+    devices: &[(usize, DeviceConfig)],
+    tags: &[(usize, TagConfig)],
+    device_by_name: &HashMap<&str, (usize, &DeviceConfig)>,
+    tag_by_name: &HashMap<&str, (usize, &TagConfig)>,
+) {
+    let clock_problem = |clock: &TagConfig, device: &str| -> Option<String> {
+        if clock.device.get_ref() != device {
+            return Some(format!(
+                "'{}' is a tag of device '{}', not of '{device}'",
+                clock.name.get_ref(),
+                clock.device.get_ref()
+            ));
+        }
+        let ty = clock.data_type();
+        if matches!(ty, DataType::Bool | DataType::String) || clock.bit.is_some() {
+            return Some(format!(
+                "'{}' is a {}; a device clock is a datetime or a number of Unix seconds",
+                clock.name.get_ref(),
+                ty.label()
+            ));
+        }
+        None
+    };
+    for (f, d) in devices {
+        let Some(tt) = &d.time_tag else { continue };
+        let dev = d.name.get_ref().as_str();
+        match tag_by_name.get(tt.get_ref().as_str()) {
+            None => cx.err(
+                *f,
+                tt.span(),
+                format!("device '{dev}': time_tag '{}' is not a tag", tt.get_ref()),
+            ),
+            Some((_, clock)) => {
+                if let Some(why) = clock_problem(clock, dev) {
+                    cx.err(*f, tt.span(), format!("device '{dev}': time_tag {why}"));
+                }
+            }
+        }
+    }
+    for (f, t) in tags {
+        let name = t.name.get_ref();
+        if let Some(tt) = &t.time_tag {
+            if tt.get_ref() != RECEIVE_TIME {
+                match tag_by_name.get(tt.get_ref().as_str()) {
+                    None => cx.err(
+                        *f,
+                        tt.span(),
+                        format!("tag '{name}': time_tag '{}' is not a tag (or \"{RECEIVE_TIME}\" for the receive time)", tt.get_ref()),
+                    ),
+                    Some((_, clock)) => {
+                        if let Some(why) = clock_problem(clock, t.device.get_ref()) {
+                            cx.err(*f, tt.span(), format!("tag '{name}': time_tag {why}"));
+                        }
+                    }
+                }
+            }
+        }
+        // The clock must be read in the same scan as the tag it stamps.
+        let Some((_, d)) = device_by_name.get(t.device.get_ref().as_str()) else {
+            continue;
+        };
+        let Some(clock_name) = t.time_tag(d) else {
+            continue;
+        };
+        let Some((_, clock)) = tag_by_name.get(clock_name) else {
+            continue;
+        };
+        let (own, theirs) = (t.scan_ms(d), clock.scan_ms(d));
+        if own != theirs && clock.device.get_ref() == t.device.get_ref() {
+            let at = t.time_tag.as_ref().map_or(t.name.span(), |s| s.span());
+            cx.err(
+                *f,
+                at,
+                format!("tag '{name}': scanned every {own} ms but its device clock '{clock_name}' every {theirs} ms; a clock stamps only the tags read in its own scan (give them the same scan_ms, or time_tag = \"{RECEIVE_TIME}\")"),
+            );
         }
     }
 }

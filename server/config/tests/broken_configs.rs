@@ -439,3 +439,38 @@ fn horizon_settings_and_forecast_curves_are_checked() {
         "{got:#?}"
     );
 }
+
+#[test]
+fn device_clocks_are_checked() {
+    let d2 = "[[device]]\nname = \"D2\"\nprotocol = \"tcp\"\naddress = \"127.0.0.1:1503\"\ntime_tag = \"Nope\"\n";
+    let tag = |name: &str, dev: &str, addr: u32, extra: &str| {
+        format!("[[tag]]\nname = \"{name}\"\ndevice = \"{dev}\"\nkind = \"holding_register\"\naddress = {addr}\n{extra}\n")
+    };
+    let tags = [
+        DEVICE.to_string(),
+        d2.to_string(),
+        tag(
+            "D1.Clock",
+            "D1",
+            0,
+            "type = \"datetime\"\nwritable = true\nwrite_role = \"operator\"",
+        ),
+        tag("D1.Flag", "D1", 10, "type = \"bool\"\nbit = 0"),
+        tag("D1.A", "D1", 11, "time_tag = \"D1.Clock\"\nscan_ms = 500"),
+        tag("D1.B", "D1", 12, "time_tag = \"D1.Flag\""),
+        tag("D2.C", "D2", 0, "time_tag = \"D1.Clock\""),
+        tag("D2.D", "D2", 1, "time_tag = \"receive\""),
+    ]
+    .concat();
+    assert_problems(
+        MAIN,
+        &tags,
+        &[
+            "DIR/tags.toml:9:12: error: device 'D2': time_tag 'Nope' is not a tag",
+            "DIR/tags.toml:16:12: error: tag 'D1.Clock': a datetime is a device clock, read-only; it cannot be writable",
+            "DIR/tags.toml:30:12: error: tag 'D1.A': scanned every 500 ms but its device clock 'D1.Clock' every 1000 ms; a clock stamps only the tags read in its own scan (give them the same scan_ms, or time_tag = \"receive\")",
+            "DIR/tags.toml:37:12: error: tag 'D1.B': time_tag 'D1.Flag' is a bool; a device clock is a datetime or a number of Unix seconds",
+            "DIR/tags.toml:43:12: error: tag 'D2.C': time_tag 'D1.Clock' is a tag of device 'D1', not of 'D2'",
+        ],
+    );
+}

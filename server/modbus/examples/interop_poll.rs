@@ -118,6 +118,7 @@ fn json_value(v: &Value) -> String {
     match v {
         Value::Bool(b) => format!("\"value\":{b}"),
         Value::Int(i) => format!("\"value\":{i}"),
+        Value::UInt(u) => format!("\"value\":{u}"),
         // Debug prints the shortest text that reads back to the same f64.
         Value::Float(f) if f.is_finite() => format!("\"value\":{f:?}"),
         Value::Float(f) => format!("\"value\":null,\"nonfinite\":{}", json_str(&f.to_string())),

@@ -7,7 +7,7 @@
 //! **Must not touch:** I/O, the tag database, scheduling.
 
 use gridscada_config::{DataType, Endian, RegisterKind, TagConfig};
-use gridscada_tagdb::{Quality, Value, ValueKind};
+use gridscada_tagdb::{Quality, Sample, Timestamp, Value, ValueKind};
 
 /// How one tag sits on the wire, taken from its configuration once at start.
 #[derive(Debug, Clone, PartialEq)]
@@ -51,7 +51,7 @@ impl Codec {
     pub fn value_kind(&self) -> ValueKind {
         match self.data_type {
             DataType::Bool => ValueKind::Bool,
-            DataType::String => ValueKind::Str,
+            DataType::String | DataType::DateTime => ValueKind::Str,
             DataType::F32 | DataType::F64 => ValueKind::Float,
             _ if self.scaled() => ValueKind::Float,
             _ => ValueKind::Int,
@@ -83,6 +83,26 @@ pub fn quality_of(value: &Value) -> Quality {
         Value::Float(f) if f.is_infinite() => Quality::uncertain("device reported infinity"),
         _ => Quality::GOOD,
     }
+}
+
+/// The time a device clock tag reads: a `datetime` tag's text, or a number of
+/// Unix seconds (scale it to seconds if the device counts milliseconds).
+/// `None` when the reading is not Good or not a plausible time (before 1970 or
+/// after 9999).
+pub fn device_time(clock: &Sample) -> Option<Timestamp> {
+    if !clock.quality.is_good() {
+        return None;
+    }
+    let ms = match &clock.value {
+        Value::Str(s) => Timestamp::parse_utc_text(s)?.as_millis(),
+        v => {
+            let secs = v.as_f64().filter(|s| s.is_finite())?;
+            (secs * 1000.0).round() as i64
+        }
+    };
+    (0..=253_402_300_799_000)
+        .contains(&ms)
+        .then(|| Timestamp::from_millis(ms))
 }
 
 /// Applies the byte order within each register.
@@ -132,8 +152,8 @@ pub fn decode_registers(codec: &Codec, regs: &[u16]) -> Result<Value, String> {
         } else if let Ok(v) = i64::try_from(i) {
             Value::Int(v)
         } else {
-            // u64 above i64::MAX: keep the magnitude rather than wrap.
-            Value::Float(i as f64)
+            // u64 above i64::MAX: exact, never rounded through a float.
+            Value::from_u64(i as u64)
         }
     };
     let float = |f: f64| Value::Float(f * codec.scale + codec.offset);
@@ -147,6 +167,28 @@ pub fn decode_registers(codec: &Codec, regs: &[u16]) -> Result<Value, String> {
         DataType::U64 => int(i128::from(raw)),
         DataType::F32 => float(f64::from(f32::from_bits(raw as u32))),
         DataType::F64 => float(f64::from_bits(raw)),
+        DataType::DateTime => {
+            let r: Vec<u32> = regs
+                .iter()
+                .map(|r| u32::from(byte_ordered(codec, *r)))
+                .collect();
+            let civil = gridscada_tagdb::CivilTime {
+                year: i64::from(r[0]),
+                month: r[1],
+                day: r[2],
+                hour: r[3],
+                minute: r[4],
+                second: r[5],
+                milli: 0,
+            };
+            let t = Timestamp::from_civil_utc(civil).ok_or_else(|| {
+                format!(
+                    "device clock reads {:04}-{:02}-{:02} {:02}:{:02}:{:02}: not a date and time",
+                    r[0], r[1], r[2], r[3], r[4], r[5]
+                )
+            })?;
+            Value::Str(t.utc_text().into())
+        }
         DataType::String => {
             let mut bytes = Vec::with_capacity(regs.len() * 2);
             for r in regs {
@@ -199,6 +241,7 @@ pub fn encode(codec: &Codec, value: &Value) -> Result<Encoded, String> {
                 .ok_or_else(|| "a bool takes true/false (or 1/0)".to_string())?;
             Ok(Encoded::Registers(vec![u16::from(b)]))
         }
+        DataType::DateTime => Err("a datetime tag is a device clock: it is read-only".into()),
         DataType::String => {
             let Value::Str(s) = value else {
                 return Err("a string tag takes text".into());
@@ -288,13 +331,16 @@ fn integer_raw(codec: &Codec, value: &Value) -> Result<i128, String> {
     if !codec.scaled() {
         // Unscaled: the value must be a whole number; keep 64-bit precision.
         return match value {
-            Value::Int(i) => Ok(i128::from(*i)),
+            Value::Int(_) | Value::UInt(_) => Ok(value.as_i128().unwrap_or_default()),
             Value::Bool(b) => Ok(i128::from(*b)),
             Value::Float(f) if f.is_finite() && f.fract() == 0.0 && f.abs() < 1.9e19 => {
                 Ok(*f as i128)
             }
             Value::Float(_) => Err(format!("a {ty} tag takes a whole number")),
-            Value::Str(_) => Err(format!("a {ty} tag takes a number, not text")),
+            // The JSON form of an integer beyond 2^53.
+            Value::Str(_) => value
+                .as_i128()
+                .ok_or_else(|| format!("a {ty} tag takes a number, not text")),
         };
     }
     let eng = value
@@ -444,16 +490,55 @@ mod tests {
     }
 
     #[test]
-    fn u64_beyond_i64_is_float() {
+    fn u64_beyond_i64_is_exact() {
         let c = codec(DataType::U64, 4);
         assert_eq!(
             decode_registers(&c, &[0xFFFF, 0xFFFF, 0xFFFF, 0xFFFF]).unwrap(),
-            Value::Float(u64::MAX as f64)
+            Value::UInt(u64::MAX)
+        );
+        // 12345678901234567891 = 0xAB54_A98C_EB1F_0AD3, in and out exactly,
+        // whether written as a number or as its JSON string form.
+        let regs = [0xAB54, 0xA98C, 0xEB1F, 0x0AD3];
+        let big = Value::UInt(12_345_678_901_234_567_891);
+        assert_eq!(decode_registers(&c, &regs).unwrap(), big);
+        assert_eq!(encode(&c, &big).unwrap(), Encoded::Registers(regs.to_vec()));
+        assert_eq!(
+            encode(&c, &Value::from("12345678901234567891")).unwrap(),
+            Encoded::Registers(regs.to_vec())
         );
         // And a write of such a value encodes the right image.
         assert_eq!(
             encode(&c, &Value::Float(9_223_372_036_854_775_808.0)).unwrap(),
             Encoded::Registers(vec![0x8000, 0, 0, 0])
+        );
+    }
+
+    #[test]
+    fn a_datetime_reads_six_fields_and_refuses_an_impossible_date() {
+        let c = codec(DataType::DateTime, 6);
+        let v = decode_registers(&c, &[2026, 11, 25, 13, 30, 5]).unwrap();
+        assert_eq!(v, Value::from("2026-11-25T13:30:05Z"));
+        let at = Timestamp::parse_utc_text("2026-11-25T13:30:05Z").unwrap();
+        assert_eq!(
+            device_time(&Sample::good(v, Timestamp::from_millis(0))),
+            Some(at)
+        );
+        let err = decode_registers(&c, &[2026, 2, 30, 0, 0, 0]).unwrap_err();
+        assert!(err.contains("2026-02-30 00:00:00: not a date"), "{err}");
+        // Unix seconds (a scaled millisecond counter works the same way).
+        let secs = Sample::good(Value::Int(1_764_077_405), Timestamp::from_millis(0));
+        assert_eq!(
+            device_time(&secs),
+            Some(Timestamp::from_millis(1_764_077_405_000))
+        );
+        let bad = Sample {
+            quality: Quality::bad("x"),
+            ..secs.clone()
+        };
+        assert_eq!(device_time(&bad), None);
+        assert_eq!(
+            device_time(&Sample::good(Value::Int(-5), Timestamp::from_millis(0))),
+            None
         );
     }
 
@@ -583,7 +668,21 @@ mod tests {
         assert!(encode(&u, &Value::Float(1.5))
             .unwrap_err()
             .contains("whole"));
-        assert!(encode(&u, &Value::from("1")).is_err());
+        assert!(encode(&u, &Value::from("1x"))
+            .unwrap_err()
+            .contains("not text"));
+        assert!(encode(&u, &Value::from("1.0")).is_err());
+        // Digits are an integer's JSON form beyond 2^53: taken exactly.
+        assert_eq!(
+            encode(&u, &Value::from("7")).unwrap(),
+            Encoded::Registers(vec![7])
+        );
+        // A device clock is read-only.
+        assert!(encode(
+            &codec(DataType::DateTime, 6),
+            &Value::from("2026-01-01T00:00:00Z")
+        )
+        .is_err());
         assert!(encode(&codec(DataType::F32, 2), &Value::Float(f64::NAN)).is_err());
         assert!(encode(&codec(DataType::F32, 2), &Value::Float(1e300)).is_err());
         assert!(decode_registers(&codec(DataType::U32, 2), &[1]).is_err());

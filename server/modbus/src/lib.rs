@@ -209,8 +209,7 @@ fn check_limits(
     limits: (Option<f64>, Option<f64>),
 ) -> Result<(), WriteError> {
     let v = match value {
-        Value::Float(f) => *f,
-        Value::Int(i) => *i as f64,
+        Value::Float(_) | Value::Int(_) | Value::UInt(_) => value.as_f64().unwrap_or(f64::NAN),
         _ => return Ok(()),
     };
     let (lo, hi) = limits;
@@ -348,7 +347,22 @@ impl FieldIo {
                 device: di,
                 address,
                 codec,
+                time_from: None,
             });
+        }
+        // Device clocks: each tag stamped by a clock knows the clock's index
+        // in its link (same device, so same link; `check` guarantees it).
+        for t in &plant.tags {
+            let Some(&(li, di)) = device_link.get(t.device.get_ref().as_str()) else {
+                continue;
+            };
+            let Some(clock) = t.time_tag(groups[&keys[li]][di]) else {
+                continue;
+            };
+            let index_of = |n: &str| link_tags[li].iter().position(|x| &*x.name == n);
+            if let (Some(i), Some(c)) = (index_of(t.name.get_ref()), index_of(clock)) {
+                link_tags[li][i].time_from = Some(c);
+            }
         }
         let now = clock.now();
         let mut senders = Vec::new();

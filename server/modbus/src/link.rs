@@ -40,6 +40,9 @@ pub(crate) struct LinkTag {
     pub device: usize,
     pub address: u16,
     pub codec: Codec,
+    /// The device clock tag (index in the link) whose reading in the same
+    /// scan stamps this tag's samples; `None`: the time the reply arrived.
+    pub time_from: Option<usize>,
 }
 
 /// The status tags of one device.
@@ -471,6 +474,8 @@ impl Link {
         // this scan is newer, and the scan's older reading of it is dropped
         // when the batch is applied (TagDb::apply_observed).
         let mut tickets: Vec<u64> = Vec::new();
+        // The link tag index of each sample in `batch`.
+        let mut read: Vec<usize> = Vec::new();
         let mut answered = false;
         let mut lost = false;
         let nblocks = self.devices[d].classes[c].blocks.len();
@@ -505,6 +510,7 @@ impl Link {
                     let ticket = self.db.ticket();
                     self.block_samples(&block, answer, ts, &mut batch);
                     tickets.resize(batch.len(), ticket);
+                    read.extend_from_slice(&block.tags);
                 }
                 None => {
                     if self.transport.is_connected() {
@@ -516,6 +522,7 @@ impl Link {
                 }
             }
         }
+        self.stamp_device_time(&read, &mut batch);
         let now = self.clock.now();
         let dev = &mut self.devices[d];
         let class = &mut dev.classes[c];
@@ -544,6 +551,37 @@ impl Link {
                 .map(|((id, s), t)| (id, s, t))
                 .chain(status),
         );
+    }
+
+    /// Gives the samples of tags stamped by a device clock the time that
+    /// clock read in this scan. Without a usable clock reading the receive
+    /// time stays, and a Good value turns Uncertain to say so.
+    fn stamp_device_time(&self, read: &[usize], batch: &mut [(TagId, Sample)]) {
+        if !read.iter().any(|&t| self.tags[t].time_from.is_some()) {
+            return;
+        }
+        let clock_time = |clock: usize, batch: &[(TagId, Sample)]| {
+            read.iter()
+                .position(|&t| t == clock)
+                .and_then(|p| decode::device_time(&batch[p].1))
+        };
+        for (p, &t) in read.iter().enumerate() {
+            let Some(clock) = self.tags[t].time_from else {
+                continue;
+            };
+            let time = clock_time(clock, batch);
+            let sample = &mut batch[p].1;
+            match time {
+                Some(ts) => sample.timestamp = ts,
+                None if sample.quality.is_good() => {
+                    sample.quality = Quality::uncertain(format!(
+                        "device clock {} not read: receive time",
+                        self.tags[clock].name
+                    ));
+                }
+                None => {}
+            }
+        }
     }
 
     /// Decodes one block's answer into samples (exceptions make its tags Bad).

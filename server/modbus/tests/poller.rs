@@ -163,10 +163,8 @@ async fn every_data_type_reads_and_writes_with_read_back() {
         panic!("scaled tag is not a float")
     };
     assert!((scaled - 25.5).abs() < 1e-9);
-    assert_eq!(
-        value(&db, "D.Big"),
-        Some(Value::Float((u64::MAX - 1) as f64))
-    );
+    // Exact above i64::MAX, never rounded through a float.
+    assert_eq!(value(&db, "D.Big"), Some(Value::UInt(u64::MAX - 1)));
 
     // Writes: each is confirmed by read-back, and the wire image is right.
     let w = io.writer();
@@ -178,6 +176,8 @@ async fn every_data_type_reads_and_writes_with_read_back() {
         ("D.U32", Value::Int(0x0102_0304)),
         ("D.I64", Value::Int(-5)),
         ("D.U64", Value::Int(1 << 40)),
+        // Above 2^53 and above i64::MAX: the write and its read-back are exact.
+        ("D.U64", Value::UInt(12_345_678_901_234_567_891)),
         ("D.F32", Value::Float(-1.25)),
         ("D.F64", Value::Float(1.0e-3)),
         ("D.Str", Value::from("xy")),
@@ -199,7 +199,7 @@ async fn every_data_type_reads_and_writes_with_read_back() {
         assert_eq!(&u.holding[2..4], &[i32w[1], i32w[0]]);
         assert_eq!(&u.holding[4..6], &[0x0201, 0x0403]);
         assert_eq!(&u.holding[6..10], &[0xFFFF, 0xFFFF, 0xFFFF, 0xFFFB]);
-        assert_eq!(&u.holding[10..14], &[0, 0x100, 0, 0]);
+        assert_eq!(&u.holding[10..14], &[0xAB54, 0xA98C, 0xEB1F, 0x0AD3]);
         assert_eq!(
             &u.holding[14..16],
             words_be(&(-1.25f32).to_be_bytes()).as_slice()
@@ -690,4 +690,82 @@ async fn a_recovered_device_is_back_within_two_scans_and_one_probe_interval() {
         );
         io.shutdown().await;
     }
+}
+
+/// Tags stamped by a device clock carry the time the device read, from a
+/// datetime clock and from a Unix-seconds clock; a tag set to `receive`, and
+/// every tag once the clock reads nonsense, keep the receive time (and say
+/// so with Uncertain quality).
+#[tokio::test]
+async fn device_clocks_stamp_the_tags_read_with_them() {
+    let bank = Bank::with_units(&[1, 2]);
+    bank.unit(1, |u| {
+        u.holding[0..6].copy_from_slice(&[2024, 2, 29, 12, 0, 30]);
+        u.holding[10] = 42;
+        u.holding[11] = 43;
+    });
+    bank.unit(2, |u| {
+        u.input[0..2].copy_from_slice(&words_be(&1_700_000_000u32.to_be_bytes()));
+        u.input[5] = 7;
+    });
+    let (addr, _server) = serve(Arc::clone(&bank), "127.0.0.1:0").await;
+    let tags = |dev: &str, name: &str, kind: &str, address: u32, extra: &str| {
+        format!("[[tag]]\nname = \"{dev}.{name}\"\ndevice = \"{dev}\"\nkind = \"{kind}\"\naddress = {address}\n{extra}\n")
+    };
+    let text = [
+        device("M", addr, 1, 100, 500)
+            .replace("[[device]]\n", "[[device]]\ntime_tag = \"M.Clock\"\n"),
+        device("R", addr, 2, 100, 500),
+        tags("M", "Clock", "holding_register", 0, "type = \"datetime\""),
+        tags("M", "Energy", "holding_register", 10, ""),
+        tags(
+            "M",
+            "Local",
+            "holding_register",
+            11,
+            "time_tag = \"receive\"",
+        ),
+        tags("R", "Clock", "input_register", 0, "type = \"u32\""),
+        tags("R", "Level", "input_register", 5, "time_tag = \"R.Clock\""),
+    ]
+    .concat();
+    let plant = plant(&text);
+    let (db, io) = start(&plant);
+    eventually("all tags read", 5 * SECOND, || {
+        ["M.Energy", "M.Local", "R.Level"]
+            .iter()
+            .all(|t| value(&db, t).is_some())
+    })
+    .await;
+    let ts = |n: &str| db.get_by_name(n).unwrap().timestamp.as_millis();
+    let leap_noon = gridscada_tagdb::Timestamp::parse_utc_text("2024-02-29T12:00:30Z").unwrap();
+    assert_eq!(
+        value(&db, "M.Clock"),
+        Some(Value::from("2024-02-29T12:00:30Z"))
+    );
+    assert_eq!(ts("M.Energy"), leap_noon.as_millis());
+    assert_eq!(ts("R.Level"), 1_700_000_000_000);
+    // The clock itself and the opted-out tag keep the receive time (now).
+    let now = gridscada_tagdb::Timestamp::now_utc().as_millis();
+    assert!((now - ts("M.Local")).abs() < 5_000, "receive time");
+    assert!(
+        (now - ts("M.Clock")).abs() < 5_000,
+        "the clock's own receive time"
+    );
+    // A clock that reads no date: its tags keep the receive time, flagged.
+    bank.unit(1, |u| u.holding[1] = 13);
+    eventually("the energy tag stamped on receipt", 5 * SECOND, || {
+        db.get_by_name("M.Energy").is_some_and(|s| {
+            s.quality.code == QualityCode::Uncertain
+                && s.quality
+                    .reason
+                    .as_deref()
+                    .unwrap_or("")
+                    .contains("device clock M.Clock not read")
+                && (now - s.timestamp.as_millis()).abs() < 5_000
+        })
+    })
+    .await;
+    assert!(bad_reason(&db, "M.Clock").unwrap().contains("not a date"));
+    io.shutdown().await;
 }

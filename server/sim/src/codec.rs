@@ -93,8 +93,25 @@ impl Binding {
             DataType::F64 => split(raw.to_bits(), 4),
             // Strings are not simulated signals; they read as blanks.
             DataType::String => vec![0x2020; usize::from(self.width)],
+            // A device clock: the signal is Unix seconds.
+            DataType::DateTime => {
+                let c = gridscada_tagdb::Timestamp::from_millis((raw.max(0.0) * 1000.0) as i64)
+                    .civil_utc();
+                [
+                    c.year.clamp(0, 9999) as u32,
+                    c.month,
+                    c.day,
+                    c.hour,
+                    c.minute,
+                    c.second,
+                ]
+                .iter()
+                .map(|&v| v as u16)
+                .collect()
+            }
         };
-        if self.word_order == Endian::Little {
+        // A datetime's six registers are fields in a fixed order, not one number.
+        if self.word_order == Endian::Little && self.data_type != DataType::DateTime {
             words.reverse();
         }
         if self.byte_order == Endian::Little {
@@ -141,6 +158,7 @@ impl Binding {
             DataType::F32 => f64::from(f32::from_bits(joined as u32)),
             DataType::F64 => f64::from_bits(joined),
             DataType::String => return None,
+            DataType::DateTime => return None,
         };
         Some(raw * self.scale + self.offset)
     }

@@ -23,6 +23,7 @@ fn samples(prefix: &str, n: usize, tags: usize, t0: i64) -> Vec<HistorySample> {
             tag: names[i % tags].clone(),
             ts: Timestamp::from_millis(t0 + (i / tags) as i64 * 1000),
             value: Some((i as f64 * 0.001).sin() * 230.0),
+            exact: None,
             quality: QualityCode::Good,
         })
         .collect()

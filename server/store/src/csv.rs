@@ -10,7 +10,9 @@ pub(crate) fn row(out: &mut String, s: &RawSample) {
     let _ = write!(out, ",{},", s.ts.as_millis());
     field(out, &s.tag);
     out.push(',');
-    if let Some(v) = s.value {
+    if let Some(i) = s.exact {
+        let _ = write!(out, "{i}");
+    } else if let Some(v) = s.value {
         let _ = write!(out, "{v}");
     }
     out.push(',');
@@ -43,26 +45,11 @@ fn field(out: &mut String, s: &str) {
 
 /// `YYYY-MM-DDTHH:MM:SS.mmmZ` for milliseconds since the epoch.
 pub(crate) fn iso_utc(out: &mut String, ms: i64) {
-    let secs = ms.div_euclid(1000);
-    let milli = ms.rem_euclid(1000);
-    let days = secs.div_euclid(86_400);
-    let sod = secs.rem_euclid(86_400);
-    // Civil date from days since 1970-01-01 (H. Hinnant's algorithm).
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097);
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = doy - (153 * mp + 2) / 5 + 1;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 };
-    let y = yoe + era * 400 + i64::from(m <= 2);
+    let c = gridscada_tagdb::Timestamp::from_millis(ms).civil_utc();
     let _ = write!(
         out,
-        "{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}.{milli:03}Z",
-        sod / 3600,
-        sod % 3600 / 60,
-        sod % 60
+        "{:04}-{:02}-{:02}T{:02}:{:02}:{:02}.{:03}Z",
+        c.year, c.month, c.day, c.hour, c.minute, c.second, c.milli
     );
 }
 
@@ -103,6 +90,7 @@ mod tests {
                 tag: "=cmd,\"x\"".into(),
                 ts: Timestamp::from_millis(1500),
                 value: Some(2.5),
+                exact: None,
                 quality: QualityCode::Bad,
             },
         );

@@ -34,6 +34,8 @@ pub struct HistorySample {
     /// The numeric value (booleans as 0/1); `None` when the reading had no
     /// finite number. Non-finite numbers are stored as `None`.
     pub value: Option<f64>,
+    /// The exact integer, for an integer outside ±2^53 (which `value` rounds).
+    pub exact: Option<i128>,
     pub quality: QualityCode,
 }
 
@@ -43,7 +45,18 @@ pub struct RawSample {
     pub tag: String,
     pub ts: Timestamp,
     pub value: Option<f64>,
+    /// The exact integer where `value` is an integer outside ±2^53 (as a
+    /// string in JSON, like a live value of that size).
+    #[serde(skip_serializing_if = "Option::is_none", serialize_with = "as_digits")]
+    pub exact: Option<i128>,
     pub quality: QualityCode,
+}
+
+fn as_digits<S: serde::Serializer>(v: &Option<i128>, s: S) -> std::result::Result<S::Ok, S::Error> {
+    match v {
+        Some(i) => s.collect_str(i),
+        None => s.serialize_none(),
+    }
 }
 
 /// One bucket of a downsampled trend. Only buckets holding samples are returned.
@@ -123,10 +136,14 @@ type BucketRow = (
     i32,
 );
 
+/// A raw sample as selected: tag id, ts, value, exact digits, quality.
+type RawRow = (i64, i64, Option<f64>, Option<String>, i32);
+
 struct Row {
     tag_id: i64,
     ts: i64,
     value: Option<f64>,
+    exact: Option<String>,
     quality: i32,
 }
 
@@ -151,6 +168,7 @@ impl Store {
                 tag_id,
                 ts: s.ts.as_millis(),
                 value: s.value.filter(|v| v.is_finite()),
+                exact: s.exact.map(|i| i.to_string()),
                 quality: quality_to_code(s.quality),
             });
         }
@@ -173,17 +191,19 @@ impl Store {
                     .await
                     .map_err(db("inserting historian samples"))?;
                 for chunk in deduped.chunks(SQLITE_ROWS_PER_STATEMENT) {
-                    let mut qb =
-                        QueryBuilder::new("INSERT INTO samples (tag_id, ts, value, quality) ");
+                    let mut qb = QueryBuilder::new(
+                        "INSERT INTO samples (tag_id, ts, value, exact, quality) ",
+                    );
                     qb.push_values(chunk, |mut b, r| {
                         b.push_bind(r.tag_id)
                             .push_bind(r.ts)
                             .push_bind(r.value)
+                            .push_bind(r.exact.as_deref())
                             .push_bind(r.quality);
                     });
                     qb.push(
                         " ON CONFLICT (tag_id, ts) DO UPDATE SET \
-                         value = excluded.value, quality = excluded.quality",
+                         value = excluded.value, exact = excluded.exact, quality = excluded.quality",
                     );
                     qb.build()
                         .execute(&mut *tx)
@@ -195,27 +215,30 @@ impl Store {
                     .map_err(db("inserting historian samples"))?;
             }
             crate::store::Backend::Postgres(p) => {
-                let (mut t, mut ts, mut v, mut q) = (
+                let (mut t, mut ts, mut v, mut x, mut q) = (
+                    Vec::with_capacity(deduped.len()),
                     Vec::with_capacity(deduped.len()),
                     Vec::with_capacity(deduped.len()),
                     Vec::with_capacity(deduped.len()),
                     Vec::with_capacity(deduped.len()),
                 );
-                for r in &deduped {
+                for r in deduped {
                     t.push(r.tag_id);
                     ts.push(r.ts);
                     v.push(r.value);
+                    x.push(r.exact);
                     q.push(r.quality);
                 }
                 sqlx::query(
-                    "INSERT INTO samples (tag_id, ts, value, quality) \
-                     SELECT * FROM UNNEST($1::bigint[], $2::bigint[], $3::float8[], $4::int4[]) \
+                    "INSERT INTO samples (tag_id, ts, value, exact, quality) \
+                     SELECT * FROM UNNEST($1::bigint[], $2::bigint[], $3::float8[], $4::text[], $5::int4[]) \
                      ON CONFLICT (tag_id, ts) DO UPDATE SET \
-                     value = EXCLUDED.value, quality = EXCLUDED.quality",
+                     value = EXCLUDED.value, exact = EXCLUDED.exact, quality = EXCLUDED.quality",
                 )
                 .bind(t)
                 .bind(ts)
                 .bind(v)
+                .bind(x)
                 .bind(q)
                 .execute(p)
                 .await
@@ -385,9 +408,9 @@ impl Store {
         if by_id.is_empty() {
             return Ok(Vec::new());
         }
-        let rows: Vec<(i64, i64, Option<f64>, i32)> = on_backend!(self, reader, |p| {
+        let rows: Vec<RawRow> = on_backend!(self, reader, |p| {
             let mut qb = QueryBuilder::new(
-                "SELECT tag_id, ts, value, quality FROM samples WHERE tag_id IN (",
+                "SELECT tag_id, ts, value, exact, quality FROM samples WHERE tag_id IN (",
             );
             let mut sep = qb.separated(", ");
             for id in by_id.keys() {
@@ -410,13 +433,14 @@ impl Store {
         });
         Ok(rows
             .into_iter()
-            .map(|(id, ts, value, q)| {
+            .map(|(id, ts, value, exact, q)| {
                 (
                     id,
                     RawSample {
                         tag: by_id.get(&id).copied().unwrap_or_default().to_string(),
                         ts: Timestamp::from_millis(ts),
                         value,
+                        exact: exact.and_then(|x| x.parse().ok()),
                         quality: quality_from_code(q),
                     },
                 )

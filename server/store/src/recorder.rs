@@ -61,6 +61,8 @@ impl RecordPolicy {
 #[derive(Debug, Clone, Copy)]
 struct Seen {
     value: Option<f64>,
+    /// The exact integer where `value` rounds it (outside ±2^53).
+    exact: Option<i128>,
     quality: QualityCode,
     ts: Timestamp,
 }
@@ -145,6 +147,10 @@ impl Recorder {
         let bad = sample.quality.code == gridscada_tagdb::QualityCode::Bad;
         let now = Seen {
             value: sample.value.as_f64().filter(|v| v.is_finite() && !bad),
+            exact: sample
+                .value
+                .as_i128()
+                .filter(|_| sample.value.is_wide_integer() && !bad),
             quality: sample.quality.code,
             ts: sample.timestamp,
         };
@@ -156,7 +162,12 @@ impl Recorder {
         t.last_seen = Some(now);
         let log = match t.last_logged {
             None => true,
-            Some(l) => l.quality != now.quality || moved(l.value, now.value, t.policy.deadband),
+            Some(l) => {
+                l.quality != now.quality
+                    || moved(l.value, now.value, t.policy.deadband)
+                    // A float cannot see a step of one in a wide integer.
+                    || (t.policy.deadband == 0.0 && l.exact != now.exact)
+            }
         };
         if !log {
             return None;
@@ -166,6 +177,7 @@ impl Recorder {
             tag: t.name.clone(),
             ts: now.ts,
             value: now.value,
+            exact: now.exact,
             quality: now.quality,
         })
     }
@@ -191,6 +203,7 @@ impl Recorder {
                 tag: t.name.clone(),
                 ts: now,
                 value: row.value,
+                exact: row.exact,
                 quality: row.quality,
             });
         }
@@ -219,6 +232,22 @@ mod tests {
             },
         );
         r
+    }
+
+    #[test]
+    fn a_wide_integer_is_logged_exactly_and_a_step_of_one_is_seen() {
+        let mut r = rec(0.0, None);
+        let id = TagId(0);
+        let big = 12_345_678_901_234_567_891u64;
+        let s = |ms, u| Sample::good(Value::from_u64(u), Timestamp::from_millis(ms));
+        let first = r.offer(id, &s(1, big)).unwrap();
+        assert_eq!(first.exact, Some(i128::from(big)));
+        // big + 1 is the same f64: only the exact integer shows the change.
+        let next = r.offer(id, &s(2, big + 1)).unwrap();
+        assert_eq!(next.exact, Some(i128::from(big) + 1));
+        assert!(r.offer(id, &s(3, big + 1)).is_none());
+        // A small integer needs no exact copy.
+        assert_eq!(r.offer(id, &s(4, 7)).unwrap().exact, None);
     }
 
     #[test]

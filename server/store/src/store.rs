@@ -127,6 +127,11 @@ const SQLITE_MIGRATIONS: &[(i64, &str, &str)] = &[
         "user screens",
         include_str!("../migrations/sqlite/0003_user_screens.sql"),
     ),
+    (
+        4,
+        "exact integers",
+        include_str!("../migrations/sqlite/0004_exact_integers.sql"),
+    ),
 ];
 const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
     (
@@ -143,6 +148,11 @@ const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
         3,
         "user screens",
         include_str!("../migrations/postgres/0003_user_screens.sql"),
+    ),
+    (
+        4,
+        "exact integers",
+        include_str!("../migrations/postgres/0004_exact_integers.sql"),
     ),
 ];
 

@@ -60,6 +60,7 @@ fn crash_child() {
                     tag: Arc::from("crash.P"),
                     ts: Timestamp::from_millis(i * 10 + k),
                     value: Some((i * 10 + k) as f64),
+                    exact: None,
                     quality: QualityCode::Good,
                 });
             }

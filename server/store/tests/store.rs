@@ -20,6 +20,7 @@ fn sample(tag: &str, ms: i64, v: Option<f64>, q: QualityCode) -> HistorySample {
         tag: Arc::from(tag),
         ts: ts(ms),
         value: v,
+        exact: None,
         quality: q,
     }
 }
@@ -223,6 +224,52 @@ async fn csv_export_and_raw(db: TestDb) {
     db.cleanup().await;
 }
 both_backends!(csv_export, csv_export_and_raw);
+
+/// An integer outside ±2^53 comes back exactly from raw reads and the CSV.
+async fn wide_integers_are_exact(db: TestDb) {
+    let s = &db.store;
+    let big = 12_345_678_901_234_567_891i128;
+    s.insert_samples(&[
+        HistorySample {
+            exact: Some(big),
+            ..sample("Meter.Energy", 1000, Some(big as f64), QualityCode::Good)
+        },
+        HistorySample {
+            exact: Some(-9_007_199_254_740_993),
+            ..sample(
+                "Meter.Energy",
+                2000,
+                Some(-9.007199254740993e15),
+                QualityCode::Good,
+            )
+        },
+    ])
+    .await
+    .unwrap();
+    let raw = s
+        .raw_samples(&["Meter.Energy"], ts(0), ts(3000), 10)
+        .await
+        .unwrap();
+    assert_eq!(raw[0].exact, Some(big));
+    assert_eq!(raw[1].exact, Some(-9_007_199_254_740_993));
+    let json = serde_json::to_value(&raw[0]).unwrap();
+    assert_eq!(json["exact"], "12345678901234567891");
+    let mut out = Vec::new();
+    s.export_csv(&["Meter.Energy"], ts(0), ts(3000), &mut out)
+        .await
+        .unwrap();
+    let text = String::from_utf8(out).unwrap();
+    assert!(
+        text.contains(",Meter.Energy,12345678901234567891,good\n"),
+        "{text}"
+    );
+    assert!(
+        text.contains(",Meter.Energy,-9007199254740993,good\n"),
+        "{text}"
+    );
+    db.cleanup().await;
+}
+both_backends!(wide_integers, wide_integers_are_exact);
 
 async fn retention_deletes_old_rows(db: TestDb) {
     let s = &db.store;

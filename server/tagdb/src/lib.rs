@@ -15,7 +15,7 @@ mod db;
 mod value;
 mod write;
 
-pub use clock::{Clock, ScaledClock, SleepFuture, SystemClock, Timestamp};
+pub use clock::{CivilTime, Clock, ScaledClock, SleepFuture, SystemClock, Timestamp};
 pub use db::{ChangeBatch, Subscription, TagDb, TagDbError, TagId, TagMeta, Update};
 pub use value::{Quality, QualityCode, Sample, Value, ValueKind};
 pub use write::{TagWriter, WriteError, WriteFuture};

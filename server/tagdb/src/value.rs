@@ -8,20 +8,47 @@ use serde::{Deserialize, Serialize};
 use crate::Timestamp;
 
 /// The engineering value of a tag, after decoding and scaling.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+///
+/// Integers are exact end to end. An unsigned 64-bit reading above `i64::MAX`
+/// is `UInt`; every other integer is `Int` (construct through
+/// [`Value::from_u64`] so that one number has one representation).
+///
+/// In JSON (the API, the live push, exports) an integer within ±2^53 is a
+/// number; one outside it is a string of decimal digits, because a JSON
+/// number beyond 2^53 is rounded by JavaScript and most JSON readers. A
+/// string of digits written to an integer tag is taken exactly.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(untagged)]
 pub enum Value {
     Bool(bool),
     Int(i64),
+    /// Only above `i64::MAX` (a u64 register); below it a value is `Int`.
+    UInt(u64),
     Float(f64),
     Str(Arc<str>),
+}
+
+/// The largest integer that every JSON reader holds exactly (2^53).
+pub const JSON_SAFE_INTEGER: u64 = 1 << 53;
+
+impl Serialize for Value {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Value::Bool(b) => s.serialize_bool(*b),
+            Value::Int(i) if i.unsigned_abs() <= JSON_SAFE_INTEGER => s.serialize_i64(*i),
+            Value::Int(i) => s.collect_str(i),
+            Value::UInt(u) => s.collect_str(u),
+            Value::Float(f) => s.serialize_f64(*f),
+            Value::Str(t) => s.serialize_str(t),
+        }
+    }
 }
 
 impl Value {
     pub fn kind(&self) -> ValueKind {
         match self {
             Value::Bool(_) => ValueKind::Bool,
-            Value::Int(_) => ValueKind::Int,
+            Value::Int(_) | Value::UInt(_) => ValueKind::Int,
             Value::Float(_) => ValueKind::Float,
             Value::Str(_) => ValueKind::Str,
         }
@@ -33,8 +60,35 @@ impl Value {
         match self {
             Value::Bool(b) => Some(if *b { 1.0 } else { 0.0 }),
             Value::Int(i) => Some(*i as f64),
+            Value::UInt(u) => Some(*u as f64),
             Value::Float(f) => Some(*f),
             Value::Str(_) => None,
+        }
+    }
+
+    /// An unsigned integer in its one representation: `Int` up to `i64::MAX`.
+    pub fn from_u64(u: u64) -> Value {
+        i64::try_from(u).map_or(Value::UInt(u), Value::Int)
+    }
+
+    /// The exact integer, for integer values (and a string of decimal digits,
+    /// the JSON form of an integer beyond 2^53).
+    pub fn as_i128(&self) -> Option<i128> {
+        match self {
+            Value::Int(i) => Some(i128::from(*i)),
+            Value::UInt(u) => Some(i128::from(*u)),
+            Value::Str(s) => parse_integer(s),
+            _ => None,
+        }
+    }
+
+    /// Whether the value is an integer that a JSON number would not hold
+    /// exactly (outside ±2^53).
+    pub fn is_wide_integer(&self) -> bool {
+        match self {
+            Value::Int(i) => i.unsigned_abs() > JSON_SAFE_INTEGER,
+            Value::UInt(_) => true,
+            _ => false,
         }
     }
 
@@ -43,6 +97,7 @@ impl Value {
         match self {
             Value::Bool(b) => Some(*b),
             Value::Int(i) => Some(*i != 0),
+            Value::UInt(_) => Some(true),
             Value::Float(f) => Some(*f != 0.0),
             Value::Str(_) => None,
         }
@@ -61,6 +116,14 @@ impl Value {
             (Value::Bool(b), ValueKind::Float) => Some(Value::Float(*b as i64 as f64)),
             (Value::Int(i), ValueKind::Bool) if *i == 0 || *i == 1 => Some(Value::Bool(*i == 1)),
             (Value::Int(i), ValueKind::Float) => Some(Value::Float(*i as f64)),
+            (Value::UInt(u), ValueKind::Float) => Some(Value::Float(*u as f64)),
+            (Value::Str(s), ValueKind::Int) => {
+                let i = parse_integer(s)?;
+                i64::try_from(i)
+                    .map(Value::Int)
+                    .or_else(|_| u64::try_from(i).map(Value::UInt))
+                    .ok()
+            }
             (Value::Float(f), ValueKind::Bool) if *f == 0.0 || *f == 1.0 => {
                 Some(Value::Bool(*f == 1.0))
             }
@@ -80,6 +143,7 @@ impl fmt::Display for Value {
         match self {
             Value::Bool(b) => write!(f, "{b}"),
             Value::Int(i) => write!(f, "{i}"),
+            Value::UInt(u) => write!(f, "{u}"),
             Value::Float(x) => write!(f, "{x}"),
             Value::Str(s) => f.write_str(s),
         }
@@ -96,6 +160,11 @@ impl From<i64> for Value {
         Value::Int(i)
     }
 }
+impl From<u64> for Value {
+    fn from(u: u64) -> Self {
+        Value::from_u64(u)
+    }
+}
 impl From<f64> for Value {
     fn from(f: f64) -> Self {
         Value::Float(f)
@@ -105,6 +174,16 @@ impl From<&str> for Value {
     fn from(s: &str) -> Self {
         Value::Str(s.into())
     }
+}
+
+/// A whole number written as text: optional sign, then decimal digits only.
+fn parse_integer(s: &str) -> Option<i128> {
+    let t = s.trim();
+    let digits = t.strip_prefix(['-', '+']).unwrap_or(t);
+    if digits.is_empty() || digits.len() > 20 || !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    t.parse().ok()
 }
 
 /// The kind of engineering value a tag holds.
@@ -251,5 +330,33 @@ mod tests {
         let a = Sample::good(f64::NAN, t);
         let b = Sample::good(f64::NAN, Timestamp::from_millis(2));
         assert!(!a.differs_from(&b));
+    }
+
+    #[test]
+    fn integers_beyond_2_pow_53_go_out_as_exact_strings() {
+        let big = 12_345_678_901_234_567_891u64;
+        let v = Value::from_u64(big);
+        assert_eq!(v, Value::UInt(big));
+        assert_eq!(Value::from_u64(7), Value::Int(7));
+        let json = |v: &Value| serde_json::to_string(v).unwrap();
+        assert_eq!(json(&v), "\"12345678901234567891\"");
+        assert_eq!(json(&Value::Int(1 << 53)), "9007199254740992");
+        assert_eq!(json(&Value::Int((1 << 53) + 1)), "\"9007199254740993\"");
+        assert_eq!(json(&Value::Int(i64::MIN)), "\"-9223372036854775808\"");
+        assert_eq!(json(&Value::Int(-42)), "-42");
+        // Read back: a JSON number above i64::MAX and the digit string both
+        // reach an integer tag exactly.
+        let n: Value = serde_json::from_str("12345678901234567891").unwrap();
+        assert_eq!(n, Value::UInt(big));
+        let s: Value = serde_json::from_str("\"12345678901234567891\"").unwrap();
+        assert_eq!(s.coerce(ValueKind::Int), Some(Value::UInt(big)));
+        assert_eq!(s.as_i128(), Some(i128::from(big)));
+        assert_eq!(Value::from("12a").coerce(ValueKind::Int), None);
+        assert_eq!(
+            Value::from("99999999999999999999").coerce(ValueKind::Int),
+            None
+        );
+        assert_eq!(v.to_string(), "12345678901234567891");
+        assert!(v.is_wide_integer() && !Value::Int(5).is_wide_integer());
     }
 }

@@ -114,21 +114,17 @@ pub fn parse_start(text: &str) -> Result<Timestamp, String> {
     if tod >= Duration::from_secs(86400) {
         return Err(bad());
     }
-    let days = days_from_civil(y, mo, da);
-    Ok(Timestamp::from_millis(
-        days * 86_400_000 + tod.as_millis() as i64,
-    ))
-}
-
-/// Days since 1970-01-01 (H. Hinnant's algorithm).
-fn days_from_civil(y: i64, m: u32, d: u32) -> i64 {
-    let y = if m <= 2 { y - 1 } else { y };
-    let era = y.div_euclid(400);
-    let yoe = y - era * 400;
-    let mp = (i64::from(m) + 9) % 12;
-    let doy = (153 * mp + 2) / 5 + i64::from(d) - 1;
-    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-    era * 146_097 + doe - 719_468
+    let midnight = Timestamp::from_civil_utc(gridscada_tagdb::CivilTime {
+        year: y,
+        month: mo,
+        day: da,
+        hour: 0,
+        minute: 0,
+        second: 0,
+        milli: 0,
+    })
+    .ok_or_else(bad)?;
+    Ok(midnight.add(tod))
 }
 
 /// `HH:MM:SS` of an offset (hours may exceed 24).

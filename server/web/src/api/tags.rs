@@ -41,6 +41,9 @@ pub struct TagSource {
     pub byte_order: Endian,
     pub scale: f64,
     pub offset: f64,
+    /// The device clock tag that stamps this tag's samples; `None`: the
+    /// time the reply arrived.
+    pub time_tag: Option<String>,
 }
 
 impl WebState {
@@ -73,6 +76,11 @@ impl WebState {
                 byte_order: t.byte_order,
                 scale: *t.scale.get_ref(),
                 offset: t.offset,
+                time_tag: self
+                    .plant
+                    .device(t.device.get_ref())
+                    .and_then(|d| t.time_tag(d))
+                    .map(str::to_owned),
             }),
             sample,
         })
