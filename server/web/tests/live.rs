@@ -14,31 +14,6 @@ use serde_json::{json, Value};
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 use tokio_tungstenite::tungstenite::Message;
 
-type Ws =
-    tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
-
-async fn next_json(ws: &mut Ws) -> Option<Value> {
-    loop {
-        let msg = tokio::time::timeout(Duration::from_secs(5), ws.next())
-            .await
-            .expect("a message within 5 s")?
-            .ok()?;
-        match msg {
-            Message::Text(t) => {
-                let v: Value = serde_json::from_str(&t).expect("JSON message");
-                if v["type"] == "heartbeat" {
-                    continue;
-                }
-                return Some(v);
-            }
-            Message::Close(frame) => {
-                return Some(json!({"closed": frame.map(|f| u16::from(f.code))}));
-            }
-            _ => continue,
-        }
-    }
-}
-
 #[tokio::test]
 async fn live_push_follows_the_session() {
     let h = Harness::new(Options::default()).await;
@@ -65,7 +40,7 @@ async fn live_push_follows_the_session() {
     assert!(err.to_string().contains("403"), "{err}");
 
     let (mut ws, _) = connect(Some(format!("http://{addr}"))).await.unwrap();
-    let hello = next_json(&mut ws).await.unwrap();
+    let hello = next_message(&mut ws).await.unwrap();
     assert_eq!(hello["type"], "hello");
     assert_eq!(hello["user"], "operator");
     assert_eq!(hello["role"], "operator");
@@ -77,7 +52,7 @@ async fn live_push_follows_the_session() {
     ))
     .await
     .unwrap();
-    let snap = next_json(&mut ws).await.unwrap();
+    let snap = next_message(&mut ws).await.unwrap();
     assert_eq!(snap["type"], "tags");
     assert_eq!(snap["snapshot"], true);
     assert_eq!(
@@ -91,7 +66,7 @@ async fn live_push_follows_the_session() {
     let other = h.state.db.id(TAG_SUP).unwrap();
     h.state.db.apply([(other, Sample::good(99.0, t))]);
     h.state.db.apply([(ro, Sample::good(42.25, t))]);
-    let push = next_json(&mut ws).await.unwrap();
+    let push = next_message(&mut ws).await.unwrap();
     assert_eq!(
         push,
         json!({"type": "tags", "snapshot": false, "values": [
@@ -103,7 +78,7 @@ async fn live_push_follows_the_session() {
     ws.send(Message::Text("{\"subscribe\": 5}".into()))
         .await
         .unwrap();
-    let err = next_json(&mut ws).await.unwrap();
+    let err = next_message(&mut ws).await.unwrap();
     assert_eq!(err["type"], "error");
 
     // Logging out closes the socket with 4001.
@@ -111,7 +86,7 @@ async fn live_push_follows_the_session() {
         .call(Method::DELETE, "/api/session", Some(&cookie), None)
         .await;
     assert_eq!(r.status, axum::http::StatusCode::NO_CONTENT);
-    let closed = next_json(&mut ws).await.unwrap();
+    let closed = next_message(&mut ws).await.unwrap();
     assert_eq!(closed, json!({"closed": 4001}));
 
     // Anonymous clients cannot open it at all.
@@ -173,9 +148,9 @@ async fn heartbeats_and_a_visible_screen_keep_a_watch_session() {
         .await
         .json();
     assert_eq!(me["authenticated"], false);
-    let mut closed = next_json(&mut quiet).await.unwrap();
+    let mut closed = next_message(&mut quiet).await.unwrap();
     if closed["type"] == "hello" {
-        closed = next_json(&mut quiet).await.unwrap();
+        closed = next_message(&mut quiet).await.unwrap();
     }
     assert_eq!(closed, json!({"closed": 4001}));
 }

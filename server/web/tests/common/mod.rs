@@ -1,16 +1,20 @@
 //! A small web stack for the integration tests: a three-tag plant, a temp
 //! SQLite store, one user per role, a fake field writer and (optionally) a fake
-//! simulator, driven in-process through `tower::ServiceExt::oneshot`.
+//! simulator, driven in-process through `tower::ServiceExt::oneshot`. The
+//! alarm engine runs, with its events and history stored, on request
+//! ([`Harness::run_alarms`]).
 //!
 //! Owns nothing outside the tests; it builds `WebState` exactly as the app does
 //! (`server/app/src/runtime.rs::web_state`) but with fakes behind it.
 
 #![allow(dead_code)] // each test binary uses a different part
 
+use std::collections::HashMap;
+use std::future::Future;
 use std::net::SocketAddr;
 use std::path::Path;
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use axum::body::Body;
 use axum::extract::ConnectInfo;
@@ -18,7 +22,7 @@ use axum::http::{header, HeaderMap, Method, Request, StatusCode};
 use axum::Router;
 use gridscada_alarms::{AlarmChannels, AlarmEngine, EngineOptions};
 use gridscada_config::Role;
-use gridscada_store::{NewUser, OpenOptions, Store};
+use gridscada_store::{NewEvent, NewUser, OpenOptions, Store};
 use gridscada_tagdb::{
     Quality, Sample, SystemClock, TagDb, TagWriter, Timestamp, Value, WriteError, WriteFuture,
 };
@@ -36,7 +40,7 @@ pub const PASSWORD: &str = "correct horse battery";
 pub const HOST: &str = "scada.test";
 
 /// Test tags: one read-only measurement, one setpoint an operator may write,
-/// one a supervisor must write.
+/// one a supervisor must write (within engineering limits of -50 to 50 kW).
 pub const TAG_RO: &str = "T.Feeder1.P_kW";
 pub const TAG_OP: &str = "T.Zone1.Reset";
 pub const TAG_SUP: &str = "T.BESS.Setpoint_kW";
@@ -76,12 +80,39 @@ type = "f32"
 units = "kW"
 writable = true
 write_role = "supervisor"
+min = -50.0
+max = 50.0
 "#;
 
-/// A writer that takes every write and reports it back as confirmed.
+/// A writer that takes every write and reports it back as confirmed, except
+/// one outside the tag's engineering limits, which it refuses before it
+/// reaches the "device" (`writes`), as the field writer does.
 #[derive(Default)]
 pub struct FakeWriter {
+    /// What reached the device.
     pub writes: Mutex<Vec<(String, Value)>>,
+    /// Engineering limits by tag (`Plant::write_limits`).
+    pub limits: HashMap<String, (Option<f64>, Option<f64>)>,
+}
+
+impl FakeWriter {
+    /// A writer with the engineering limits of `plant`'s tags.
+    pub fn for_plant(plant: &gridscada_config::Plant) -> FakeWriter {
+        let limits = plant
+            .tags
+            .iter()
+            .map(|t| t.name.get_ref().clone())
+            .map(|n| {
+                let l = plant.write_limits(&n);
+                (n, l)
+            })
+            .filter(|(_, l)| *l != (None, None))
+            .collect();
+        FakeWriter {
+            limits,
+            ..FakeWriter::default()
+        }
+    }
 }
 
 impl TagWriter for FakeWriter {
@@ -89,6 +120,15 @@ impl TagWriter for FakeWriter {
         Box::pin(async move {
             if name.is_empty() {
                 return Err(WriteError::UnknownTag(name.into()));
+            }
+            if let (Some(&(lo, hi)), Some(v)) = (self.limits.get(name), value.as_f64()) {
+                if v.is_nan() || lo.is_some_and(|lo| v < lo) || hi.is_some_and(|hi| v > hi) {
+                    return Err(WriteError::OutOfLimits {
+                        tag: name.into(),
+                        value: value.to_string(),
+                        limits: format!("{lo:?} to {hi:?}"),
+                    });
+                }
             }
             self.writes.lock().push((name.to_string(), value.clone()));
             Ok(Sample::good(value, Timestamp::now_utc()))
@@ -152,9 +192,16 @@ pub struct Harness {
     pub state: WebState,
     pub writer: Arc<FakeWriter>,
     pub sim: Arc<FakeSim>,
-    _alarm_outputs: Box<dyn std::any::Any + Send + Sync>,
+    /// The alarm engine's transitions and events, until [`Harness::run_alarms`]
+    /// takes them into the store.
+    alarm_outputs: Mutex<Option<AlarmOutputs>>,
     _dir: tempfile::TempDir,
 }
+
+type AlarmOutputs = (
+    tokio::sync::mpsc::Receiver<gridscada_alarms::AlarmTransition>,
+    tokio::sync::mpsc::Receiver<gridscada_alarms::Event>,
+);
 
 /// A response, read whole.
 #[derive(Debug)]
@@ -242,7 +289,7 @@ impl Harness {
             EngineOptions::default(),
         )
         .expect("alarm engine");
-        let writer = Arc::new(FakeWriter::default());
+        let writer = Arc::new(FakeWriter::for_plant(&plant));
         let sim = Arc::new(FakeSim::default());
         let tag_index = Arc::new(gridscada_web::access::TagIndex::new(&plant));
         let state = WebState {
@@ -269,7 +316,7 @@ impl Harness {
             state,
             writer,
             sim,
-            _alarm_outputs: Box::new((trx, erx)),
+            alarm_outputs: Mutex::new(Some((trx, erx))),
             _dir: dir,
         };
         for role in [
@@ -281,6 +328,55 @@ impl Harness {
             h.add_user(role.label(), role, role.label()).await;
         }
         h
+    }
+
+    /// Runs the alarm engine, with its operator events going to the event log
+    /// and its transitions to the alarm history, as the app's sinks carry
+    /// them (`server/app/src/sinks.rs`). Call once.
+    pub fn run_alarms(&self) {
+        let engine = self.state.components.alarms.clone().expect("alarm engine");
+        let (mut transitions, mut events) = self
+            .alarm_outputs
+            .lock()
+            .take()
+            .expect("run_alarms is called once");
+        tokio::spawn(engine.run());
+        let store = self.state.store.clone();
+        tokio::spawn(async move {
+            while let Some(e) = events.recv().await {
+                let e = NewEvent {
+                    ts: e.time,
+                    user: e.user,
+                    source: e.source,
+                    kind: e.kind.as_str().to_string(),
+                    message: e.message,
+                };
+                store
+                    .insert_events(&[e])
+                    .await
+                    .expect("record an alarm event");
+            }
+        });
+        let store = self.state.store.clone();
+        tokio::spawn(async move {
+            while let Some(t) = transitions.recv().await {
+                store
+                    .insert_alarm_transitions(&[(&t).into()])
+                    .await
+                    .expect("record an alarm transition");
+            }
+        });
+    }
+
+    /// The app over the harness's state with `change` made to its plant
+    /// (e.g. `[server]` settings), for [`send_to`].
+    pub fn app_with_plant(&self, change: impl FnOnce(&mut gridscada_config::Plant)) -> Router {
+        let mut plant = (*self.state.plant).clone();
+        change(&mut plant);
+        gridscada_web::router(WebState {
+            plant: Arc::new(plant),
+            ..self.state.clone()
+        })
     }
 
     /// Serves the app on a loopback port (for real sockets); its address.
@@ -314,16 +410,8 @@ impl Harness {
             .await
     }
 
-    pub async fn send_from(&self, mut req: Request<Body>, peer: SocketAddr) -> Resp {
-        req.extensions_mut().insert(ConnectInfo(peer));
-        let resp = self.app.clone().oneshot(req).await.expect("infallible");
-        let (parts, body) = resp.into_parts();
-        let body = body.collect().await.expect("body").to_bytes().to_vec();
-        Resp {
-            status: parts.status,
-            headers: parts.headers,
-            body,
-        }
+    pub async fn send_from(&self, req: Request<Body>, peer: SocketAddr) -> Resp {
+        send_to(&self.app, req, peer).await
     }
 
     /// A JSON call as a browser on the same origin would make it.
@@ -349,6 +437,35 @@ impl Harness {
             .await;
         assert_eq!(r.status, StatusCode::OK, "login as {user}: {}", r.text());
         r.session_cookie().expect("login sets the session cookie")
+    }
+}
+
+/// Sends a request to `app` from `peer` and reads the whole answer.
+pub async fn send_to(app: &Router, mut req: Request<Body>, peer: SocketAddr) -> Resp {
+    req.extensions_mut().insert(ConnectInfo(peer));
+    let resp = app.clone().oneshot(req).await.expect("infallible");
+    let (parts, body) = resp.into_parts();
+    let body = body.collect().await.expect("body").to_bytes().to_vec();
+    Resp {
+        status: parts.status,
+        headers: parts.headers,
+        body,
+    }
+}
+
+/// Polls `check` every 20 ms until it gives a value; panics naming `what`
+/// after `within`.
+pub async fn eventually<T, F>(what: &str, within: Duration, mut check: impl FnMut() -> F) -> T
+where
+    F: Future<Output = Option<T>>,
+{
+    let deadline = Instant::now() + within;
+    loop {
+        if let Some(v) = check().await {
+            return v;
+        }
+        assert!(Instant::now() < deadline, "not within {within:?}: {what}");
+        tokio::time::sleep(Duration::from_millis(20)).await;
     }
 }
 
@@ -400,6 +517,34 @@ pub fn seg(s: &str) -> String {
 #[allow(dead_code)]
 pub type LiveSocket =
     tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+/// The next message of a live socket as JSON, skipping heartbeats; a close
+/// as `{"closed": code}`; `None` when the socket ends. Panics after 5 s of
+/// silence.
+#[allow(dead_code)]
+pub async fn next_message(ws: &mut LiveSocket) -> Option<Json> {
+    use futures::StreamExt;
+    use tokio_tungstenite::tungstenite::Message;
+    loop {
+        let msg = tokio::time::timeout(Duration::from_secs(5), ws.next())
+            .await
+            .expect("a message within 5 s")?
+            .ok()?;
+        match msg {
+            Message::Text(t) => {
+                let v: Json = serde_json::from_str(&t).expect("JSON message");
+                if v["type"] == "heartbeat" {
+                    continue;
+                }
+                return Some(v);
+            }
+            Message::Close(frame) => {
+                return Some(serde_json::json!({"closed": frame.map(|f| u16::from(f.code))}));
+            }
+            _ => continue,
+        }
+    }
+}
 
 /// Opens `/api/live` on `addr` with the session `cookie`, from our own origin.
 #[allow(dead_code)]
