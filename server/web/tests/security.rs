@@ -11,9 +11,7 @@ use axum::body::Body;
 use axum::http::{header, Method, Request, StatusCode};
 use common::*;
 use gridscada_config::Role;
-use gridscada_web::WebState;
-use serde_json::json;
-use tower::ServiceExt;
+use serde_json::{json, Value};
 
 fn login_req(user: &str, pass: &str) -> Request<Body> {
     request(
@@ -223,36 +221,66 @@ async fn metrics_answer_loopback_or_the_token() {
     let r = h.send_from(get(), "10.0.0.7:4000".parse().unwrap()).await;
     assert_eq!(r.status, StatusCode::FORBIDDEN);
     // With a token, Prometheus sends it; no token, no figures.
-    let mut plant = (*h.state.plant).clone();
-    plant.server.metrics_token = Some("s3cret-token".into());
-    let app = gridscada_web::router(WebState {
-        plant: Arc::new(plant),
-        ..h.state.clone()
-    });
-    let send =
-        |req: Request<Body>| {
-            let app = app.clone();
-            async move {
-                let mut req = req;
-                req.extensions_mut().insert(axum::extract::ConnectInfo(
-                    std::net::SocketAddr::from(([10, 0, 0, 7], 4000)),
-                ));
-                app.oneshot(req).await.unwrap().status()
-            }
-        };
-    assert_eq!(send(get()).await, StatusCode::UNAUTHORIZED);
+    let app = h.app_with_plant(|p| p.server.metrics_token = Some("s3cret-token".into()));
+    let send = |req: Request<Body>| send_to(&app, req, "10.0.0.7:4000".parse().unwrap());
+    assert_eq!(send(get()).await.status, StatusCode::UNAUTHORIZED);
     let mut with = get();
     with.headers_mut().insert(
         header::AUTHORIZATION,
         "Bearer s3cret-token".parse().unwrap(),
     );
-    assert_eq!(send(with).await, StatusCode::OK);
+    assert_eq!(send(with).await.status, StatusCode::OK);
     let mut wrong = get();
     wrong.headers_mut().insert(
         header::AUTHORIZATION,
         "Bearer s3cret-tokex".parse().unwrap(),
     );
-    assert_eq!(send(wrong).await, StatusCode::UNAUTHORIZED);
+    assert_eq!(send(wrong).await.status, StatusCode::UNAUTHORIZED);
+}
+
+/// Issue 22 #10: the addresses in `metrics_allow` scrape without the token,
+/// with or without one configured; other addresses still need it, and
+/// with a token set loopback is no longer let in on its own.
+#[tokio::test]
+async fn metrics_answer_an_allowed_address_without_the_token() {
+    let h = Harness::new(Options::default()).await;
+    let get = || request(Method::GET, "/metrics", None, None);
+    let allowed: std::net::SocketAddr = "10.0.0.8:4000".parse().unwrap();
+    let allowed_v6: std::net::SocketAddr = "[fd00::8]:4000".parse().unwrap();
+    let other: std::net::SocketAddr = "10.0.0.7:4000".parse().unwrap();
+    let loopback: std::net::SocketAddr = "127.0.0.1:4000".parse().unwrap();
+    // Before: the allowed address is refused like any other.
+    assert_eq!(
+        h.send_from(get(), allowed).await.status,
+        StatusCode::FORBIDDEN
+    );
+
+    // An allow-list alone.
+    let app = h.app_with_plant(|p| {
+        p.server.metrics_allow = vec![allowed.ip(), allowed_v6.ip()];
+    });
+    for peer in [allowed, allowed_v6, loopback] {
+        let r = send_to(&app, get(), peer).await;
+        assert_eq!(r.status, StatusCode::OK, "{peer}: {}", r.text());
+        assert!(r.text().contains("gridscada_uptime_seconds"), "{peer}");
+    }
+    let r = send_to(&app, get(), other).await;
+    assert_eq!(r.status, StatusCode::FORBIDDEN, "{}", r.text());
+    assert!(!r.text().contains("gridscada_uptime_seconds"));
+
+    // An allow-list beside a token: the listed address needs no token,
+    // the others (loopback too) do.
+    let app = h.app_with_plant(|p| {
+        p.server.metrics_allow = vec![allowed.ip()];
+        p.server.metrics_token = Some("s3cret-token".into());
+    });
+    let r = send_to(&app, get(), allowed).await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text());
+    assert!(r.text().contains("gridscada_uptime_seconds"));
+    for peer in [other, loopback] {
+        let r = send_to(&app, get(), peer).await;
+        assert_eq!(r.status, StatusCode::UNAUTHORIZED, "{peer}: {}", r.text());
+    }
 }
 
 #[tokio::test]
@@ -336,5 +364,273 @@ async fn writes_are_audited_with_what_was_asked_and_confirmed_and_refusals_too()
     assert!(
         events.contains("requested true, confirmed true"),
         "{events}"
+    );
+}
+
+/// The one alarm whose text matches `key`, in whatever state, as the API shows it.
+async fn alarm_view(h: &Harness, cookie: &str, key: &str) -> Value {
+    let every_state = "normal,unack_active,ack_active,unack_rtn,shelved,suppressed,out_of_service";
+    let q = format!("/api/alarms?state={every_state}&text={key}");
+    let r = h.call(Method::GET, &q, Some(cookie), None).await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text());
+    let list = r.json()["alarms"].as_array().unwrap().clone();
+    assert_eq!(list.len(), 1, "{list:?}");
+    list[0].clone()
+}
+
+/// Issue 22 #14: a shelve refused for its reason (9,000 characters, the
+/// limit is 2,048 bytes) changes nothing and claims nothing: the alarm is
+/// not shelved, in the engine or in the store, and neither the event log
+/// nor the alarm history says it was.
+#[tokio::test]
+async fn a_refused_shelve_changes_nothing_and_claims_nothing() {
+    let h = Harness::new(Options::default()).await;
+    h.run_alarms();
+    let engine = h.state.components.alarms.clone().unwrap();
+    let key = "test.link_down";
+    let id = engine.raise(key, 2, "Plant", "Link down").unwrap();
+    let sup = h.login("supervisor", PASSWORD).await;
+    let path = format!("/api/alarms/{}/shelve", id.0);
+
+    let r = h
+        .call(
+            Method::POST,
+            &path,
+            Some(&sup),
+            Some(json!({"minutes": 30, "reason": "x".repeat(9000)})),
+        )
+        .await;
+    assert_eq!(r.status, StatusCode::BAD_REQUEST, "{}", r.text());
+    assert!(r.text().contains("at most 2048"), "{}", r.text());
+
+    // The alarm as the API shows it: still unshelved.
+    let a = alarm_view(&h, &sup, key).await;
+    assert_eq!(a["id"], id.0);
+    assert_eq!(a["state"], "unack_active", "{a}");
+    assert!(a["shelved"].is_null(), "{a}");
+    let shelved = h
+        .call(Method::GET, "/api/alarms?state=shelved", Some(&sup), None)
+        .await
+        .json();
+    assert_eq!(shelved["count"], 0, "{shelved}");
+    assert!(engine.view(id).unwrap().shelved.is_none());
+    assert!(
+        h.state
+            .store
+            .alarm_states()
+            .await
+            .unwrap()
+            .iter()
+            .all(|r| r.key != key || r.shelved_until.is_none()),
+        "a shelving was persisted"
+    );
+
+    // A valid shelve afterwards is the marker: once its records are in,
+    // anything the refused one had produced (earlier, in the same ordered
+    // stream) would be in too.
+    let r = h
+        .call(
+            Method::POST,
+            &path,
+            Some(&sup),
+            Some(json!({"minutes": 30, "reason": "marker"})),
+        )
+        .await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text());
+    assert_eq!(alarm_view(&h, &sup, key).await["state"], "shelved");
+    let admin = h.login("administrator", PASSWORD).await;
+    let (hr, admin, sup) = (&h, admin.as_str(), sup.as_str());
+    let shelve_events = eventually(
+        "the marker shelve's event is logged",
+        std::time::Duration::from_secs(5),
+        move || async move {
+            let h = hr;
+            let ev = h
+                .call(
+                    Method::GET,
+                    &format!("/api/events?type=shelve&source={key}"),
+                    Some(admin),
+                    None,
+                )
+                .await
+                .json();
+            let ev: Vec<Value> = ev["events"].as_array().unwrap().clone();
+            ev.iter()
+                .any(|e| e["message"].as_str().unwrap().contains("(marker)"))
+                .then_some(ev)
+        },
+    )
+    .await;
+    assert_eq!(shelve_events.len(), 1, "{shelve_events:?}");
+    assert_eq!(shelve_events[0]["user"], "supervisor");
+    let history = eventually(
+        "the marker shelve's transition is stored",
+        std::time::Duration::from_secs(5),
+        move || async move {
+            let h = hr;
+            let hist = h
+                .call(
+                    Method::GET,
+                    &format!("/api/alarms/history?key={key}"),
+                    Some(sup),
+                    None,
+                )
+                .await
+                .json();
+            let rows: Vec<Value> = hist["transitions"].as_array().unwrap().clone();
+            rows.iter()
+                .any(|t| t["to_state"] == "shelved")
+                .then_some(rows)
+        },
+    )
+    .await;
+    let to_shelved = history
+        .iter()
+        .filter(|t| t["to_state"] == "shelved")
+        .count();
+    assert_eq!(to_shelved, 1, "{history:?}");
+}
+
+/// Issue 22 #15: a write outside the tag's engineering limits (-50 to 50 kW
+/// in the test plant) answers `out_of_limits`, nothing reaches the device
+/// and the value stays, and each refusal is in the event log. A value on
+/// the limit passes.
+#[tokio::test]
+async fn a_write_outside_the_engineering_limits_is_refused_and_audited() {
+    let h = Harness::new(Options::default()).await;
+    assert_eq!(
+        h.state.plant.write_limits(TAG_SUP),
+        (Some(-50.0), Some(50.0))
+    );
+    let sup = h.login("supervisor", PASSWORD).await;
+    let path = format!("/api/tags/{TAG_SUP}/write");
+    let bad = [-1e6, 1e30, 50.5, -50.25];
+    for v in bad {
+        let r = h
+            .call(Method::POST, &path, Some(&sup), Some(json!({"value": v})))
+            .await;
+        assert_eq!(r.status, StatusCode::BAD_REQUEST, "{v}: {}", r.text());
+        let body = r.json();
+        assert_eq!(body["error"], "out_of_limits", "{v}: {body}");
+        assert!(
+            body["detail"]
+                .as_str()
+                .unwrap()
+                .contains("engineering limits of 'T.BESS.Setpoint_kW'"),
+            "{v}: {body}"
+        );
+    }
+    // Nothing reached the device, and the value is the one it had.
+    assert!(
+        h.writer.writes.lock().is_empty(),
+        "{:?}",
+        h.writer.writes.lock()
+    );
+    let tag = h
+        .call(
+            Method::GET,
+            &format!("/api/tags/{TAG_SUP}"),
+            Some(&sup),
+            None,
+        )
+        .await
+        .json();
+    assert_eq!(tag["value"], 1.5, "{tag}");
+    // Every refusal is audited, naming the user, the tag and the reason.
+    let admin = h.login("administrator", PASSWORD).await;
+    let ev = h
+        .call(
+            Method::GET,
+            &format!("/api/events?type=write_failed&source={TAG_SUP}"),
+            Some(&admin),
+            None,
+        )
+        .await
+        .json();
+    let refused = ev["events"].as_array().unwrap();
+    assert_eq!(refused.len(), bad.len(), "{ev}");
+    for e in refused {
+        assert_eq!(e["user"], "supervisor", "{e}");
+        let m = e["message"].as_str().unwrap();
+        assert!(
+            m.starts_with("supervisor could not write T.BESS.Setpoint_kW = "),
+            "{m}"
+        );
+        assert!(m.contains("outside the engineering limits"), "{m}");
+    }
+    // On the limit is inside.
+    let r = h
+        .call(
+            Method::POST,
+            &path,
+            Some(&sup),
+            Some(json!({"value": -50.0})),
+        )
+        .await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text());
+    assert_eq!(
+        *h.writer.writes.lock(),
+        [(TAG_SUP.to_string(), gridscada_tagdb::Value::Float(-50.0))]
+    );
+}
+
+/// Issue 22 #12: the address cap. Sessions of one address together open at
+/// most `MAX_SOCKETS_PER_ADDRESS` live sockets; the one past it is refused
+/// (429) although its own session has room, another address is not held
+/// out, and closing one frees a place.
+#[tokio::test]
+async fn one_address_cannot_open_more_than_its_live_sockets() {
+    use gridscada_web::auth::{MAX_SOCKETS_PER_ADDRESS, MAX_SOCKETS_PER_SESSION};
+    let started = std::time::Instant::now();
+    let h = Harness::new(Options::default()).await;
+    let addr = h.serve().await;
+    let sessions = MAX_SOCKETS_PER_ADDRESS.div_ceil(MAX_SOCKETS_PER_SESSION) + 1;
+    let mut cookies = vec![];
+    for _ in 0..sessions {
+        cookies.push(h.login("operator", PASSWORD).await);
+    }
+    // Fill the address, each session up to its own cap.
+    let mut open = vec![];
+    for i in 0..MAX_SOCKETS_PER_ADDRESS {
+        let cookie = &cookies[i / MAX_SOCKETS_PER_SESSION];
+        open.push(
+            live_socket(addr, cookie)
+                .await
+                .unwrap_or_else(|e| panic!("socket {i}: {e}")),
+        );
+    }
+    // The next session has room of its own but the address has none.
+    let fresh = cookies.last().unwrap();
+    let err = live_socket(addr, fresh).await.unwrap_err();
+    assert!(err.to_string().contains("429"), "{err}");
+    // Another address (of the loopback network) is not held out.
+    let other = {
+        use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+        let sock = tokio::net::TcpSocket::new_v4().unwrap();
+        sock.bind("127.0.0.2:0".parse().unwrap()).unwrap();
+        let stream = sock.connect(addr).await.unwrap();
+        let mut req = format!("ws://{addr}/api/live")
+            .into_client_request()
+            .unwrap();
+        req.headers_mut().insert("cookie", fresh.parse().unwrap());
+        req.headers_mut()
+            .insert("origin", format!("http://{addr}").parse().unwrap());
+        tokio_tungstenite::client_async(req, stream).await
+    };
+    assert!(other.is_ok(), "{:?}", other.err());
+    // Closing one of the address's sockets frees its place.
+    let mut first = open.remove(0);
+    first.close(None).await.unwrap();
+    drop(first);
+    eventually(
+        "a place freed on the address",
+        std::time::Duration::from_secs(5),
+        move || async move { live_socket(addr, fresh).await.ok() },
+    )
+    .await;
+    assert!(
+        started.elapsed() < std::time::Duration::from_secs(30),
+        "{:?}",
+        started.elapsed()
     );
 }
