@@ -312,3 +312,147 @@ async fn devices_need_field_io() {
         .await;
     assert_eq!(r.status, StatusCode::FORBIDDEN);
 }
+
+/// A drawn screen with one value display per tag.
+fn values_screen(id: &str, tags: &[&str]) -> Value {
+    let elements: Vec<Value> = tags
+        .iter()
+        .enumerate()
+        .map(|(i, t)| {
+            json!({"type": "value", "x": 10, "y": 10 + 30 * i, "w": 120, "h": 20, "tag": t, "digits": 1})
+        })
+        .collect();
+    json!({"id": id, "name": id, "version": 0, "width": 400, "height": 300, "elements": elements})
+}
+
+/// An administrator saves `screens` and gives the guest group `access`.
+async fn guest_screens(h: &Harness, admin: &str, screens: &[Value], access: &[&str]) {
+    for s in screens {
+        let path = format!("/api/screens/{}", s["id"].as_str().unwrap());
+        let r = h
+            .call(Method::PUT, &path, Some(admin), Some(s.clone()))
+            .await;
+        assert_eq!(r.status, StatusCode::OK, "{}", r.text());
+    }
+    let r = h
+        .call(
+            Method::PUT,
+            "/api/groups/guest/screens",
+            Some(admin),
+            Some(json!({ "screens": access })),
+        )
+        .await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text());
+}
+
+/// Sends `subscribe` on `ws`; the names in the snapshot that answers it.
+async fn subscribe(ws: &mut LiveSocket, subscribe: Value) -> Vec<String> {
+    use futures::SinkExt;
+    ws.send(tokio_tungstenite::tungstenite::Message::Text(
+        json!({ "subscribe": subscribe }).to_string().into(),
+    ))
+    .await
+    .unwrap();
+    let snap = next_message(ws).await.expect("a snapshot");
+    assert_eq!(
+        (&snap["type"], &snap["snapshot"]),
+        (&json!("tags"), &json!(true)),
+        "{snap}"
+    );
+    snap["values"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v["name"].as_str().unwrap().to_string())
+        .collect()
+}
+
+/// Sets each of `tags` in the tag database in turn, the last one to `last`;
+/// the tag names pushed on `ws` until the last change arrives. A tag set
+/// earlier that the socket carried would be pushed before it, or with it.
+async fn pushed_until_last(
+    h: &Harness,
+    ws: &mut LiveSocket,
+    tags: &[&str],
+    last: f64,
+) -> Vec<String> {
+    let t = gridscada_tagdb::Timestamp::now_utc();
+    for (i, tag) in tags.iter().enumerate() {
+        let v = if i + 1 == tags.len() { last } else { 77.0 };
+        let id = h.state.db.id(tag).unwrap();
+        h.state
+            .db
+            .apply([(id, gridscada_tagdb::Sample::good(v, t))]);
+    }
+    let target = *tags.last().unwrap();
+    let mut seen = vec![];
+    loop {
+        let m = next_message(ws).await.expect("a push");
+        assert_eq!(m["type"], "tags", "{m}");
+        let mut done = false;
+        for v in m["values"].as_array().unwrap() {
+            let name = v["name"].as_str().unwrap().to_string();
+            done |= name == target && v["value"] == last;
+            seen.push(name);
+        }
+        if done {
+            return seen;
+        }
+    }
+}
+
+/// Issue 12 #5: over `/api/live` a Guest gets values only of the tags on its
+/// screens, whether it names a tag or a prefix, in the snapshot and in the
+/// pushes that follow.
+#[tokio::test]
+async fn a_guests_live_socket_carries_only_what_it_may_read() {
+    let h = Harness::new(Options::default()).await;
+    let addr = h.serve().await;
+    let admin = h.login("administrator", PASSWORD).await;
+    guest_screens(
+        &h,
+        &admin,
+        &[values_screen("feeder", &[TAG_RO])],
+        &["alarms", "custom:feeder"],
+    )
+    .await;
+    let guest = h.login("guest", PASSWORD).await;
+    let mut ws = live_socket(addr, &guest).await.unwrap();
+    assert_eq!(next_message(&mut ws).await.unwrap()["type"], "hello");
+
+    let names = subscribe(&mut ws, json!({"tags": [TAG_SUP, TAG_RO, TAG_OP]})).await;
+    assert_eq!(names, [TAG_RO]);
+    let names = subscribe(&mut ws, json!({"prefixes": ["T."]})).await;
+    assert_eq!(names, [TAG_RO]);
+    let names = subscribe(&mut ws, json!({"tags": [TAG_SUP, TAG_OP]})).await;
+    assert!(names.is_empty(), "{names:?}");
+    // Changes of the others are not pushed; of its own, they are.
+    subscribe(&mut ws, json!({"tags": [TAG_SUP, TAG_OP, TAG_RO]})).await;
+    let pushed = pushed_until_last(&h, &mut ws, &[TAG_SUP, TAG_OP, TAG_RO], 42.25).await;
+    assert!(pushed.iter().all(|n| n == TAG_RO), "{pushed:?}");
+}
+
+/// Issue 12 #5 and docs/ACCESS.md: after an administrator narrows the
+/// Guest group's screens, a new subscription on a socket opened before no
+/// longer carries the removed tags.
+#[tokio::test]
+async fn narrowed_screens_apply_to_an_open_socket_at_its_next_subscribe() {
+    let h = Harness::new(Options::default()).await;
+    let addr = h.serve().await;
+    let admin = h.login("administrator", PASSWORD).await;
+    let feeder = values_screen("feeder", &[TAG_RO, TAG_OP]);
+    let zone = values_screen("zone", &[TAG_OP]);
+    guest_screens(&h, &admin, &[feeder, zone], &["alarms", "custom:feeder"]).await;
+    let guest = h.login("guest", PASSWORD).await;
+    let mut ws = live_socket(addr, &guest).await.unwrap();
+    assert_eq!(next_message(&mut ws).await.unwrap()["type"], "hello");
+    let wanted = json!({"tags": [TAG_RO, TAG_OP]});
+    let names = subscribe(&mut ws, wanted.clone()).await;
+    assert_eq!(names, [TAG_RO, TAG_OP]);
+
+    guest_screens(&h, &admin, &[], &["alarms", "custom:zone"]).await;
+    let names = subscribe(&mut ws, wanted).await;
+    assert_eq!(names, [TAG_OP], "the removed screen's tag is still sent");
+    let pushed = pushed_until_last(&h, &mut ws, &[TAG_RO, TAG_OP], 3.0).await;
+    assert!(pushed.iter().all(|n| n == TAG_OP), "{pushed:?}");
+}

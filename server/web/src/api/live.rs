@@ -18,6 +18,7 @@ use gridscada_tagdb::{Quality, Sample, TagId, Timestamp, Update, Value};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
+use crate::access::Readable;
 use crate::auth::{token_from_cookies, Principal};
 use crate::error::ApiError;
 use crate::WebState;
@@ -118,6 +119,31 @@ fn tags_message(s: &WebState, pending: &BTreeMap<TagId, Sample>, snapshot: bool)
     serde_json::to_string(&msg).unwrap_or_default()
 }
 
+/// What the socket's user may read now. Their group's screens are read
+/// again at each subscription (one look-up of the user, one of the group),
+/// so a change of screen access applies to an open socket when it next
+/// (re)subscribes (docs/ACCESS.md). A user gone or blocked since, or a store
+/// that cannot answer, reads nothing.
+async fn readable_now(s: &WebState, who: &Principal) -> Readable {
+    let Some(name) = who.user.as_deref() else {
+        return s.readable(who);
+    };
+    let now = match s.store.user(name).await {
+        Ok(Some(u)) if !u.blocked => Principal {
+            screens: s.screens_of(&u.group, u.role).await,
+            user: Some(u.name),
+            role: u.role,
+            group: Some(u.group),
+        },
+        Ok(_) => Principal::anonymous(),
+        Err(e) => {
+            tracing::error!(error = %e, "reading a live socket's user");
+            Principal::anonymous()
+        }
+    };
+    s.readable(&now)
+}
+
 async fn run(
     s: WebState,
     who: Principal,
@@ -134,7 +160,6 @@ async fn run(
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let mut last_heartbeat = std::time::Instant::now();
 
-    let readable = s.readable(&who);
     let hello = json!({"type": "hello", "user": who.user, "role": who.role});
     socket.send(Message::Text(hello.to_string().into())).await?;
 
@@ -151,6 +176,7 @@ async fn run(
                             }
                         }
                         Ok(ClientMessage { subscribe: Some(sub_req), .. }) => {
+                            let readable = readable_now(&s, &who).await;
                             let mut ids: Vec<TagId> = sub_req.tags.iter().filter_map(|t| s.db.id(t)).collect();
                             for p in sub_req.prefixes.iter().filter(|p| !p.is_empty()) {
                                 ids.extend(s.db.ids_with_prefix(p));
