@@ -16,6 +16,10 @@ checks every decoded value against the value encoded here with pymodbus's own
 converters, and checks that the writes the poller made (coil, register,
 multi-register f32 and i32, bit in a register) landed in pymodbus's tables.
 
+Last, a slow device (every reply 0.2 s late, nine blocks, so a scan takes
+about 2 s): writes land in the middle of its scans, and each confirmed value
+must never be replaced by the scan's older reading (`--watch-ms`).
+
 Usage: interop_pymodbus_server.py INTEROP_POLL_BINARY
 Prints one line per check and a closing "N passed, M failed"; exits 1 on
 any failure.
@@ -180,13 +184,12 @@ class DevicePlan:
                     byte_order=bo,
                 )
                 addr += len(regs)
-        # u64 above i64::MAX: the tag database holds i64, so it reads as a
-        # float of the same magnitude (not wrapped negative).
+        # u64 above i64::MAX: exact, not rounded through a float.
         big = 18446744073709551000 - salt
         regs = CONVERT(big, DT.UINT64)
         for k, r in enumerate(regs):
             self.ir[addr + k] = r
-        self.tag("U64_Big", "input_register", addr, float(big), exact=False, type_="u64")
+        self.tag("U64_Big", "input_register", addr, big, type_="u64")
         addr += 4
         # Strings: even length, odd length (NUL padded), little byte order.
         for label, text, length, bo in [
@@ -303,6 +306,76 @@ class Servers:
             self.run(go(), timeout=5)
         except Exception:  # noqa: BLE001
             pass
+
+
+class SlowBlock(ModbusSequentialDataBlock):
+    """Holding registers that answer every access 0.2 s late."""
+
+    def getValues(self, address, count=1):  # noqa: N802 - pymodbus's name
+        time.sleep(0.2)
+        return super().getValues(address, count)
+
+
+SLOW_BLOCKS = 9
+
+
+def slow_device_interleaving(poll_bin, work):
+    """Writes to a slow device interleave with its scans and never roll back."""
+    servers = Servers()  # its own loop: the sleeps must not stall the others
+    try:
+        ctx = ModbusServerContext(
+            slaves={
+                1: ModbusSlaveContext(
+                    hr=SlowBlock(1, [0] * (SLOW_BLOCKS * 40 + 8)),
+                    ir=ModbusSequentialDataBlock(1, [0] * 8),
+                    co=ModbusSequentialDataBlock(1, [False] * 8),
+                    di=ModbusSequentialDataBlock(1, [False] * 8),
+                )
+            },
+            single=False,
+        )
+        port = free_port()
+        servers.start(lambda: ModbusTcpServer(ctx, address=("127.0.0.1", port)))
+        check(wait_for(lambda: port_open(port), 10), f"slow pymodbus server listens on 127.0.0.1:{port}")
+        # Blocks 40 registers apart (past max_gap): one request each.
+        text = (
+            f'[[device]]\nname = "SLOW"\nprotocol = "tcp"\naddress = "127.0.0.1:{port}"\n'
+            "unit_id = 1\nscan_ms = 200\ntimeout_ms = 1500\nretries = 0\n\n"
+        )
+        for b in range(SLOW_BLOCKS):
+            extra = 'writable = true\nwrite_role = "operator"\n' if b == 0 else ""
+            text += (
+                f'[[tag]]\nname = "SLOW.R{b}"\ndevice = "SLOW"\nkind = "holding_register"\n'
+                f"address = {b * 40}\n{extra}\n"
+            )
+        folder = os.path.join(work, "slow")
+        os.makedirs(folder)
+        with open(os.path.join(folder, "tags.toml"), "w") as f:
+            f.write(text)
+        with open(os.path.join(folder, "gridscada.toml"), "w") as f:
+            f.write('tag_files = ["tags.toml"]\n')
+        values = [4101, 4102, 4103]
+        cmd = [poll_bin, "--config", folder, "--wait-s", "20", "--watch-ms", "2500"]
+        for v in values:
+            cmd += ["--write", f"SLOW.R0={v}"]
+        run = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+        writes = []
+        for line in run.stdout.splitlines():
+            try:
+                obj = json.loads(line)
+            except json.JSONDecodeError:
+                continue
+            if "write" in obj:
+                writes.append(obj)
+        check(len(writes) == len(values), "slow device: every write answered", run.stderr[-500:])
+        for v, w in zip(values, writes):
+            check(w.get("ok") is True and w.get("value") == v,
+                  f"slow device: write SLOW.R0 := {v} confirmed mid-scan", str(w))
+            check(w.get("rollbacks") == 0,
+                  f"slow device: SLOW.R0 = {v} never replaced by an older scan's reading", str(w))
+        check(ctx[1].getValues(3, 0, 1) == [values[-1]], "slow device holds the last value written")
+    finally:
+        servers.stop()
 
 
 def wait_for(pred, seconds):
@@ -464,6 +537,8 @@ def main():
                     expect_back = float(value) if "." in value else int(value)
                 check(back.get("quality") == "good" and back.get("value") == expect_back,
                       f"read-back of {name} = {value}", str(back))
+
+        slow_device_interleaving(poll_bin, work)
     finally:
         servers.stop()
         if socat is not None:

@@ -4,7 +4,7 @@
 //!
 //! ```sh
 //! cargo run -p gridscada-modbus --example interop_poll -- \
-//!     --config PATH [--wait-s 10] [--write TAG=VALUE]...
+//!     --config PATH [--wait-s 10] [--watch-ms 0] [--write TAG=VALUE]...
 //! ```
 //!
 //! 1. Loads the configuration (`gridscada_config::load_path`), builds the tag
@@ -14,7 +14,11 @@
 //! 3. Performs each `--write` in order through the field writer (which
 //!    confirms by read-back) and prints one line per write:
 //!    `{"write":TAG,"ok":true,"value":V,"quality":"good"}` or
-//!    `{"write":TAG,"ok":false,"error":"..."}`.
+//!    `{"write":TAG,"ok":false,"error":"..."}`. With `--watch-ms N`, each
+//!    confirmed write is then watched for N ms: the line adds
+//!    `"rollbacks":K`, the number of times the tag database showed another
+//!    value, or an older timestamp, than the confirmed read-back (a scan
+//!    that read the register before the write must never overwrite it).
 //! 4. Prints every tag: `{"tag":NAME,"value":V,"quality":"good"|"uncertain"|"bad","reason":R}`.
 //!    Non-finite floats print as `null` with `"nonfinite":"NaN"` (or `inf`, `-inf`).
 //!
@@ -36,17 +40,20 @@ use gridscada_tagdb::{QualityCode, Sample, SystemClock, TagDb, Value};
 struct Args {
     config: PathBuf,
     wait: Duration,
+    watch: Duration,
     writes: Vec<(String, Value)>,
 }
 
 fn usage() -> String {
-    "usage: interop_poll --config PATH [--wait-s SECONDS] [--write TAG=VALUE]...".into()
+    "usage: interop_poll --config PATH [--wait-s SECONDS] [--watch-ms MS] [--write TAG=VALUE]..."
+        .into()
 }
 
 fn parse_args(mut it: impl Iterator<Item = String>) -> Result<Args, String> {
     let mut config = None;
     let mut wait = Duration::from_secs(10);
     let mut writes = Vec::new();
+    let mut watch = Duration::ZERO;
     while let Some(a) = it.next() {
         let mut next = |what: &str| it.next().ok_or_else(|| format!("{a} needs {what}"));
         match a.as_str() {
@@ -59,6 +66,13 @@ fn parse_args(mut it: impl Iterator<Item = String>) -> Result<Args, String> {
                     .filter(|v: &f64| v.is_finite() && *v >= 0.0 && *v < 3600.0)
                     .ok_or_else(|| format!("--wait-s {s}: not a number of seconds (0-3600)"))?;
                 wait = Duration::from_secs_f64(secs);
+            }
+            "--watch-ms" => {
+                let s = next("milliseconds")?;
+                let ms: u64 = s.parse().ok().filter(|v| *v <= 600_000).ok_or_else(|| {
+                    format!("--watch-ms {s}: not a number of milliseconds (0-600000)")
+                })?;
+                watch = Duration::from_millis(ms);
             }
             "--write" => {
                 let w = next("TAG=VALUE")?;
@@ -74,6 +88,7 @@ fn parse_args(mut it: impl Iterator<Item = String>) -> Result<Args, String> {
     Ok(Args {
         config: config.ok_or_else(usage)?,
         wait,
+        watch,
         writes,
     })
 }
@@ -85,6 +100,8 @@ fn parse_value(s: &str) -> Value {
         _ => {
             if let Ok(i) = s.parse::<i64>() {
                 Value::Int(i)
+            } else if let Ok(u) = s.parse::<u64>() {
+                Value::from_u64(u)
             } else if let Ok(f) = s.parse::<f64>() {
                 Value::Float(f)
             } else {
@@ -139,6 +156,26 @@ fn json_quality(s: &Sample) -> String {
         .map(json_str)
         .unwrap_or_else(|| "null".into());
     format!("\"quality\":\"{code}\",\"reason\":{reason}")
+}
+
+/// Watches `tag` for `window` after a confirmed write: how many times it
+/// showed another value, or an older timestamp, than the confirmed sample.
+async fn watch_for_rollbacks(db: &TagDb, tag: &str, confirmed: &Sample, window: Duration) -> u64 {
+    let start = Instant::now();
+    let mut rollbacks = 0;
+    let mut last_bad = false;
+    while start.elapsed() < window {
+        if let Some(now) = db.get_by_name(tag) {
+            // A newer sample of the same value (the next scans) is fine.
+            let bad = now.value != confirmed.value || now.timestamp < confirmed.timestamp;
+            if bad && !last_bad {
+                rollbacks += 1;
+            }
+            last_bad = bad;
+        }
+        tokio::time::sleep(Duration::from_millis(2)).await;
+    }
+    rollbacks
 }
 
 fn main() -> ExitCode {
@@ -206,12 +243,15 @@ fn main() -> ExitCode {
             let r = tokio::time::timeout(Duration::from_secs(15), writer.write(tag, value.clone()))
                 .await;
             let line = match r {
-                Ok(Ok(s)) => format!(
-                    "{{\"write\":{},\"ok\":true,{},{}}}",
-                    json_str(tag),
-                    json_value(&s.value),
-                    json_quality(&s)
-                ),
+                Ok(Ok(s)) => {
+                    let rollbacks = watch_for_rollbacks(&db, tag, &s, args.watch).await;
+                    format!(
+                        "{{\"write\":{},\"ok\":true,{},{},\"rollbacks\":{rollbacks}}}",
+                        json_str(tag),
+                        json_value(&s.value),
+                        json_quality(&s)
+                    )
+                }
                 Ok(Err(e)) => {
                     all_ok = false;
                     format!(
