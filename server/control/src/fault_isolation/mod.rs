@@ -1,7 +1,7 @@
 //! OLUC/OLDC automatic fault isolation of LV substation panels.
 //!
 //! **Owns:** the sequence of each panel: a pure state machine ([`Sequence`],
-//! in `machine.rs`) and a thin async driver ([`run_panel`], in `driver.rs`)
+//! in `machine/`) and a thin async driver ([`run_panel`], in `driver.rs`)
 //! that feeds it snapshots of the panel's tags, runs its timers on the plant
 //! [`Clock`](gridscada_tagdb::Clock), writes its commands through a
 //! [`TagWriter`](gridscada_tagdb::TagWriter), publishes a [`PanelStatus`] and

@@ -1,0 +1,206 @@
+//! Alarm definitions: from the plant's tags and devices, for system alarms,
+//! their validation, and how their messages show values.
+
+use std::time::Duration;
+
+use gridscada_config::{AlarmConfig, LimitAlarm, Plant, TagConfig};
+use gridscada_tagdb::Value;
+
+use crate::machine::{format_value, AlarmDef, Condition};
+use crate::model::{comm_key, discrete_key, limit_key};
+use crate::model::{AlarmError, AlarmKind};
+
+use super::operations::secs;
+use super::COMM_PRIORITY;
+
+pub(super) fn validate_def(def: &AlarmDef) -> Result<(), AlarmError> {
+    if def.key.trim().is_empty() {
+        return Err(AlarmError::invalid("alarm", "the key must not be empty"));
+    }
+    match &def.condition {
+        Condition::Above { limit, deadband } | Condition::Below { limit, deadband } => {
+            if !limit.is_finite() {
+                return Err(AlarmError::invalid(
+                    format!("alarm '{}'", def.key),
+                    "the limit must be a finite number",
+                ));
+            }
+            if !deadband.is_finite() || *deadband < 0.0 {
+                return Err(AlarmError::invalid(
+                    format!("alarm '{}'", def.key),
+                    "the deadband must be a non-negative number",
+                ));
+            }
+        }
+        Condition::Equals(Value::Float(f)) if !f.is_finite() => {
+            return Err(AlarmError::invalid(
+                format!("alarm '{}'", def.key),
+                "the alarm value must be a finite number",
+            ));
+        }
+        _ => {}
+    }
+    Ok(())
+}
+
+pub(super) fn system_def(key: &str, priority: u32, selection: &str, message: &str) -> AlarmDef {
+    AlarmDef {
+        key: key.trim().to_owned(),
+        tag: None,
+        kind: AlarmKind::System,
+        priority,
+        selection: selection.trim().to_owned(),
+        message: message.to_owned(),
+        units: String::new(),
+        device: None,
+        condition: Condition::External,
+        on_delay: Duration::ZERO,
+        off_delay: Duration::ZERO,
+    }
+}
+
+/// The first segment of a dotted name (`SS1.PA.V_L1` -> `SS1`).
+pub fn first_segment(name: &str) -> &str {
+    name.split('.').next().unwrap_or(name)
+}
+
+/// The alarm definitions of a plant: every tag's limit and discrete alarms,
+/// then one comm alarm per device.
+pub fn plant_defs(plant: &Plant) -> Result<Vec<AlarmDef>, AlarmError> {
+    let mut defs = Vec::new();
+    for tag in &plant.tags {
+        if let Some(a) = &tag.alarm {
+            tag_defs(tag, a, &mut defs)?;
+        }
+    }
+    for d in &plant.devices {
+        let device = d.name.get_ref();
+        defs.push(AlarmDef {
+            key: comm_key(device),
+            tag: Some(format!("{device}.Comm.Connected")),
+            kind: AlarmKind::CommFail,
+            priority: COMM_PRIORITY,
+            selection: first_segment(device).to_owned(),
+            message: "Communication lost with {device}: {error}".into(),
+            units: String::new(),
+            device: Some(device.clone()),
+            condition: Condition::CommLost,
+            on_delay: Duration::ZERO,
+            off_delay: Duration::ZERO,
+        });
+    }
+    Ok(defs)
+}
+
+fn tag_defs(tag: &TagConfig, a: &AlarmConfig, defs: &mut Vec<AlarmDef>) -> Result<(), AlarmError> {
+    let name = tag.name.get_ref();
+    let default_selection = a
+        .selection
+        .clone()
+        .unwrap_or_else(|| first_segment(name).to_owned());
+    let limits: [(AlarmKind, &Option<LimitAlarm>); 4] = [
+        (AlarmKind::HiHi, &a.hihi),
+        (AlarmKind::Hi, &a.hi),
+        (AlarmKind::Lo, &a.lo),
+        (AlarmKind::LoLo, &a.lolo),
+    ];
+    for (kind, l) in limits {
+        let Some(l) = l else { continue };
+        let key = limit_key(name, kind);
+        let limit = *l.limit.get_ref();
+        let deadband = *l.deadband.get_ref();
+        let condition = match kind {
+            AlarmKind::HiHi | AlarmKind::Hi => Condition::Above { limit, deadband },
+            _ => Condition::Below { limit, deadband },
+        };
+        defs.push(AlarmDef {
+            on_delay: secs(
+                &format!("alarm '{key}' on_delay_s"),
+                *l.on_delay_s.get_ref(),
+            )?,
+            off_delay: secs(
+                &format!("alarm '{key}' off_delay_s"),
+                *l.off_delay_s.get_ref(),
+            )?,
+            key,
+            tag: Some(name.clone()),
+            kind,
+            priority: l.priority,
+            selection: l
+                .selection
+                .clone()
+                .unwrap_or_else(|| default_selection.clone()),
+            message: l
+                .message
+                .clone()
+                .unwrap_or_else(|| default_limit_message(kind, &tag.units)),
+            units: tag.units.clone(),
+            device: Some(tag.device.get_ref().clone()),
+            condition,
+        });
+    }
+    for (i, d) in a.discrete.iter().enumerate() {
+        let key = discrete_key(name, i);
+        let when = match d.when.get_ref() {
+            toml::Value::Boolean(b) => Value::Bool(*b),
+            toml::Value::Integer(i) => Value::Int(*i),
+            toml::Value::Float(f) => Value::Float(*f),
+            toml::Value::String(s) => Value::Str(s.as_str().into()),
+            other => {
+                return Err(AlarmError::invalid(
+                    format!("alarm '{key}'"),
+                    format!("'when = {other}' must be a boolean, number or string"),
+                ))
+            }
+        };
+        let message = d.message.clone().unwrap_or_else(|| {
+            if tag.description.trim().is_empty() {
+                "{tag} = {value}".to_owned()
+            } else {
+                format!("{{tag}} ({}) = {{value}}", tag.description.trim())
+            }
+        });
+        defs.push(AlarmDef {
+            on_delay: secs(
+                &format!("alarm '{key}' on_delay_s"),
+                *d.on_delay_s.get_ref(),
+            )?,
+            off_delay: secs(
+                &format!("alarm '{key}' off_delay_s"),
+                *d.off_delay_s.get_ref(),
+            )?,
+            key,
+            tag: Some(name.clone()),
+            kind: AlarmKind::Discrete,
+            priority: d.priority,
+            selection: d
+                .selection
+                .clone()
+                .unwrap_or_else(|| default_selection.clone()),
+            message,
+            units: tag.units.clone(),
+            device: Some(tag.device.get_ref().clone()),
+            condition: Condition::Equals(when),
+        });
+    }
+    Ok(())
+}
+
+fn default_limit_message(kind: AlarmKind, units: &str) -> String {
+    let what = match kind {
+        AlarmKind::HiHi => "very high",
+        AlarmKind::Hi => "high",
+        AlarmKind::Lo => "low",
+        _ => "very low",
+    };
+    if units.trim().is_empty() {
+        format!("{{tag}} {what}: {{value}} (limit {{limit}})")
+    } else {
+        format!("{{tag}} {what}: {{value}} {{units}} (limit {{limit}} {{units}})")
+    }
+}
+
+/// Formats a value as messages do (exposed for the web layer's tables).
+pub fn display_value(v: &Value) -> String {
+    format_value(v)
+}

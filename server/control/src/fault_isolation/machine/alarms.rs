@@ -1,0 +1,89 @@
+//! What the sequence annunciates: alarm priorities and keys, raising and
+//! clearing its alarms, and its events.
+
+use super::io::Output;
+use super::Sequence;
+
+/// Alarm priorities (the alarm engine's scale: higher is more urgent).
+pub mod priority {
+    pub const ELCB_TRIP: u32 = 900;
+    pub const LOAD0_FAULT: u32 = 900;
+    pub const LOCKOUT: u32 = 900;
+    pub const MISMATCH: u32 = 800;
+    pub const COMM_LOST: u32 = 800;
+    pub const ZONE_ISOLATED: u32 = 700;
+}
+
+/// Key of the lockout alarm.
+pub(super) const LOCKOUT_ALARM: &str = "lockout";
+
+/// Key of the alarm of a faulty load.
+pub(super) fn faulty_alarm_key(load: u8) -> String {
+    if load == 0 {
+        "load0.fault".into()
+    } else {
+        format!("zone{load}.isolated")
+    }
+}
+
+impl Sequence {
+    pub(super) fn raise_faulty_alarm(&mut self, load: u8, out: &mut Vec<Output>) {
+        let (priority, message) = if load == 0 {
+            (
+                priority::LOAD0_FAULT,
+                "fault on load 0 (main MCCB / busbar): nothing can be restored".to_string(),
+            )
+        } else {
+            (
+                priority::ZONE_ISOLATED,
+                format!("zone {load} is faulty and isolated (left off)"),
+            )
+        };
+        self.raise(&faulty_alarm_key(load), priority, message, out);
+    }
+
+    pub(super) fn raise_trip_alarm(&mut self, out: &mut Vec<Output>) {
+        self.raise(
+            "elcb.trip",
+            priority::ELCB_TRIP,
+            "ELCB tripped: supply to all zones lost".into(),
+            out,
+        );
+    }
+
+    pub(super) fn raise(
+        &mut self,
+        key: &str,
+        priority: u32,
+        message: String,
+        out: &mut Vec<Output>,
+    ) {
+        if self
+            .active_alarms
+            .insert(key.to_string(), priority)
+            .is_none()
+        {
+            out.push(Output::Alarm {
+                key: key.to_string(),
+                active: true,
+                priority,
+                message,
+            });
+        }
+    }
+
+    pub(super) fn clear(&mut self, key: &str, out: &mut Vec<Output>) {
+        if let Some(priority) = self.active_alarms.remove(key) {
+            out.push(Output::Alarm {
+                key: key.to_string(),
+                active: false,
+                priority,
+                message: format!("{key}: cleared"),
+            });
+        }
+    }
+}
+
+pub(super) fn event(out: &mut Vec<Output>, kind: &'static str, message: String) {
+    out.push(Output::Event { kind, message });
+}
