@@ -17,6 +17,10 @@ pub mod priority {
 /// Key of the lockout alarm.
 pub(super) const LOCKOUT_ALARM: &str = "lockout";
 
+/// Key of the alarm of healthy loads left off in automatic mode (cleared by
+/// the next sequence, or by manual mode).
+pub(super) const LOADS_OFF_ALARM: &str = "loads_off";
+
 /// Key of the alarm of a faulty load.
 pub(super) fn faulty_alarm_key(load: u8) -> String {
     if load == 0 {
