@@ -154,6 +154,45 @@ pub struct DeviceConfig {
     /// their timestamp from it instead of the time their reply arrived.
     #[serde(default)]
     pub time_tag: Option<Spanned<String>>,
+    /// The device's communication-failure alarm.
+    #[serde(default)]
+    pub comm_alarm: CommAlarmConfig,
+}
+
+/// A device's communication-failure alarm (`[device.comm_alarm]`): active
+/// once the device has not answered for `on_delay_s`, cleared once it has
+/// answered again for `off_delay_s`, so a device that drops out for a moment,
+/// or answers in fits, does not chatter.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct CommAlarmConfig {
+    #[serde(default = "default_comm_on_delay")]
+    pub on_delay_s: Spanned<f64>,
+    #[serde(default = "default_comm_off_delay")]
+    pub off_delay_s: Spanned<f64>,
+    #[serde(default = "default_comm_priority")]
+    pub priority: u32,
+}
+
+impl Default for CommAlarmConfig {
+    fn default() -> Self {
+        CommAlarmConfig {
+            on_delay_s: default_comm_on_delay(),
+            off_delay_s: default_comm_off_delay(),
+            priority: default_comm_priority(),
+        }
+    }
+}
+
+fn default_comm_on_delay() -> Spanned<f64> {
+    Spanned::new(0..0, 2.0)
+}
+fn default_comm_off_delay() -> Spanned<f64> {
+    Spanned::new(0..0, 5.0)
+}
+/// High: every value of the device is stale while it stands.
+fn default_comm_priority() -> u32 {
+    800
 }
 
 fn default_unit_id() -> Spanned<u8> {

@@ -142,6 +142,18 @@ fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
 fn check_device(cx: &mut Ctx<'_>, f: usize, d: &DeviceConfig) {
     let name = d.name.get_ref();
     let at = d.name.span();
+    for (field, v) in [
+        ("on_delay_s", &d.comm_alarm.on_delay_s),
+        ("off_delay_s", &d.comm_alarm.off_delay_s),
+    ] {
+        if !(v.get_ref().is_finite() && (0.0..=3600.0).contains(v.get_ref())) {
+            cx.err(
+                f,
+                v.span(),
+                format!("device '{name}': comm_alarm {field} must be 0 to 3600 seconds"),
+            );
+        }
+    }
     match d.protocol {
         Protocol::Tcp => {
             match &d.address {

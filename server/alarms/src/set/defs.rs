@@ -11,7 +11,6 @@ use crate::model::{comm_key, discrete_key, limit_key};
 use crate::model::{AlarmError, AlarmKind};
 
 use super::operations::secs;
-use super::COMM_PRIORITY;
 
 pub(super) fn validate_def(def: &AlarmDef) -> Result<(), AlarmError> {
     if def.key.trim().is_empty() {
@@ -79,14 +78,14 @@ pub fn plant_defs(plant: &Plant) -> Result<Vec<AlarmDef>, AlarmError> {
             key: comm_key(device),
             tag: Some(format!("{device}.Comm.Connected")),
             kind: AlarmKind::CommFail,
-            priority: COMM_PRIORITY,
+            priority: d.comm_alarm.priority,
             selection: first_segment(device).to_owned(),
             message: "Communication lost with {device}: {error}".into(),
             units: String::new(),
             device: Some(device.clone()),
             condition: Condition::CommLost,
-            on_delay: Duration::ZERO,
-            off_delay: Duration::ZERO,
+            on_delay: Duration::from_secs_f64(*d.comm_alarm.on_delay_s.get_ref()),
+            off_delay: Duration::from_secs_f64(*d.comm_alarm.off_delay_s.get_ref()),
         });
     }
     Ok(defs)
