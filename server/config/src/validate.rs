@@ -422,6 +422,40 @@ fn check_tag(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, device: Option<&DeviceCo
     }
     // Writes.
     let writable = *t.writable.get_ref();
+    if let Some(states) = &t.states {
+        let kind = t.value_kind();
+        for (key, label) in states.get_ref() {
+            let key_ok = match kind {
+                ValueKind::Bool => key == "true" || key == "false",
+                ValueKind::Int => key.parse::<i64>().is_ok(),
+                _ => false,
+            };
+            if !key_ok {
+                let want = match kind {
+                    ValueKind::Bool => "true or false",
+                    ValueKind::Int => "whole numbers",
+                    _ => "nothing: states are for bool and integer tags",
+                };
+                cx.err(
+                    f,
+                    states.span(),
+                    format!("tag '{name}': states key '{key}' is not a value of this tag (keys are {want})"),
+                );
+            }
+            if label.trim().is_empty()
+                || label.chars().count() > 40
+                || label.chars().any(char::is_control)
+            {
+                cx.err(
+                    f,
+                    states.span(),
+                    format!(
+                        "tag '{name}': states label for {key} must be 1 to 40 printable characters"
+                    ),
+                );
+            }
+        }
+    }
     if writable && ty == DataType::DateTime {
         cx.err(
             f,

@@ -1,6 +1,7 @@
 //! Alarm definitions: from the plant's tags and devices, for system alarms,
 //! their validation, and how their messages show values.
 
+use std::sync::Arc;
 use std::time::Duration;
 
 use gridscada_config::{AlarmConfig, LimitAlarm, Plant, TagConfig};
@@ -52,6 +53,7 @@ pub(super) fn system_def(key: &str, priority: u32, selection: &str, message: &st
         message: message.to_owned(),
         units: String::new(),
         device: None,
+        states: None,
         condition: Condition::External,
         on_delay: Duration::ZERO,
         off_delay: Duration::ZERO,
@@ -83,6 +85,7 @@ pub fn plant_defs(plant: &Plant) -> Result<Vec<AlarmDef>, AlarmError> {
             message: "Communication lost with {device}: {error}".into(),
             units: String::new(),
             device: Some(device.clone()),
+            states: None,
             condition: Condition::CommLost,
             on_delay: Duration::from_secs_f64(*d.comm_alarm.on_delay_s.get_ref()),
             off_delay: Duration::from_secs_f64(*d.comm_alarm.off_delay_s.get_ref()),
@@ -135,6 +138,7 @@ fn tag_defs(tag: &TagConfig, a: &AlarmConfig, defs: &mut Vec<AlarmDef>) -> Resul
                 .unwrap_or_else(|| default_limit_message(kind, &tag.units)),
             units: tag.units.clone(),
             device: Some(tag.device.get_ref().clone()),
+            states: tag.states.as_ref().map(|s| Arc::new(s.get_ref().clone())),
             condition,
         });
     }
@@ -179,6 +183,7 @@ fn tag_defs(tag: &TagConfig, a: &AlarmConfig, defs: &mut Vec<AlarmDef>) -> Resul
             message,
             units: tag.units.clone(),
             device: Some(tag.device.get_ref().clone()),
+            states: tag.states.as_ref().map(|s| Arc::new(s.get_ref().clone())),
             condition: Condition::Equals(when),
         });
     }

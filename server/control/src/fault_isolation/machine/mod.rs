@@ -203,7 +203,7 @@ mod steps;
 
 pub use gridscada_config::PanelMode as Mode;
 
-pub use alarms::priority;
+pub use alarms::{priority, ELCB_TRIP_ALARM};
 pub use io::{
     Breaker, CommandError, Input, OperatorCommand, Output, PanelState, Reading, Settings, Snapshot,
     Timer,

@@ -2,7 +2,7 @@
 //! OLUC and OLDC walks with their dwells, the end of a sequence and the
 //! lockout, and moving between steps and timers.
 
-use super::alarms::{event, priority, LOADS_OFF_ALARM, LOCKOUT_ALARM};
+use super::alarms::{event, priority, ELCB_TRIP_ALARM, LOADS_OFF_ALARM, LOCKOUT_ALARM};
 use super::io::{Breaker, Output, Timer};
 use super::step::{Metrics, Outcome, Step};
 use super::{Mode, Sequence};
@@ -123,7 +123,7 @@ impl Sequence {
         match self.step {
             Step::Tripped => self.on_confirmed_tripped(now_s, out),
             Step::ElcbReset => {
-                self.clear("elcb.trip", out);
+                self.clear(ELCB_TRIP_ALARM, out);
                 event(
                     out,
                     "elcb_reclosed",
