@@ -123,7 +123,8 @@ enum UserCommand {
     Add {
         /// The user's login name.
         name: String,
-        /// guest (views only), operator (acknowledges alarms, operates
+        /// display (a wall display: views only, its session never idles
+        /// out), guest (views only), operator (acknowledges alarms, operates
         /// breakers in manual mode, writes operator tags), supervisor (also
         /// switches modes, shelves alarms, writes supervisor tags) or
         /// administrator (also manages users, screen access and screens).
@@ -151,13 +152,12 @@ enum DispatchCommand {
 fn parse_role(s: &str) -> Result<gridscada_config::Role, String> {
     use gridscada_config::Role;
     match s {
-        "guest" => Ok(Role::Guest),
-        "operator" => Ok(Role::Operator),
-        "supervisor" => Ok(Role::Supervisor),
-        "administrator" | "admin" => Ok(Role::Administrator),
-        other => Err(format!(
-            "'{other}' is not a role; use guest, operator, supervisor or administrator"
-        )),
+        "admin" => Ok(Role::Administrator),
+        other => Role::parse(other).ok_or_else(|| {
+            format!(
+                "'{other}' is not a role; use display, guest, operator, supervisor or administrator"
+            )
+        }),
     }
 }
 

@@ -619,7 +619,8 @@ async fn load_screens(web: &gridscada_web::WebState, mode: Mode) -> anyhow::Resu
 
 /// The web layer's view of a running stack.
 pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
-    let auth = gridscada_web::Auth::new(Default::default(), false).await;
+    let policy = gridscada_web::auth::SessionPolicy::from_config(&stack.plant.server.sessions);
+    let auth = gridscada_web::Auth::new(policy, false).await;
     // Abandoned sessions are forgotten, not kept until the next restart.
     let sessions = Arc::downgrade(&auth.sessions);
     tokio::spawn(async move {

@@ -120,6 +120,34 @@ fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
             ),
         );
     }
+    let sessions = &main.server.sessions;
+    for (role, minutes) in sessions.idle_minutes.get_ref() {
+        if !(minutes.is_finite() && (0.0..=10_080.0).contains(minutes)) {
+            cx.err(
+                0,
+                sessions.idle_minutes.span(),
+                format!(
+                    "[server.sessions] idle_minutes.{}: {minutes} must be 0 (never) to 10080 (a week)",
+                    role.label()
+                ),
+            );
+        }
+    }
+    let hours = *sessions.absolute_hours.get_ref();
+    if !(hours.is_finite() && (0.0..=720.0).contains(&hours)) {
+        cx.err(
+            0,
+            sessions.absolute_hours.span(),
+            format!("[server.sessions] absolute_hours: {hours} must be 0 (never) to 720"),
+        );
+    }
+    if *sessions.warn_s.get_ref() > 3600 {
+        cx.err(
+            0,
+            sessions.warn_s.span(),
+            "[server.sessions] warn_s: at most 3600 seconds",
+        );
+    }
     let url = &main.storage.url;
     let u = url.get_ref();
     if !(u.starts_with("sqlite:") || u.starts_with("postgres://") || u.starts_with("postgresql://"))

@@ -487,3 +487,24 @@ fn comm_alarm_delays_are_checked() {
         ],
     );
 }
+
+#[test]
+fn session_policy_is_checked() {
+    let main = "tag_files = [\"tags.toml\"]\n[server.sessions]\nidle_minutes = { operator = -1.0, display = 0.0 }\nabsolute_hours = 1000.0\nwarn_s = 7200\n";
+    let tags = format!("{DEVICE}\n[[tag]]\nname = \"A.V\"\ndevice = \"D1\"\nkind = \"input_register\"\naddress = 0\n");
+    let got = problems(main, &tags);
+    assert_eq!(got.len(), 3, "{got:?}");
+    assert!(
+        got[0].contains("idle_minutes.operator: -1 must be 0 (never) to 10080"),
+        "{got:?}"
+    );
+    assert!(
+        got[1].contains("absolute_hours: 1000 must be 0 (never) to 720"),
+        "{got:?}"
+    );
+    assert!(got[2].contains("warn_s: at most 3600 seconds"), "{got:?}");
+    assert!(
+        got.iter().all(|g| g.starts_with("DIR/gridscada.toml:")),
+        "{got:?}"
+    );
+}

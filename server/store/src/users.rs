@@ -61,16 +61,10 @@ impl User {
 }
 
 fn role_from(s: &str) -> Result<Role> {
-    Ok(match s {
-        "guest" => Role::Guest,
-        "operator" => Role::Operator,
-        "supervisor" => Role::Supervisor,
-        "administrator" => Role::Administrator,
-        other => {
-            return Err(StoreError::Corrupt(format!(
-                "user role '{other}' is not one of guest, operator, supervisor, administrator"
-            )))
-        }
+    Role::parse(s).ok_or_else(|| {
+        StoreError::Corrupt(format!(
+            "user role '{s}' is not one of display, guest, operator, supervisor, administrator"
+        ))
     })
 }
 

@@ -142,15 +142,16 @@ pub fn screen_exists(plant: &Plant, library: &ScreenLibrary, id: &str) -> bool {
 }
 
 /// The screens a group named after a role may open before an administrator
-/// changes it. Guests see the plant's overview screens and the alarms, never
-/// the engineering screens (tags, devices) or the tools of administrators.
+/// changes it. Guests and displays see the plant's overview screens and the
+/// alarms, never the engineering screens (tags, devices) or the tools of
+/// administrators.
 pub fn default_screens(plant: &Plant, library: &ScreenLibrary, role: Role) -> Vec<String> {
     catalog(plant, library)
         .into_iter()
         .filter(|e| match role {
             Role::Administrator => true,
             Role::Supervisor | Role::Operator => !ADMIN_ONLY.contains(&e.id.as_str()),
-            Role::Guest => {
+            Role::Guest | Role::Display => {
                 matches!(e.kind, ScreenKind::Builtin)
                     && ["main", "microgrid", "alarms", "trends"].contains(&e.id.as_str())
             }

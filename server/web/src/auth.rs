@@ -227,10 +227,27 @@ pub fn check_password_strength(password: &str) -> Result<(), String> {
 
 // --- sessions --------------------------------------------------------------
 
+/// When sessions end: an idle timeout and an absolute lifetime, each per
+/// role (group), `None` meaning never. The HMI's live connection counts as
+/// activity while its screen is visible.
 #[derive(Debug, Clone)]
 pub struct SessionPolicy {
+    /// The default idle timeout.
     pub idle: Duration,
+    /// The default absolute lifetime.
     pub absolute: Duration,
+    /// Per-role exceptions to the defaults (by default: a `display` session
+    /// never ends by itself).
+    pub by_role: std::collections::BTreeMap<Role, Expiry>,
+    /// How long before an idle expiry the HMI warns.
+    pub warn: Duration,
+}
+
+/// When one role's sessions end; `None`: never.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Expiry {
+    pub idle: Option<Duration>,
+    pub absolute: Option<Duration>,
 }
 
 impl Default for SessionPolicy {
@@ -238,15 +255,65 @@ impl Default for SessionPolicy {
         SessionPolicy {
             idle: Duration::from_secs(30 * 60),
             absolute: Duration::from_secs(12 * 3600),
+            by_role: [(
+                Role::Display,
+                Expiry {
+                    idle: None,
+                    absolute: None,
+                },
+            )]
+            .into(),
+            warn: Duration::from_secs(60),
         }
+    }
+}
+
+impl SessionPolicy {
+    /// The policy of `[server.sessions]`.
+    pub fn from_config(c: &gridscada_config::SessionsConfig) -> Self {
+        SessionPolicy {
+            by_role: Role::ALL
+                .into_iter()
+                .map(|r| {
+                    let e = Expiry {
+                        idle: c.idle(r),
+                        absolute: c.absolute(r),
+                    };
+                    (r, e)
+                })
+                .collect(),
+            warn: Duration::from_secs(*c.warn_s.get_ref()),
+            ..SessionPolicy::default()
+        }
+    }
+
+    /// When sessions of `role` end.
+    pub fn expiry(&self, role: Role) -> Expiry {
+        self.by_role.get(&role).copied().unwrap_or(Expiry {
+            idle: Some(self.idle),
+            absolute: Some(self.absolute),
+        })
     }
 }
 
 #[derive(Debug, Clone)]
 struct Session {
     user: String,
+    expiry: Expiry,
     created: Instant,
     last_seen: Instant,
+}
+
+impl Session {
+    fn expired(&self, now: Instant) -> bool {
+        self.expiry
+            .idle
+            .is_some_and(|d| now.duration_since(self.last_seen) > d)
+            || self
+                .expiry
+                .absolute
+                .is_some_and(|d| now.duration_since(self.created) > d)
+    }
 }
 
 /// Server-side sessions, keyed by token.
@@ -266,9 +333,9 @@ impl Sessions {
         }
     }
 
-    /// Starts a session for `user` and returns its new token. Any token the
-    /// client held before is ended (rotation on login).
-    pub fn create(&self, user: &str, previous: Option<&str>) -> String {
+    /// Starts a session for `user` (of `role`) and returns its new token.
+    /// Any token the client held before is ended (rotation on login).
+    pub fn create(&self, user: &str, role: Role, previous: Option<&str>) -> String {
         let token = new_token();
         let now = Instant::now();
         let mut map = self.by_token.lock();
@@ -279,6 +346,7 @@ impl Sessions {
             token.clone(),
             Session {
                 user: user.to_string(),
+                expiry: self.policy.expiry(role),
                 created: now,
                 last_seen: now,
             },
@@ -293,9 +361,7 @@ impl Sessions {
         let now = Instant::now();
         let mut map = self.by_token.lock();
         let s = map.get_mut(token)?;
-        if now.duration_since(s.last_seen) > self.policy.idle
-            || now.duration_since(s.created) > self.policy.absolute
-        {
+        if s.expired(now) {
             map.remove(token);
             drop(map);
             self.ended.send_modify(|v| *v += 1);
@@ -308,10 +374,10 @@ impl Sessions {
     /// Whether a token is still live, without touching its idle timer.
     pub fn is_live(&self, token: &str) -> bool {
         let now = Instant::now();
-        self.by_token.lock().get(token).is_some_and(|s| {
-            now.duration_since(s.last_seen) <= self.policy.idle
-                && now.duration_since(s.created) <= self.policy.absolute
-        })
+        self.by_token
+            .lock()
+            .get(token)
+            .is_some_and(|s| !s.expired(now))
     }
 
     pub fn end(&self, token: &str) {
@@ -338,10 +404,12 @@ impl Sessions {
     /// not pile up.
     pub fn sweep(&self) {
         let now = Instant::now();
-        self.by_token.lock().retain(|_, s| {
-            now.duration_since(s.last_seen) <= self.policy.idle
-                && now.duration_since(s.created) <= self.policy.absolute
-        });
+        self.by_token.lock().retain(|_, s| !s.expired(now));
+    }
+
+    /// The session policy.
+    pub fn policy(&self) -> &SessionPolicy {
+        &self.policy
     }
 
     /// Notified whenever any session ends.
@@ -658,9 +726,9 @@ mod tests {
     #[test]
     fn sessions_rotate_and_end() {
         let s = Sessions::new(SessionPolicy::default());
-        let a = s.create("ann", None);
+        let a = s.create("ann", Role::Operator, None);
         assert_eq!(s.user(&a).as_deref(), Some("ann"));
-        let b = s.create("ann", Some(&a));
+        let b = s.create("ann", Role::Operator, Some(&a));
         assert_ne!(a, b);
         assert!(s.user(&a).is_none(), "the old token dies at login");
         s.end(&b);
@@ -672,8 +740,9 @@ mod tests {
         let s = Sessions::new(SessionPolicy {
             idle: Duration::from_millis(20),
             absolute: Duration::from_secs(60),
+            ..Default::default()
         });
-        let t = s.create("ann", None);
+        let t = s.create("ann", Role::Operator, None);
         std::thread::sleep(Duration::from_millis(40));
         assert!(s.user(&t).is_none());
     }

@@ -106,6 +106,7 @@ async fn heartbeats_and_a_visible_screen_keep_a_watch_session() {
         policy: gridscada_web::auth::SessionPolicy {
             idle: Duration::from_millis(1500),
             absolute: Duration::from_secs(60),
+            ..Default::default()
         },
         ..Options::default()
     })

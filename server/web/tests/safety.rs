@@ -154,6 +154,7 @@ async fn an_idle_session_expires() {
         policy: SessionPolicy {
             idle: Duration::from_millis(150),
             absolute: Duration::from_secs(60),
+            ..Default::default()
         },
         ..Default::default()
     })
@@ -171,6 +172,74 @@ async fn an_idle_session_expires() {
             .await
             .status,
         StatusCode::UNAUTHORIZED
+    );
+}
+
+/// A wall display stays logged in however long it idles, and commands
+/// nothing; the session says when each group idles out, for the HMI's
+/// warning.
+#[tokio::test]
+async fn a_display_session_never_idles_out_and_commands_nothing() {
+    let h = Harness::new(Options {
+        policy: SessionPolicy {
+            idle: Duration::from_millis(150),
+            absolute: Duration::from_secs(60),
+            ..Default::default()
+        },
+        ..Default::default()
+    })
+    .await;
+    let display = h.login("display", PASSWORD).await;
+    let guest = h.login("guest", PASSWORD).await;
+    let session = |c: String| {
+        let h = &h;
+        async move {
+            h.call(Method::GET, "/api/session", Some(&c), None)
+                .await
+                .json()
+        }
+    };
+    let d = session(display.clone()).await;
+    assert_eq!(
+        (d["role"].as_str(), d["idle_timeout_s"].is_null()),
+        (Some("display"), true),
+        "{d}"
+    );
+    let g = session(guest.clone()).await;
+    assert_eq!(g["idle_timeout_s"], 0, "150 ms rounds down to 0 s: {g}");
+    assert_eq!(g["warn_s"], 60);
+    tokio::time::sleep(Duration::from_millis(400)).await;
+    let get = |c: String| {
+        let h = &h;
+        async move {
+            h.call(Method::GET, "/api/tags", Some(&c), None)
+                .await
+                .status
+        }
+    };
+    assert_eq!(
+        get(display.clone()).await,
+        StatusCode::OK,
+        "the display is still logged in"
+    );
+    assert_eq!(
+        get(guest).await,
+        StatusCode::UNAUTHORIZED,
+        "the guest idled out"
+    );
+    for (path, body) in [
+        (
+            "/api/tags/T.Zone1.Reset/write",
+            serde_json::json!({"value": true}),
+        ),
+        ("/api/alarms/ack", serde_json::json!({"ids": []})),
+    ] {
+        let r = h.call(Method::POST, path, Some(&display), Some(body)).await;
+        assert_eq!(r.status, StatusCode::FORBIDDEN, "{path}: {}", r.text());
+    }
+    assert!(
+        h.writer.writes.lock().is_empty(),
+        "nothing reached the field"
     );
 }
 

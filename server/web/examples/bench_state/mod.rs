@@ -43,7 +43,7 @@ pub async fn web_state(db: Arc<TagDb>, dir: &Path) -> (WebState, String) {
         .await
         .expect("user");
     let sessions = Arc::new(Sessions::new(SessionPolicy::default()));
-    let token = sessions.create("bench", None);
+    let token = sessions.create("bench", gridscada_config::Role::Operator, None);
     let plant_ref = plant.clone();
     let state = WebState {
         db,

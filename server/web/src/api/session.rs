@@ -101,7 +101,10 @@ pub async fn login(
     s.auth.throttle.success(attempt);
     let previous =
         auth::token_from_cookies(headers.get(header::COOKIE).and_then(|v| v.to_str().ok()));
-    let token = s.auth.sessions.create(&user.name, previous.as_deref());
+    let token = s
+        .auth
+        .sessions
+        .create(&user.name, user.role, previous.as_deref());
     let screens = s.screens_of(&user.group, user.role).await;
     let who = Principal {
         user: Some(user.name.clone()),
@@ -117,7 +120,7 @@ pub async fn login(
         format!("{} logged in from {ip}", user.name),
     )
     .await;
-    let body = session_body(&who);
+    let body = session_body(&s, &who);
     Ok((
         [(
             header::SET_COOKIE,
@@ -128,18 +131,26 @@ pub async fn login(
         .into_response())
 }
 
-fn session_body(p: &Principal) -> serde_json::Value {
+/// The session as the HMI sees it, with when it idles out (`idle_timeout_s`,
+/// null: never) and how long before that the HMI warns (`warn_s`).
+fn session_body(s: &WebState, p: &Principal) -> serde_json::Value {
+    let expiry = s.auth.sessions.policy().expiry(p.role);
     json!({
         "authenticated": p.is_logged_in(),
         "user": p.user,
         "role": p.role,
         "group": p.group,
         "screens": p.screens,
+        "idle_timeout_s": p.is_logged_in().then_some(expiry.idle.map(|d| d.as_secs())).flatten(),
+        "warn_s": s.auth.sessions.policy().warn.as_secs(),
     })
 }
 
-pub async fn current(Extension(p): Extension<Principal>) -> Json<serde_json::Value> {
-    Json(session_body(&p))
+pub async fn current(
+    State(s): State<WebState>,
+    Extension(p): Extension<Principal>,
+) -> Json<serde_json::Value> {
+    Json(session_body(&s, &p))
 }
 
 pub async fn logout(

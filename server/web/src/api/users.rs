@@ -360,13 +360,9 @@ pub async fn group_screens(
     ))
 }
 
+/// The role a group is named after; other groups have a guest's defaults.
 fn role_named(group: &str) -> Role {
-    match group {
-        "administrator" => Role::Administrator,
-        "supervisor" => Role::Supervisor,
-        "operator" => Role::Operator,
-        _ => Role::Guest,
-    }
+    Role::parse(group).unwrap_or(Role::Guest)
 }
 
 #[derive(Deserialize)]

@@ -319,12 +319,7 @@ impl Harness {
             alarm_outputs: Mutex::new(Some((trx, erx))),
             _dir: dir,
         };
-        for role in [
-            Role::Guest,
-            Role::Operator,
-            Role::Supervisor,
-            Role::Administrator,
-        ] {
+        for role in Role::ALL {
             h.add_user(role.label(), role, role.label()).await;
         }
         h
