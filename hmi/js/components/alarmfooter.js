@@ -1,5 +1,8 @@
 // The frame's footer: the live alarm list with a selection and a priority
 // filter, the count shown, Ack Top, Ack All, Print and the horn's mute.
+// Its height is dragged (or set with the arrow keys) on its top edge and
+// kept for the session; on a small screen, and on request, it shows the
+// alarm counts by priority per area instead of rows.
 
 import { post } from '../api.js';
 import { h, select } from '../dom.js';
@@ -7,7 +10,13 @@ import { fmtTime, roleAtLeast } from '../format.js';
 import { live } from '../live.js';
 import { attempt, toast } from '../ui.js';
 import { beeper } from './beeper.js';
-import { ALARM_HEADERS, drawAlarmRows, filterAlarms, sortAlarms } from './alarmtable.js';
+import { ALARM_HEADERS, drawAlarmRows, filterAlarms, sortAlarms, summarize, summaryTable } from './alarmtable.js';
+
+const HEIGHT_KEY = 'gridscada.footer.height';
+const VIEW_KEY = 'gridscada.footer.view';
+const MIN_H = 64;
+/** A phone or a small tablet: the footer shows the summary per area. */
+const COMPACT = '(max-width: 700px)';
 
 export const PRIORITY_LEVELS = [['', 'Any priority'], ['200', '≥ 200'], ['400', '≥ 400'], ['600', '≥ 600'], ['800', '≥ 800']];
 
@@ -18,7 +27,14 @@ export class AlarmFooter {
     this.known = null; // ids of unacknowledged alarms already heard
     this.selection = '';
     this.minPriority = '';
+    this.compact = window.matchMedia(COMPACT);
+    this.view = sessionStorage.getItem(VIEW_KEY) || '';
     this.build();
+    this.applyHeight(Number(sessionStorage.getItem(HEIGHT_KEY)) || null);
+    this.onMedia = () => { this.applyHeight(this.height); this.draw(live.alarms); };
+    this.compact.addEventListener('change', this.onMedia);
+    this.onResize = () => this.applyHeight(this.height);
+    window.addEventListener('resize', this.onResize);
     this.root.dataset.horn = beeper.state;
     this.offWant = live.want({ alarms: true });
     this.offAlarms = live.onAlarms((list) => this.draw(list));
@@ -59,15 +75,86 @@ export class AlarmFooter {
     buttons.push(
       h('button', { type: 'button', class: 'btn btn-small', id: 'footer-print', onclick: () => this.print(), text: 'Print' }),
       silenceBtn, muteBtn);
+    this.viewBtn = h('button', { type: 'button', class: 'btn btn-small', id: 'footer-view', 'aria-pressed': 'false', text: 'By area',
+      title: 'Show the alarm counts by priority for each area instead of rows' });
+    this.viewBtn.addEventListener('click', () => {
+      this.view = this.summaryShown() ? 'rows' : 'summary';
+      sessionStorage.setItem(VIEW_KEY, this.view);
+      this.draw(live.alarms);
+    });
+    buttons.unshift(this.viewBtn);
+    // The top edge: drag it, or focus it and use the arrow keys.
+    this.grip = h('div', { class: 'footer-resize', id: 'footer-resize', role: 'separator', tabindex: '0', 'aria-orientation': 'horizontal',
+      'aria-label': 'Resize the alarm list', 'aria-controls': 'alarm-footer', title: 'Drag to resize the alarm list (or use the up and down arrow keys)' });
+    this.wireGrip();
     this.tbody = h('tbody');
-    this.root.replaceChildren(
+    this.list = h('div', { class: 'footer-list' },
+      h('table', { class: 'data alarms', id: 'footer-alarms' },
+        h('thead', {}, h('tr', {}, ALARM_HEADERS.map((t) => h('th', { scope: 'col', text: t })))),
+        this.tbody));
+    this.summary = h('div', { class: 'footer-list footer-summary', id: 'footer-summary', hidden: true });
+    this.root.replaceChildren(this.grip,
       h('div', { class: 'footer-bar' },
         h('h2', { class: 'footer-title', text: 'Alarms' }), this.count, this.selSelect, this.prioSelect,
         h('div', { class: 'footer-buttons' }, buttons)),
-      h('div', { class: 'footer-list' },
-        h('table', { class: 'data alarms', id: 'footer-alarms' },
-          h('thead', {}, h('tr', {}, ALARM_HEADERS.map((t) => h('th', { scope: 'col', text: t })))),
-          this.tbody)));
+      this.list, this.summary);
+  }
+
+  /** The summary per area is shown on a small screen unless rows were asked for, and elsewhere on request. */
+  summaryShown() {
+    return this.view === 'summary' || (this.compact.matches && this.view !== 'rows');
+  }
+
+  maxHeight() { return Math.max(MIN_H, Math.round(window.innerHeight * 0.8)); }
+
+  /** Sets the footer's height (null: the default for the screen's size), kept within the window. */
+  applyHeight(px) {
+    this.height = px;
+    const def = this.compact.matches ? 200 : 150;
+    const hgt = Math.round(Math.min(this.maxHeight(), Math.max(MIN_H, px || def)));
+    document.documentElement.style.setProperty('--footer-h', `${hgt}px`);
+    this.grip.setAttribute('aria-valuenow', String(hgt));
+    this.grip.setAttribute('aria-valuemin', String(MIN_H));
+    this.grip.setAttribute('aria-valuemax', String(this.maxHeight()));
+    this.grip.setAttribute('aria-valuetext', `${hgt} pixels high`);
+    return hgt;
+  }
+
+  setHeight(px) {
+    const hgt = this.applyHeight(px);
+    this.height = hgt;
+    sessionStorage.setItem(HEIGHT_KEY, String(hgt));
+  }
+
+  wireGrip() {
+    const g = this.grip;
+    let drag = null;
+    g.addEventListener('pointerdown', (e) => {
+      e.preventDefault();
+      g.setPointerCapture(e.pointerId);
+      drag = { y: e.clientY, h: this.root.getBoundingClientRect().height };
+      this.root.classList.add('resizing');
+    });
+    g.addEventListener('pointermove', (e) => {
+      if (!drag) return;
+      this.applyHeight(drag.h + (drag.y - e.clientY));
+    });
+    const end = (e) => {
+      if (!drag) return;
+      drag = null;
+      this.root.classList.remove('resizing');
+      if (g.hasPointerCapture(e.pointerId)) g.releasePointerCapture(e.pointerId);
+      this.setHeight(this.root.getBoundingClientRect().height);
+    };
+    g.addEventListener('pointerup', end);
+    g.addEventListener('pointercancel', end);
+    g.addEventListener('keydown', (e) => {
+      const cur = this.root.getBoundingClientRect().height;
+      const k = { ArrowUp: 20, ArrowDown: -20, PageUp: 100, PageDown: -100 }[e.key];
+      if (k) { e.preventDefault(); this.setHeight(cur + k); }
+      if (e.key === 'Home') { e.preventDefault(); this.setHeight(this.maxHeight()); }
+      if (e.key === 'End') { e.preventDefault(); this.setHeight(MIN_H); }
+    });
   }
 
   filter() {
@@ -88,6 +175,24 @@ export class AlarmFooter {
     this.root.classList.toggle('has-unacked', list.some((a) => !a.acked));
     this.shown = shown;
     drawAlarmRows(this.tbody, shown);
+    // The summary counts every standing alarm per area, whatever the filter.
+    const summary = this.summaryShown();
+    this.list.hidden = summary;
+    this.summary.hidden = !summary;
+    this.root.classList.toggle('footer-compact', summary);
+    this.viewBtn.setAttribute('aria-pressed', String(summary));
+    // Redrawn only when a count or the area chosen changed (a focused area button keeps its focus).
+    const key = summary ? JSON.stringify([summarize(list), this.selection]) : '';
+    if (summary && key !== this.summaryKey) {
+      this.summary.replaceChildren(summaryTable(list, { id: 'footer-summary-table', current: this.selection, onPick: (sel) => {
+        this.selection = sel;
+        this.selSelect.value = sel;
+        this.view = 'rows';
+        sessionStorage.setItem(VIEW_KEY, this.view);
+        this.draw(live.alarms);
+      } }));
+    }
+    this.summaryKey = key;
     this.sound(list);
   }
 
@@ -123,6 +228,8 @@ export class AlarmFooter {
     this.offAlarms();
     this.offHorn();
     clearInterval(this.muteTimer);
+    this.compact.removeEventListener('change', this.onMedia);
+    window.removeEventListener('resize', this.onResize);
     beeper.setAlarms([]);
   }
 }
