@@ -1,6 +1,7 @@
 // Trend screen: several pens, X range by start date, start time and
-// duration, Y automatic or set, live mode, a reading cursor, Show Tabular
-// with Reload, and CSV export. The server downsamples to about one bucket
+// duration, one Y axis per unit (each automatic or set), pan and zoom back
+// in time (drag, wheel, buttons; never into the future), live mode, a
+// reading cursor, Show Tabular with Reload, and CSV export. The server downsamples to about one bucket
 // per pixel, so long ranges stay light.
 
 import { get, qs } from '../api.js';
@@ -8,7 +9,7 @@ import { h, replace, select, field } from '../dom.js';
 import { fmtNumber, fmtTime, pad } from '../format.js';
 import { live } from '../live.js';
 import { toast } from '../ui.js';
-import { TrendChart, PEN_COLORS } from '../components/chart.js';
+import { TrendChart, PEN_COLORS, axesOf } from '../components/chart.js';
 import { tagList } from './common.js';
 
 const DURATIONS = [
@@ -16,11 +17,22 @@ const DURATIONS = [
   [8 * 3600, '8 hours'], [86400, '1 day'], [7 * 86400, '1 week'],
 ];
 const LIVE_RELOAD_MS = 5000;
+/** The narrowest and widest windows pan and zoom go to. */
+const MIN_SPAN_S = 10;
+const MAX_SPAN_S = 31 * 86400;
 const MAX_PENS = 8;
 const PENS_KEY = 'gridscada.trend.pens';
 
 const dateValue = (d) => `${d.getFullYear()}-${pad(d.getMonth() + 1)}-${pad(d.getDate())}`;
 const timeValue = (d) => `${pad(d.getHours())}:${pad(d.getMinutes())}:${pad(d.getSeconds())}`;
+
+/** A duration in words for the duration list ("37 min 30 s", "2 h 15 min", "3 d 4 h"). */
+function spanLabel(sec) {
+  if (sec < 60) return `${sec} s`;
+  if (sec < 3600) return `${Math.floor(sec / 60)} min${sec % 60 ? ` ${sec % 60} s` : ''}`;
+  if (sec < 86400) return `${Math.floor(sec / 3600)} h${Math.floor((sec % 3600) / 60) ? ` ${Math.floor((sec % 3600) / 60)} min` : ''}`;
+  return `${Math.floor(sec / 86400)} d${Math.floor((sec % 86400) / 3600) ? ` ${Math.floor((sec % 86400) / 3600)} h` : ''}`;
+}
 
 /**
  * The pens to start with: those named in the address (`#/trends?pens=A,B`,
@@ -56,6 +68,7 @@ export default {
     const startTime = h('input', { type: 'time', id: 'trend-start-time', step: 1, value: timeValue(now) });
     const duration = select({ id: 'trend-duration' }, DURATIONS.map(([s, l]) => [String(s), l]), String(15 * 60));
     const liveBox = h('input', { type: 'checkbox', id: 'trend-live', checked: true });
+    const yAxis = select({ id: 'trend-y-axis' }, [], '');
     const yAuto = h('input', { type: 'checkbox', id: 'trend-y-auto', checked: true });
     const yMin = h('input', { type: 'number', id: 'trend-y-min', step: 'any', disabled: true, size: 6 });
     const yMax = h('input', { type: 'number', id: 'trend-y-max', step: 'any', disabled: true, size: 6 });
@@ -64,13 +77,20 @@ export default {
     const penList = h('ul', { class: 'pen-list', id: 'trend-pens', 'aria-label': 'Pens' });
     const readout = h('dl', { class: 'kv cursor-readout', id: 'trend-cursor', 'aria-live': 'polite' });
     const canvas = h('canvas', { id: 'trend-canvas' });
-    const tableBox = h('div', { class: 'table-wrap', id: 'trend-table', hidden: true });
+    const tableBox = h('div', { class: 'table-wrap', id: 'trend-table', tabindex: '0', hidden: true });
     const tableBtn = h('button', { type: 'button', class: 'btn', id: 'trend-show-table', 'aria-pressed': 'false', text: 'Show Tabular' });
     const reloadBtn = h('button', { type: 'button', class: 'btn', id: 'trend-reload', text: 'Reload' });
     const csvLink = h('a', { class: 'btn', id: 'trend-csv', href: '#', download: 'trend.csv', text: 'Export CSV' });
     const status = h('p', { class: 'hint', id: 'trend-status', role: 'status' });
+    const axesList = h('ul', { class: 'axes-list', id: 'trend-axes', 'aria-label': 'Y axes' });
+    const navBtn = (id, text, title, f) => h('button', { type: 'button', class: 'btn btn-small', id, title, 'aria-label': title, text, onclick: f });
+    const nav = h('div', { class: 'btn-row trend-nav', role: 'group', 'aria-label': 'Move the window' },
+      navBtn('trend-back', '◀ Back', 'Back in time by half the window', () => chart.pan(-0.5)),
+      navBtn('trend-zoom-in', '+ Zoom in', 'Zoom in (half the window)', () => chart.zoom(0.5)),
+      navBtn('trend-zoom-out', '− Zoom out', 'Zoom out (twice the window)', () => chart.zoom(2)),
+      navBtn('trend-forward', 'Forward ▶', 'Forward in time by half the window (never past now)', () => chart.pan(0.5)));
 
-    const chart = new TrendChart(canvas, { onCursor: drawReadout });
+    const chart = new TrendChart(canvas, { onCursor: drawReadout, onView: ({ from, to, kind }) => setWindow(from, to - from, kind) });
 
     el.append(
       h('h1', { class: 'screen-title', text: 'Trends' }),
@@ -78,11 +98,12 @@ export default {
         h('div', { class: 'filters' },
           field('Start date', startDate), field('Start time', startTime), field('Duration', duration),
           h('label', { class: 'field field-inline' }, liveBox, 'Live'),
+          field('Y axis', yAxis),
           h('label', { class: 'field field-inline' }, yAuto, 'Y automatic'),
           field('Y min', yMin), field('Y max', yMax),
           h('div', { class: 'btn-row' }, h('button', { type: 'button', class: 'btn btn-primary', id: 'trend-apply', onclick: () => load(), text: 'Apply' }), reloadBtn, tableBtn, csvLink))),
       h('div', { class: 'trend-layout' },
-        h('div', { class: 'card' }, h('div', { class: 'trend-canvas-wrap' }, canvas), status, tableBox),
+        h('div', { class: 'card' }, nav, h('div', { class: 'trend-canvas-wrap' }, canvas), status, axesList, tableBox),
         h('div', { class: 'card' },
           h('h2', { text: 'Pens' }), penList,
           h('form', { class: 'btn-row', id: 'trend-add-pen' }, h('label', { class: 'field' }, h('span', { class: 'field-label', text: 'Add pen' }), penInput), datalist,
@@ -103,12 +124,20 @@ export default {
     yAuto.addEventListener('change', () => {
       yMin.disabled = yMax.disabled = yAuto.checked;
       if (!yAuto.checked && data) {
-        const r = chart.yRange();
+        const r = chart.yRange(yAxis.value);
         yMin.value = fmtNumber(r.min); yMax.value = fmtNumber(r.max);
       }
       applyY();
     });
     for (const i of [yMin, yMax]) i.addEventListener('change', applyY);
+    // The Y fields show and set the axis chosen.
+    yAxis.addEventListener('change', () => {
+      const fixed = chart.yFixed.get(yAxis.value);
+      yAuto.checked = !fixed;
+      yMin.disabled = yMax.disabled = !fixed;
+      yMin.value = fixed ? fmtNumber(fixed.min) : '';
+      yMax.value = fixed ? fmtNumber(fixed.max) : '';
+    });
     liveBox.addEventListener('change', () => { setLive(liveBox.checked); load(); });
     // Editing the start leaves Live and keeps what was typed (the window starts there).
     for (const i of [startDate, startTime, duration]) {
@@ -128,9 +157,56 @@ export default {
     function applyY() {
       const lo = Number(yMin.value);
       const hi = Number(yMax.value);
-      if (yAuto.checked) chart.setY(null);
-      else if (yMin.value !== '' && yMax.value !== '' && lo < hi) chart.setY({ min: lo, max: hi });
+      if (yAuto.checked) chart.setY(yAxis.value, null);
+      else if (yMin.value !== '' && yMax.value !== '' && lo < hi) chart.setY(yAxis.value, { min: lo, max: hi });
       else toast('Y range: the minimum must be below the maximum.', 'error');
+      drawAxes();
+    }
+
+    /** The axes in words: each unit, its side, its range, and its pens. */
+    function drawAxes() {
+      const axes = chart.axesInfo();
+      replace(axesList, axes.map((a) => h('li', { dataset: { unit: a.unit, side: a.side, min: String(a.min), max: String(a.max), pens: a.pens.join(',') } },
+        h('strong', { text: a.unit || '(no unit)' }), ` axis, ${a.side}: ${fmtNumber(a.min)} to ${fmtNumber(a.max)}${chart.yFixed.has(a.unit) ? ' (set)' : ''}; ${a.pens.join(', ')}`)));
+      // The Y axis choice follows the units of the pens.
+      const units = axesOf(pens).map((a) => a.unit);
+      const cur = yAxis.value;
+      if ([...yAxis.options].map((o) => o.value).join('\n') !== units.join('\n')) {
+        replace(yAxis, units.map((u) => h('option', { value: u, selected: u === cur, text: u || '(no unit)' })));
+      }
+    }
+
+    /**
+     * Shows the window that starts at `from` and lasts `dur` ms (from pan or
+     * zoom), never reaching past now. A zoom of the live window stays live
+     * (it keeps its end, now); a pan leaves Live, as a typed start does.
+     */
+    function setWindow(from, dur, kind) {
+      const now = Date.now();
+      let sec = Math.round(Math.min(MAX_SPAN_S, Math.max(MIN_SPAN_S, dur / 1000)));
+      let start = Math.floor(from / 1000) * 1000;
+      if (start + sec * 1000 > now) start = Math.floor((now - sec * 1000) / 1000) * 1000;
+      const stayLive = liveBox.checked && kind === 'zoom';
+      setDuration(sec);
+      if (!stayLive) {
+        if (liveBox.checked) { liveBox.checked = false; setLive(false, false); }
+        const d = new Date(start);
+        startDate.value = dateValue(d);
+        startTime.value = timeValue(d);
+      }
+      load();
+    }
+
+    /** Sets the duration list, with the window's own length as an extra entry when it is none of the usual. */
+    function setDuration(sec) {
+      const v = String(sec);
+      for (const o of [...duration.options]) if (o.dataset.custom && o.value !== v) o.remove();
+      if (![...duration.options].some((o) => o.value === v)) {
+        const opt = h('option', { value: v, dataset: { custom: '1' }, text: spanLabel(sec) });
+        const after = [...duration.options].find((o) => Number(o.value) > sec);
+        duration.insertBefore(opt, after || null);
+      }
+      duration.value = v;
     }
 
     function addPen(tag) {
@@ -167,7 +243,7 @@ export default {
       const { from, to } = range();
       if (!Number.isFinite(from)) { status.textContent = 'Set a valid start date and time.'; return; }
       csvLink.href = pens.length ? `/api/trends.csv${qs({ tags: pens.map((p) => p.tag).join(','), from, to })}` : '#';
-      if (!pens.length) { data = { from, to, series: [] }; chart.setData([], from, to); drawTable(); return; }
+      if (!pens.length) { data = { from, to, series: [] }; chart.setData([], from, to); drawAxes(); drawTable(); return; }
       const points = Math.max(50, Math.min(2000, Math.round(canvas.clientWidth || 800)));
       const seq = ++loadSeq;
       status.textContent = 'Loading…';
@@ -180,6 +256,9 @@ export default {
         });
         data = { from, to, series };
         chart.setData(series, from, to);
+        canvas.dataset.from = String(from);
+        canvas.dataset.to = String(to);
+        drawAxes();
         const n = series.reduce((a, s) => a + s.buckets.reduce((b, k) => b + (k.count || 0), 0), 0);
         status.textContent = `${fmtTime(from)} to ${fmtTime(to)}: ${n} samples in ${points} buckets per pen${liveBox.checked ? ' (live)' : ''}.`;
         drawTable();
@@ -211,10 +290,14 @@ export default {
         data.to = Date.now();
         data.from = data.to - span;
         chart.setData(data.series, data.from, data.to);
+        canvas.dataset.from = String(data.from);
+        canvas.dataset.to = String(data.to);
+        drawAxes();
       }
     }
     function setLive(on, freeze = true) {
       clearInterval(liveTimer);
+      chart.anchorEnd = on;
       liveTimer = on ? setInterval(load, LIVE_RELOAD_MS) : null;
       if (!on && freeze) {
         // Freeze the window that was on view (never one reaching into the
