@@ -14,8 +14,18 @@ let onUnauthorized = () => {};
 /** Called when any request answers 401 (the session ended). */
 export function setUnauthorizedHandler(f) { onUnauthorized = f; }
 
-export async function api(method, path, body) {
+import { noteActivity } from './session.js';
+
+/**
+ * One request. `opts.user`: the user asked for it (a click), so it is
+ * activity even if the page reports itself hidden.
+ */
+export async function api(method, path, body, opts = {}) {
   const init = { method, credentials: 'same-origin', headers: { Accept: 'application/json' } };
+  // Polls of a hidden screen are not the user's activity: they must not keep
+  // an unwatched session alive (docs/ACCESS.md).
+  const hidden = !opts.user && document.visibilityState !== 'visible';
+  if (hidden) init.headers['X-Gridscada-Background'] = '1';
   if (body !== undefined) {
     init.headers['Content-Type'] = 'application/json';
     init.body = JSON.stringify(body);
@@ -26,6 +36,8 @@ export async function api(method, path, body) {
   } catch (e) {
     throw new ApiError(0, 'network', `cannot reach the server (${e.message})`);
   }
+  // Any answer from a logged-in session counts as its activity.
+  if (resp.status !== 401 && !hidden) noteActivity();
   const text = await resp.text();
   let data = null;
   if (text) {

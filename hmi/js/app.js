@@ -1,10 +1,11 @@
 // The HMI's frame: session, toolbar, clock, communication light, the live
 // alarm footer, and the router that mounts one screen at a time.
 
-import { get, del, post, setUnauthorizedHandler, enc, qs } from './api.js';
+import { api, get, del, post, setUnauthorizedHandler, enc, qs } from './api.js';
 import { h, replace } from './dom.js';
 import { fmtTime } from './format.js';
 import { live } from './live.js';
+import { visibleEveryMs, watchExpiry } from './session.js';
 import { toast, attempt, formDialog } from './ui.js';
 import { AlarmFooter } from './components/alarmfooter.js';
 import { beeper } from './components/beeper.js';
@@ -98,6 +99,7 @@ function renderToolbar() {
 
 function renderFrame() {
   const s = state.session;
+  live.visibleMs = visibleEveryMs(s);
   renderToolbar();
 
   const box = $('user-box');
@@ -367,4 +369,5 @@ wireCommLight();
 wireSkipLink();
 wireThemeToggle();
 watchConnection();
+watchExpiry($('session-warning'), () => state.session, () => api('GET', '/api/session', undefined, { user: true }));
 loadSession();

@@ -1,7 +1,7 @@
 // Formatting of values, quality and times for display.
 
 /** Role order, lowest first: the server enforces; the HMI only hides what would be refused. */
-export const ROLES = ['guest', 'operator', 'supervisor', 'administrator'];
+export const ROLES = ['display', 'guest', 'operator', 'supervisor', 'administrator'];
 export const roleAtLeast = (role, min) => ROLES.indexOf(role) >= ROLES.indexOf(min);
 
 export function pad(n, w = 2) { return String(n).padStart(w, '0'); }

@@ -3,13 +3,15 @@
 // subscription, and sent again after every reconnect. Values are kept in a
 // cache so a screen mounted later sees them at once.
 
+import { noteActivity } from './session.js';
+
 const RETRY_MIN_MS = 500;
 const RETRY_MAX_MS = 10_000;
 /** The server sends a heartbeat every second: silence this long means it is not answering. */
 const SILENCE_MS = 2200;
 /** A connection not open by then is given up and tried again. */
 const CONNECT_TIMEOUT_MS = 5000;
-/** How often a screen on view tells the server it is watched (keeps a wall display logged in). */
+/** How often, at most, a screen on view tells the server it is watched (keeps a wall display logged in); more often for a short idle timeout (`live.visibleMs`). */
 const VISIBLE_MS = 60_000;
 
 export class Live {
@@ -49,9 +51,12 @@ export class Live {
       this.scheduleReconnect();
       return;
     }
-    if (this.connected && document.visibilityState === 'visible' && now - (this.lastVisible || 0) > VISIBLE_MS) {
+    if (this.connected && document.visibilityState === 'visible' && now - (this.lastVisible || 0) > (this.visibleMs || VISIBLE_MS)) {
       this.lastVisible = now;
-      try { this.ws.send(JSON.stringify({ visible: true })); } catch { /* reconnecting */ }
+      try {
+        this.ws.send(JSON.stringify({ visible: true }));
+        noteActivity();
+      } catch { /* reconnecting */ }
     }
   }
 

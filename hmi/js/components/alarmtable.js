@@ -107,7 +107,8 @@ export function summaryTable(list, { id, onPick, current } = {}) {
 
 function valueText(a) {
   if (a.value === null || a.value === undefined) return '';
-  const v = fmtValue(a.value);
+  // The tag's own word for the value (TRIPPED), else the number.
+  const v = a.value_text || fmtValue(a.value);
   const l = a.limit !== null && a.limit !== undefined && typeof a.limit !== 'boolean' ? ` (limit ${fmtValue(a.limit)})` : '';
   return `${v}${a.units ? ` ${a.units}` : ''}${l}`;
 }
@@ -129,19 +130,21 @@ export function drawAlarmRows(tbody, alarms, { extra, selectable, selected } = {
       })));
     }
     row.append(
-      h('td', { class: 'nowrap', text: fmtTime(a.active_since ?? a.last_change) }),
+      // Since: when it became active, also once it cleared; Cleared: when.
+      h('td', { class: 'nowrap alarm-since', text: fmtTime(a.activated_at ?? a.active_since ?? a.last_change) }),
+      h('td', { class: 'nowrap alarm-cleared', text: a.active || !a.cleared_at ? '' : fmtTime(a.cleared_at) }),
       h('td', { class: 'alarm-state', text: STATE_LABELS[a.state] || a.state }),
       h('td', { class: 'num' }, priorityChip(a.priority)),
       h('td', { text: a.selection }),
       h('td', { text: KIND_LABELS[a.kind] || a.kind }),
       h('td', { class: 'alarm-message', text: a.message }),
-      h('td', { class: 'nowrap', text: valueText(a) }));
+      h('td', { class: 'nowrap alarm-value', text: valueText(a) }));
     if (extra) row.append(h('td', { class: 'actions' }, extra(a)));
     return row;
   }));
   if (alarms.length === 0) {
-    tbody.append(h('tr', {}, h('td', { colspan: 9, class: 'empty', text: 'No alarms match.' })));
+    tbody.append(h('tr', {}, h('td', { colspan: 10, class: 'empty', text: 'No alarms match.' })));
   }
 }
 
-export const ALARM_HEADERS = ['Since', 'State', 'Prio', 'Selection', 'Type', 'Message', 'Value'];
+export const ALARM_HEADERS = ['Since', 'Cleared', 'State', 'Prio', 'Selection', 'Type', 'Message', 'Value'];

@@ -358,6 +358,16 @@ impl Sessions {
 
     /// The user of a live session, touching its idle timer.
     pub fn user(&self, token: &str) -> Option<String> {
+        self.lookup(token, true)
+    }
+
+    /// The user of a live session, without touching its idle timer: for a
+    /// request the HMI makes on its own (a poll), which is not activity.
+    pub fn user_untouched(&self, token: &str) -> Option<String> {
+        self.lookup(token, false)
+    }
+
+    fn lookup(&self, token: &str, touch: bool) -> Option<String> {
         let now = Instant::now();
         let mut map = self.by_token.lock();
         let s = map.get_mut(token)?;
@@ -367,7 +377,9 @@ impl Sessions {
             self.ended.send_modify(|v| *v += 1);
             return None;
         }
-        s.last_seen = now;
+        if touch {
+            s.last_seen = now;
+        }
         Some(s.user.clone())
     }
 

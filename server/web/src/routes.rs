@@ -582,6 +582,9 @@ pub fn client_ip(req_info: Option<&ConnectInfo<std::net::SocketAddr>>) -> std::n
         .unwrap_or(std::net::IpAddr::from([0, 0, 0, 0]))
 }
 
+/// Marks a request the HMI made on its own, not for the user (`1`).
+pub const BACKGROUND_HEADER: &str = "x-gridscada-background";
+
 /// Resolving the caller from the session cookie.
 impl WebState {
     pub async fn principal(&self, headers: &HeaderMap) -> Principal {
@@ -589,7 +592,17 @@ impl WebState {
         let Some(token) = token_from_cookies(cookie) else {
             return Principal::anonymous();
         };
-        let Some(name) = self.auth.sessions.user(&token) else {
+        // A request the HMI makes on its own while its screen is hidden (a
+        // poll) is not activity: it must not keep an unwatched session alive.
+        let background = headers
+            .get(BACKGROUND_HEADER)
+            .is_some_and(|v| v.as_bytes() == b"1");
+        let name = if background {
+            self.auth.sessions.user_untouched(&token)
+        } else {
+            self.auth.sessions.user(&token)
+        };
+        let Some(name) = name else {
             return Principal::anonymous();
         };
         match self.store.user(&name).await {

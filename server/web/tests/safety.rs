@@ -243,6 +243,47 @@ async fn a_display_session_never_idles_out_and_commands_nothing() {
     );
 }
 
+/// A poll the HMI makes while its screen is hidden says so, and does not
+/// keep the session alive; the same request without the mark does.
+#[tokio::test]
+async fn background_polls_do_not_keep_a_session_alive() {
+    let h = Harness::new(Options {
+        policy: SessionPolicy {
+            idle: Duration::from_millis(300),
+            absolute: Duration::from_secs(60),
+            ..Default::default()
+        },
+        ..Default::default()
+    })
+    .await;
+    let poll = |c: String, background: bool| {
+        let h = &h;
+        async move {
+            let mut req = axum::http::Request::builder()
+                .method(Method::GET)
+                .uri("/api/panels")
+                .header(header::HOST, "127.0.0.1")
+                .header(header::COOKIE, c);
+            if background {
+                req = req.header("x-gridscada-background", "1");
+            }
+            h.send(req.body(axum::body::Body::empty()).unwrap())
+                .await
+                .status
+        }
+    };
+    let watched = h.login("operator", PASSWORD).await;
+    let hidden = h.login("supervisor", PASSWORD).await;
+    for _ in 0..6 {
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        assert_eq!(poll(watched.clone(), false).await, StatusCode::OK);
+        let _ = poll(hidden.clone(), true).await;
+    }
+    // 600 ms of polls: the hidden screen's session idled out after 300 ms.
+    assert_eq!(poll(watched, false).await, StatusCode::OK);
+    assert_eq!(poll(hidden, false).await, StatusCode::UNAUTHORIZED);
+}
+
 #[tokio::test]
 async fn cookie_attributes_are_strict() {
     let h = Harness::new(Options::default()).await;

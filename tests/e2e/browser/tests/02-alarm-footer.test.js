@@ -23,8 +23,12 @@ test('a simulated fault raises an alarm in the footer, acknowledged there', asyn
     // The ELCB trip alarm of the panel arrives over the live socket.
     const row = b.page.locator('#footer-alarms tr.unacked', { hasText: /ELCB/ });
     await row.first().waitFor({ timeout: 20_000 });
-    const selection = (await row.first().locator('td').nth(3).textContent()).trim();
+    const selection = (await row.first().locator('td').nth(4).textContent()).trim();
     assert.match(selection, /css1/i, 'the alarm belongs to the panel\'s selection');
+    // The ELCB's value in its own words, and the time it tripped under Since.
+    const first = row.first();
+    assert.match((await first.locator('td.alarm-value').textContent()).trim(), /^(TRIPPED|CLOSED)$/, 'the value in words, not FALSE/TRUE');
+    assert.match((await first.locator('td.alarm-since').textContent()).trim(), /^\d{4}-\d\d-\d\d \d\d:\d\d:\d\d$/);
     await b.page.locator('#footer-selection').selectOption(selection);
     await b.screenshot('alarm-in-footer');
     const countText = await b.page.locator('#footer-count').textContent();
