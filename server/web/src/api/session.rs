@@ -4,15 +4,17 @@ use axum::extract::{ConnectInfo, State};
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
-use serde::Deserialize;
-use serde_json::json;
+use gridscada_config::Role;
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
 
 use crate::api::audit;
 use crate::auth::{self, Principal};
 use crate::error::{ApiError, ApiResult};
+use crate::openapi::shapes;
 use crate::WebState;
 
-#[derive(Deserialize)]
+#[derive(Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Login {
     pub username: String,
@@ -29,6 +31,17 @@ fn refused() -> ApiError {
     )
 }
 
+#[utoipa::path(post, path = "/api/session", tag = "session",
+    summary = "Log in (rotates the session cookie)",
+    request_body = Login,
+    responses(
+        (status = 200, description = "Logged in; sets the session cookie", body = SessionView,
+            headers(("Set-Cookie" = String))),
+        (status = 400),
+        (status = 401, description = "Invalid username or password (the same answer whatever was wrong)"),
+        (status = 403),
+        (status = 429, description = "Too many failed logins"),
+    ))]
 pub async fn login(
     State(s): State<WebState>,
     ConnectInfo(peer): ConnectInfo<std::net::SocketAddr>,
@@ -128,20 +141,43 @@ pub async fn login(
         .into_response())
 }
 
-fn session_body(p: &Principal) -> serde_json::Value {
-    json!({
-        "authenticated": p.is_logged_in(),
-        "user": p.user,
-        "role": p.role,
-        "group": p.group,
-        "screens": p.screens,
-    })
+/// Who the caller is.
+#[derive(Serialize, ToSchema)]
+#[schema(as = Session)]
+#[serde(deny_unknown_fields)]
+pub struct SessionView {
+    pub authenticated: bool,
+    #[schema(required = true)]
+    pub user: Option<String>,
+    #[schema(value_type = shapes::Role)]
+    pub role: Role,
+    #[schema(required = true)]
+    pub group: Option<String>,
+    pub screens: Vec<String>,
 }
 
-pub async fn current(Extension(p): Extension<Principal>) -> Json<serde_json::Value> {
+fn session_body(p: &Principal) -> SessionView {
+    SessionView {
+        authenticated: p.is_logged_in(),
+        user: p.user.clone(),
+        role: p.role,
+        group: p.group.clone(),
+        screens: p.screens.clone(),
+    }
+}
+
+#[utoipa::path(get, path = "/api/session", tag = "session", summary = "Who am I",
+    responses((status = 200, description = "OK", body = SessionView)))]
+pub async fn current(Extension(p): Extension<Principal>) -> Json<SessionView> {
     Json(session_body(&p))
 }
 
+#[utoipa::path(delete, path = "/api/session", tag = "session", summary = "Log out",
+    responses(
+        (status = 204, description = "Logged out; the cookie is cleared",
+            headers(("Set-Cookie" = String))),
+        (status = 403),
+    ))]
 pub async fn logout(
     State(s): State<WebState>,
     Extension(p): Extension<Principal>,
