@@ -72,11 +72,11 @@ fn every_route_is_documented_and_nothing_else() {
     let extra: Vec<_> = documented.difference(&routed).collect();
     assert!(
         missing.is_empty(),
-        "routes missing from openapi.json: {missing:?}"
+        "routes missing from the OpenAPI document: {missing:?}"
     );
     assert!(
         extra.is_empty(),
-        "openapi.json documents routes that do not exist: {extra:?}"
+        "the OpenAPI document has routes that do not exist: {extra:?}"
     );
 }
 

@@ -10,9 +10,9 @@ use gridscada_alarms::{AlarmEngine, AlarmError, AlarmFilter, AlarmId, AlarmState
 use gridscada_store::AlarmHistoryFilter;
 use gridscada_tagdb::Timestamp;
 use serde::{Deserialize, Serialize};
-use utoipa::{IntoParams, ToSchema};
 use serde_json::{json, Value};
 use std::sync::Arc;
+use utoipa::{IntoParams, ToSchema};
 
 use crate::api::parse_time;
 use crate::auth::Principal;

@@ -7,9 +7,9 @@ use gridscada_control::fault_isolation::{
     CommandError, Mode, PanelCommand, PanelCommandKind, PanelStatus,
 };
 use serde::{Deserialize, Serialize};
-use utoipa::ToSchema;
 use serde_json::{json, Value};
 use tokio::sync::{mpsc, oneshot, watch};
+use utoipa::ToSchema;
 
 use crate::auth::Principal;
 use crate::error::{ApiError, ApiResult};

@@ -295,7 +295,7 @@ pub async fn one(
 #[derive(Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct WriteBody {
-    #[schema(value_type = shapes::Value)]
+    #[schema(value_type = shapes::TagValue)]
     pub value: Value,
 }
 

@@ -20,9 +20,9 @@ use crate::WebState;
 pub struct TrendQuery {
     /// Comma-separated tag names, at most 16
     pub tags: String,
-    #[param(schema_with = shapes::time)]
+    #[param(value_type = shapes::Time, inline)]
     pub from: String,
-    #[param(schema_with = shapes::time)]
+    #[param(value_type = shapes::Time, inline)]
     pub to: String,
     /// Points per series (buckets), at most 5000.
     #[param(minimum = 1, maximum = 5000)]
@@ -99,9 +99,9 @@ pub async fn trend(
 pub struct CsvQuery {
     /// Comma-separated tag names, at most 16
     pub tags: String,
-    #[param(schema_with = shapes::time)]
+    #[param(value_type = shapes::Time, inline)]
     pub from: String,
-    #[param(schema_with = shapes::time)]
+    #[param(value_type = shapes::Time, inline)]
     pub to: String,
 }
 

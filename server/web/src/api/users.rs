@@ -58,6 +58,7 @@ pub struct CreatedUser {
     pub user: UserSummary,
     /// The generated password, when none was given (shown once)
     #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(value_type = String, required = false)]
     pub password: Option<String>,
 }
 

@@ -31,13 +31,24 @@ pub struct Doc {
 
 /// The documentation of handler `P` (the `__path_<handler>` type that
 /// `#[utoipa::path]` makes).
-pub fn doc<P: utoipa::Path + utoipa::__dev::SchemaReferences>() -> Doc {
+pub fn doc<P>() -> Doc
+where
+    P: utoipa::Path + utoipa::__dev::SchemaReferences + for<'t> utoipa::__dev::Tags<'t>,
+{
     let mut schemas = Vec::new();
     P::schemas(&mut schemas);
+    let mut operation = P::operation();
+    let tags = P::tags();
+    if !tags.is_empty() {
+        operation
+            .tags
+            .get_or_insert_with(Vec::new)
+            .extend(tags.into_iter().map(String::from));
+    }
     Doc {
         path: P::path(),
         methods: P::methods(),
-        operation: P::operation(),
+        operation,
         schemas,
     }
 }
@@ -93,7 +104,60 @@ pub fn document_text() -> &'static str {
     TEXT.get_or_init(|| serde_json::to_string_pretty(document()).expect("JSON"))
 }
 
+/// Gives each integer schema the bounds of its Rust type: utoipa names the
+/// type in `format` (`u-int32`, `int8`...); JSON Schema needs `minimum` and
+/// `maximum`. The formats OpenAPI does not define are dropped.
+fn integer_bounds(v: &mut Value) {
+    match v {
+        Value::Object(o) => {
+            let integer = match o.get("type") {
+                Some(Value::String(t)) => t == "integer",
+                Some(Value::Array(ts)) => ts.contains(&json!("integer")),
+                _ => false,
+            };
+            if integer {
+                let bounds: Option<(i64, Option<i64>)> =
+                    match o.get("format").and_then(Value::as_str) {
+                        Some("u-int8") => Some((0, Some(u8::MAX.into()))),
+                        Some("u-int16") => Some((0, Some(u16::MAX.into()))),
+                        Some("u-int32") => Some((0, Some(u32::MAX.into()))),
+                        Some("u-int64") => Some((0, None)),
+                        Some("int8") => Some((i8::MIN.into(), Some(i8::MAX.into()))),
+                        Some("int16") => Some((i16::MIN.into(), Some(i16::MAX.into()))),
+                        Some("int32") => Some((i32::MIN.into(), Some(i32::MAX.into()))),
+                        _ => None,
+                    };
+                if let Some((min, max)) = bounds {
+                    // utoipa writes the bounds given by attributes as floats.
+                    let given = |k: &str| o.get(k).and_then(Value::as_f64).map(|f| f as i64);
+                    let lowest = given("minimum").map_or(min, |g| g.max(min));
+                    let highest = max.map(|max| given("maximum").map_or(max, |g| g.min(max)));
+                    o.insert("minimum".into(), json!(lowest));
+                    if let Some(highest) = highest {
+                        o.insert("maximum".into(), json!(highest));
+                    }
+                }
+                if !matches!(
+                    o.get("format").and_then(Value::as_str),
+                    Some("int32" | "int64") | None
+                ) {
+                    o.remove("format");
+                }
+            }
+            o.values_mut().for_each(integer_bounds);
+        }
+        Value::Array(a) => a.iter_mut().for_each(integer_bounds),
+        _ => {}
+    }
+}
+
 fn build() -> Value {
+    let mut doc = assemble();
+    integer_bounds(&mut doc);
+    doc
+}
+
+fn assemble() -> Value {
     let mut paths = Map::new();
     let mut schemas = Map::new();
     let mut tags = std::collections::BTreeSet::new();
@@ -128,7 +192,12 @@ fn build() -> Value {
             "operationId".into(),
             json!(operation_id(&method, route.path)),
         );
-        for tag in o.get("tags").and_then(Value::as_array).into_iter().flatten() {
+        for tag in o
+            .get("tags")
+            .and_then(Value::as_array)
+            .into_iter()
+            .flatten()
+        {
             tags.insert(tag.as_str().unwrap_or_default().to_string());
         }
         if o.get("description").and_then(Value::as_str) == Some("") {
@@ -167,9 +236,7 @@ fn build() -> Value {
             {
                 answer.insert("description".into(), json!(error_description(status)));
             }
-            answer
-                .entry("content")
-                .or_insert_with(|| error_ref.clone());
+            answer.entry("content").or_insert_with(|| error_ref.clone());
         }
         paths
             .entry(route.path.to_string())

@@ -43,9 +43,11 @@ impl PartialSchema for Timestamp {
 }
 impl ToSchema for Timestamp {}
 
-/// `gridscada_tagdb::Value` in its JSON form (`server/tagdb/src/value.rs`).
-pub struct Value;
-impl PartialSchema for Value {
+/// `gridscada_tagdb::Value` in its JSON form (`server/tagdb/src/value.rs`),
+/// the component `Value`. (Not named `Value`: utoipa takes a field of a type
+/// of that name for `serde_json::Value`.)
+pub struct TagValue;
+impl PartialSchema for TagValue {
     fn schema() -> RefOr<Schema> {
         from_json(serde_json::json!({
             "description": "A tag value. An integer within ±2^53 is a number; an integer outside it (a u64 or i64 register) is a string of its decimal digits, exact; a datetime tag is RFC 3339 text. A string of digits written to an integer tag is taken exactly.",
@@ -58,17 +60,32 @@ impl PartialSchema for Value {
         }))
     }
 }
-impl ToSchema for Value {}
+impl ToSchema for TagValue {
+    fn name() -> std::borrow::Cow<'static, str> {
+        "Value".into()
+    }
+}
 
-/// A time in a query: what `api::parse_time` takes (`#[param(schema_with = shapes::time)]`).
+/// A time in a query, as `api::parse_time` takes it: for a required
+/// parameter `#[param(value_type = shapes::Time, inline)]`, for an optional
+/// one `#[param(schema_with = shapes::time, required = false)]`.
+pub struct Time;
+impl PartialSchema for Time {
+    fn schema() -> RefOr<Schema> {
+        time()
+    }
+}
+impl ToSchema for Time {}
+
+/// The schema of [`Time`].
 pub fn time() -> RefOr<Schema> {
-        from_json(serde_json::json!({
-            "anyOf": [
-                {"type": "string", "pattern": "^\\s*-?[0-9]+\\s*$"},
-                {"type": "string", "format": "date-time"}
-            ],
-            "description": "Milliseconds since 1970-01-01 UTC, or an RFC 3339 date and time"
-        }))
+    from_json(serde_json::json!({
+        "anyOf": [
+            {"type": "string", "pattern": "^\\s*-?[0-9]+\\s*$"},
+            {"type": "string", "format": "date-time"}
+        ],
+        "description": "Milliseconds since 1970-01-01 UTC, or an RFC 3339 date and time"
+    }))
 }
 
 /// A screen id (`gridscada_config::ScreenId` as text).
@@ -156,7 +173,7 @@ pub struct Tag {
     pub writable: bool,
     #[schema(required = true)]
     pub write_role: Option<Role>,
-    pub value: Value,
+    pub value: TagValue,
     pub quality: Quality,
     pub timestamp: Timestamp,
     /// The field register behind the tag; null for derived tags
@@ -284,13 +301,16 @@ pub struct DispatchStatus {
     pub mode: DispatchMode,
     pub status: String,
     pub reason: Option<String>,
-    #[schema(value_type = Object)]
-    pub setpoints_kw: Option<()>,
-    pub run_cmd: Option<BTreeMap<String, bool>>,
-    pub shed_kw: Option<f64>,
+    #[schema(value_type = Object, required = false)]
+    pub setpoints_kw: (),
+    #[schema(required = false)]
+    pub run_cmd: BTreeMap<String, bool>,
+    #[schema(required = false)]
+    pub shed_kw: f64,
     pub objective: Option<f64>,
     pub solve_ms: Option<f64>,
-    pub write_failures: Option<Vec<String>>,
+    #[schema(required = false)]
+    pub write_failures: Vec<String>,
     pub horizon: Option<HorizonPlan>,
 }
 
@@ -308,11 +328,16 @@ pub struct HorizonPlan {
     pub reason: Option<String>,
     pub objective: Option<f64>,
     pub solve_ms: Option<f64>,
-    pub demand_kw: Option<Vec<f64>>,
-    pub renewable_kw: Option<Vec<f64>>,
-    pub soc_kwh: Option<BTreeMap<String, Vec<f64>>>,
-    pub diesel_kw: Option<BTreeMap<String, Vec<f64>>>,
-    pub stored_energy_value_per_kwh: Option<BTreeMap<String, f64>>,
+    #[schema(required = false)]
+    pub demand_kw: Vec<f64>,
+    #[schema(required = false)]
+    pub renewable_kw: Vec<f64>,
+    #[schema(required = false)]
+    pub soc_kwh: BTreeMap<String, Vec<f64>>,
+    #[schema(required = false)]
+    pub diesel_kw: BTreeMap<String, Vec<f64>>,
+    #[schema(required = false)]
+    pub stored_energy_value_per_kwh: BTreeMap<String, f64>,
 }
 
 /// `gridscada_store::DispatchRecord`.
@@ -350,19 +375,32 @@ pub struct MicrogridUnit {
     pub kind: UnitKind,
     pub name: String,
     pub prefix: String,
-    pub rated_kw: Option<f64>,
-    pub cost_per_kwh: Option<f64>,
-    pub min_kw: Option<f64>,
-    pub max_kw: Option<f64>,
-    pub ramp_kw_per_s: Option<f64>,
-    pub capacity_kwh: Option<f64>,
-    pub soc_min_kwh: Option<f64>,
-    pub soc_max_kwh: Option<f64>,
-    pub max_charge_kw: Option<f64>,
-    pub max_discharge_kw: Option<f64>,
-    pub eff_charge: Option<f64>,
-    pub eff_discharge: Option<f64>,
-    pub cycle_cost_per_kwh: Option<f64>,
+    #[schema(required = false)]
+    pub rated_kw: f64,
+    #[schema(required = false)]
+    pub cost_per_kwh: f64,
+    #[schema(required = false)]
+    pub min_kw: f64,
+    #[schema(required = false)]
+    pub max_kw: f64,
+    #[schema(required = false)]
+    pub ramp_kw_per_s: f64,
+    #[schema(required = false)]
+    pub capacity_kwh: f64,
+    #[schema(required = false)]
+    pub soc_min_kwh: f64,
+    #[schema(required = false)]
+    pub soc_max_kwh: f64,
+    #[schema(required = false)]
+    pub max_charge_kw: f64,
+    #[schema(required = false)]
+    pub max_discharge_kw: f64,
+    #[schema(required = false)]
+    pub eff_charge: f64,
+    #[schema(required = false)]
+    pub eff_discharge: f64,
+    #[schema(required = false)]
+    pub cycle_cost_per_kwh: f64,
 }
 
 #[derive(ToSchema)]
