@@ -30,7 +30,9 @@ pub struct Doc {
 }
 
 /// The documentation of handler `P` (the `__path_<handler>` type that
-/// `#[utoipa::path]` makes).
+/// `#[utoipa::path]` makes). Its schemas and tags come through
+/// `utoipa::__dev`, the traits utoipa-axum reads them with: a change there
+/// shows here at compile time.
 pub fn doc<P>() -> Doc
 where
     P: utoipa::Path + utoipa::__dev::SchemaReferences + for<'t> utoipa::__dev::Tags<'t>,
@@ -184,7 +186,14 @@ fn assemble() -> Value {
             route.path
         );
         for (name, schema) in d.schemas {
-            schemas.insert(name, serde_json::to_value(schema).expect("schema"));
+            let schema = serde_json::to_value(schema).expect("schema");
+            if let Some(other) = schemas.get(&name) {
+                assert_eq!(
+                    other, &schema,
+                    "two types make the component schema {name}: give one `#[schema(as = ...)]`"
+                );
+            }
+            schemas.insert(name, schema);
         }
         let mut op = serde_json::to_value(d.operation).expect("operation");
         let o = op.as_object_mut().expect("operation object");
