@@ -174,7 +174,9 @@ function mount(id) {
     el.append(h('p', { class: 'empty', text: 'Your group may not open any screen. Ask an administrator.' }));
     return;
   }
-  const ctx = { session: state.session, onLogin: loadSession, rerender: () => mount(id), refreshScreens };
+  // After a log in, focus goes to the screen's content (not the page's body).
+  const onLogin = async () => { await loadSession(); focusContent(); };
+  const ctx = { session: state.session, onLogin, rerender: () => mount(id), refreshScreens };
   try {
     state.unmount = screen.mount(el, ctx) || null;
   } catch (e) {
@@ -272,6 +274,39 @@ function wireCommLight() {
   light.title = 'Communication status: open the devices screen';
 }
 
+/** Moves focus to the screen's content, as "Skip to content" does. */
+function focusContent() {
+  const el = $('screen');
+  el.focus({ preventScroll: true });
+  el.scrollIntoView({ block: 'start' });
+}
+
+// "Skip to content" focuses the content of the screen on view: the hash
+// belongs to the router, so following the link's #screen would open Main.
+function wireSkipLink() {
+  document.querySelector('.skip-link').addEventListener('click', (e) => {
+    e.preventDefault();
+    focusContent();
+  });
+}
+
+// The dark theme for control rooms: a toggle in the header, kept in this
+// browser (js/theme.js sets it before the first paint).
+const THEME_KEY = 'gridscada.theme';
+function wireThemeToggle() {
+  const btn = $('theme-toggle');
+  const draw = () => btn.setAttribute('aria-pressed', String(document.documentElement.dataset.theme === 'dark'));
+  btn.addEventListener('click', () => {
+    const dark = document.documentElement.dataset.theme !== 'dark';
+    if (dark) document.documentElement.dataset.theme = 'dark';
+    else delete document.documentElement.dataset.theme;
+    try { localStorage.setItem(THEME_KEY, dark ? 'dark' : 'light'); } catch { /* storage disabled: this page only */ }
+    draw();
+    window.dispatchEvent(new CustomEvent('gridscada-theme'));
+  });
+  draw();
+}
+
 function tickClock() {
   const d = new Date();
   const el = $('clock');
@@ -329,5 +364,7 @@ window.addEventListener('hashchange', () => { if (state.session && hashScreen() 
 tickClock();
 setInterval(tickClock, 1000);
 wireCommLight();
+wireSkipLink();
+wireThemeToggle();
 watchConnection();
 loadSession();

@@ -29,8 +29,80 @@ export function filterAlarms(list, { selection, minPriority, text } = {}) {
     (!t || `${a.message} ${a.tag || ''} ${a.key}`.toLowerCase().includes(t)));
 }
 
+/**
+ * The four priority bands, highest first: each has a colour AND a shape
+ * (docs/HMI_STYLE.md), so priority never rests on colour alone.
+ */
+export const PRIORITY_BANDS = [
+  { key: 'urgent', label: 'Urgent', min: 800, glyph: '◆' },
+  { key: 'high', label: 'High', min: 600, glyph: '▲' },
+  { key: 'medium', label: 'Medium', min: 400, glyph: '■' },
+  { key: 'low', label: 'Low', min: -Infinity, glyph: '●' },
+];
+
+export function priorityBand(p) {
+  return PRIORITY_BANDS.find((b) => p >= b.min);
+}
+
 export function priorityClass(p) {
-  return p >= 800 ? 'prio-urgent' : p >= 600 ? 'prio-high' : p >= 400 ? 'prio-medium' : 'prio-low';
+  return `prio-${priorityBand(p).key}`;
+}
+
+/** A priority as a chip: the band's shape and colour, with the number. */
+export function priorityChip(p, text = String(p)) {
+  return bandChip(priorityBand(p), text, `${priorityBand(p).label} priority (${p})`);
+}
+
+function bandChip(b, text, title) {
+  return h('span', { class: ['prio-chip', `prio-${b.key}`], title, dataset: { band: b.key } },
+    h('span', { class: 'prio-glyph', 'aria-hidden': 'true', text: b.glyph }), h('span', { class: 'prio-text', text }));
+}
+
+/**
+ * Alarm counts by priority band for each selection (area): [{selection,
+ * urgent, high, medium, low, total, unacked}], by selection name, and the totals.
+ */
+export function summarize(list) {
+  const rows = new Map();
+  const blank = (selection) => ({ selection, urgent: 0, high: 0, medium: 0, low: 0, total: 0, unacked: 0 });
+  const all = blank('All');
+  for (const a of list) {
+    const sel = String(a.selection ?? '');
+    if (!rows.has(sel)) rows.set(sel, blank(sel));
+    const k = priorityBand(a.priority).key;
+    for (const r of [rows.get(sel), all]) {
+      r[k] += 1;
+      r.total += 1;
+      if (!a.acked) r.unacked += 1;
+    }
+  }
+  return { rows: [...rows.values()].sort((x, y) => x.selection.localeCompare(y.selection)), all };
+}
+
+/**
+ * The alarm summary per area as a table: a row per selection, a column per
+ * priority band (its shape and colour in the header), unacknowledged and
+ * total. `onPick(selection)` (optional) makes each area a button.
+ */
+export function summaryTable(list, { id, onPick, current } = {}) {
+  const { rows, all } = summarize(list);
+  const cell = (n, b) => h('td', { class: ['num', n ? `sum-${b.key}` : 'sum-zero'], dataset: { band: b.key } },
+    n ? bandChip(b, String(n), `${n} ${b.label.toLowerCase()} priority`) : '0');
+  const line = (r, isAll) => h('tr', { dataset: { selection: isAll ? '' : r.selection }, class: isAll ? 'sum-all' : '', 'aria-current': !isAll && current === r.selection ? 'true' : null },
+    h('th', { scope: 'row' }, onPick
+      ? h('button', { type: 'button', class: 'link-btn', onclick: () => onPick(isAll ? '' : r.selection), text: isAll ? 'All areas' : r.selection, title: isAll ? 'Show every area' : `Show the alarms of ${r.selection}` })
+      : (isAll ? 'All areas' : r.selection)),
+    PRIORITY_BANDS.map((b) => cell(r[b.key], b)),
+    h('td', { class: ['num', r.unacked ? 'sum-unacked' : 'sum-zero'], text: String(r.unacked) }),
+    h('td', { class: 'num', text: String(r.total) }));
+  return h('table', { class: 'data alarm-summary', id },
+    h('caption', { class: 'sr-only', text: 'Standing alarms by area and priority' }),
+    h('thead', {}, h('tr', {}, h('th', { scope: 'col', text: 'Area' }),
+      PRIORITY_BANDS.map((b) => h('th', { scope: 'col', class: 'num', title: `${b.label} priority${Number.isFinite(b.min) ? ` (${b.min} and above)` : ''}` },
+        h('span', { class: ['prio-glyph', `prio-fg-${b.key}`], 'aria-hidden': 'true', text: b.glyph }), ` ${b.label}`)),
+      h('th', { scope: 'col', class: 'num', text: 'Unacked' }), h('th', { scope: 'col', class: 'num', text: 'Total' }))),
+    h('tbody', {}, rows.length ? rows.map((r) => line(r, false)) : h('tr', {}, h('td', { colspan: 7, class: 'empty', text: 'No standing alarms.' }))),
+    rows.length > 1 ? h('tfoot', {}, line(all, true)) : null);
 }
 
 function valueText(a) {
@@ -59,7 +131,7 @@ export function drawAlarmRows(tbody, alarms, { extra, selectable, selected } = {
     row.append(
       h('td', { class: 'nowrap', text: fmtTime(a.active_since ?? a.last_change) }),
       h('td', { class: 'alarm-state', text: STATE_LABELS[a.state] || a.state }),
-      h('td', { class: 'num', text: String(a.priority) }),
+      h('td', { class: 'num' }, priorityChip(a.priority)),
       h('td', { text: a.selection }),
       h('td', { text: KIND_LABELS[a.kind] || a.kind }),
       h('td', { class: 'alarm-message', text: a.message }),

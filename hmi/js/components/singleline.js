@@ -1,8 +1,10 @@
 // Single-line diagram of one substation panel, drawn in SVG and kept live:
 // supply, ELCB, MCCB, busbar, zone breakers and zone loads, with the power
-// analyzer and the communication status of each I/O module. Breakers are
-// green when closed and red when open, and ALSO labelled CLOSED / OPEN /
-// TRIPPED, so colour is never the only signal. Unknown quality shows "?".
+// analyzer and the communication status of each I/O module. Colours follow
+// docs/HMI_STYLE.md: breakers are grey, filled when closed and hollow when
+// open (a deliberate open is not red), red only when TRIPPED, and ALWAYS
+// labelled CLOSED / OPEN / TRIPPED, so colour is never the only signal.
+// Unknown quality shows "?".
 
 import { s } from '../dom.js';
 import { fmtNumber, qualityOf } from '../format.js';
@@ -91,7 +93,7 @@ export function singleLine(binder, { prefix, title, zones = 4, devices = [], onB
       s('line', { x1: x, y1: 180, x2: x, y2: 212, class: 'sl-wire' }),
       breaker(x, 225, `zone${z}`, `Zone ${z}`, `${prefix}.Zone${z}.Closed`, `${prefix}.Zone${z}.Cmd`, false),
       s('line', { x1: x, y1: 238, x2: x, y2: 268, class: 'sl-wire' }));
-    // The zone's load, green when energised.
+    // The zone's load, filled grey when energised.
     const load = s('g', { class: 'sl-load', dataset: { zone: String(z) } });
     const tri = s('path', { d: `M ${x - 12} 270 L ${x + 12} 270 L ${x} 290 Z` });
     const txt = s('text', { x, y: 308, class: 'sl-state sl-middle' }, '');
@@ -108,7 +110,8 @@ export function singleLine(binder, { prefix, title, zones = 4, devices = [], onB
         tip.textContent = `Zone ${z}: found faulty and isolated by the sequence; repair it before Reset`;
         return;
       }
-      load.setAttribute('class', `sl-load ${!q.usable ? 'io-unknown' : on ? 'io-true' : 'io-false'}`);
+      // Energised and dead are normal states (grey, filled or hollow): a zone opened on purpose is not an alarm.
+      load.setAttribute('class', `sl-load ${!q.usable ? 'io-unknown' : on ? 'io-true io-energised' : 'io-dead'}`);
       txt.textContent = !q.usable ? '? UNKNOWN' : on ? 'ENERGISED' : 'DEAD';
       tip.textContent = `Zone ${z} load: ${txt.textContent}${q.reason ? ` (${q.reason})` : ''}`;
     };
@@ -144,8 +147,9 @@ export function singleLine(binder, { prefix, title, zones = 4, devices = [], onB
 
   // Door and communication status of each module.
   const status = s('g', { class: 'sl-status' });
-  const items = [{ label: 'Door', tag: `${prefix}.Door.Open`, text: (v) => (v ? 'OPEN' : 'CLOSED'), good: (v) => !v }]
-    .concat(devices.map((d) => ({ label: d.replace(`${prefix}.`, ''), tag: `${d}.Comm.Connected`, text: (v) => (v ? 'COMM OK' : 'COMM LOST'), good: (v) => !!v })));
+  // An open door is abnormal (amber); a lost module is an alarm (red).
+  const items = [{ label: 'Door', tag: `${prefix}.Door.Open`, text: (v) => (v ? 'OPEN' : 'CLOSED'), good: (v) => !v, notGood: 'io-abnormal' }]
+    .concat(devices.map((d) => ({ label: d.replace(`${prefix}.`, ''), tag: `${d}.Comm.Connected`, text: (v) => (v ? 'COMM OK' : 'COMM LOST'), good: (v) => !!v, notGood: 'io-false' })));
   items.forEach((it, i) => {
     const x = 20 + i * 122;
     const g = s('g', { class: 'sl-io' });
@@ -157,7 +161,7 @@ export function singleLine(binder, { prefix, title, zones = 4, devices = [], onB
     binder.on(it.tag, (smp, connected) => {
       const q = qualityOf(smp, connected);
       const ok = q.usable && it.good(smp.value);
-      g.setAttribute('class', `sl-io ${!q.usable ? 'io-unknown' : ok ? 'io-true' : 'io-false'}`);
+      g.setAttribute('class', `sl-io ${!q.usable ? 'io-unknown' : ok ? 'io-true' : it.notGood}`);
       st.textContent = q.usable ? it.text(smp.value) : '? UNKNOWN';
       tip.textContent = `${it.label}: ${st.textContent}${q.reason ? ` (${q.reason})` : ''}`;
     });
@@ -167,6 +171,10 @@ export function singleLine(binder, { prefix, title, zones = 4, devices = [], onB
   // A wide panel scrolls sideways inside its card instead of shrinking its text.
   const box = document.createElement('div');
   box.className = 'sl-scroll';
+  // A region that may scroll is reachable from the keyboard.
+  box.tabIndex = 0;
+  box.setAttribute('role', 'group');
+  box.setAttribute('aria-label', `${title}: diagram`);
   box.append(svg);
   /** Marks the faulty zones the sequence isolated, and manual mode, from the panel's status. */
   box.panelStatus = (status) => {

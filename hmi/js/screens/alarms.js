@@ -1,13 +1,14 @@
 // Alarm screen: Online (the alarms active now, live, with acknowledge and
-// shelve with a reason) and History (transitions from the database), each
-// with filters.
+// shelve with a reason, and the summary per area: counts by priority for
+// each selection) and History (transitions from the database), each with
+// filters.
 
 import { get, post, del, qs } from '../api.js';
 import { h, replace, select, field } from '../dom.js';
 import { fmtTime, fmtValue, roleAtLeast } from '../format.js';
 import { live } from '../live.js';
 import { attempt, formDialog, toast } from '../ui.js';
-import { ALARM_HEADERS, KIND_LABELS, STATE_LABELS, drawAlarmRows, filterAlarms, sortAlarms } from '../components/alarmtable.js';
+import { ALARM_HEADERS, KIND_LABELS, STATE_LABELS, drawAlarmRows, filterAlarms, priorityChip, sortAlarms, summarize, summaryTable } from '../components/alarmtable.js';
 import { PRIORITY_LEVELS } from '../components/alarmfooter.js';
 
 const STATES = [['', 'Any state'], ...Object.entries(STATE_LABELS).filter(([k]) => k !== 'normal')];
@@ -23,16 +24,15 @@ export default {
     const canAck = roleAtLeast(role, 'operator');
     const canShelve = roleAtLeast(role, 'supervisor');
     const offs = [];
-    const onlineTab = h('button', { type: 'button', role: 'tab', class: 'btn', id: 'alarms-tab-online', text: 'Online' });
-    const historyTab = h('button', { type: 'button', role: 'tab', class: 'btn', id: 'alarms-tab-history', text: 'History' });
+    // The views are toggle buttons (aria-pressed), one pressed at a time.
+    const onlineTab = h('button', { type: 'button', class: 'btn', id: 'alarms-tab-online', 'aria-pressed': 'true', text: 'Online' });
+    const historyTab = h('button', { type: 'button', class: 'btn', id: 'alarms-tab-history', 'aria-pressed': 'false', text: 'History' });
     const body = h('div', {});
-    el.append(h('h1', { class: 'screen-title', text: 'Alarms' }), h('div', { class: 'tabs', role: 'tablist' }, onlineTab, historyTab), body);
+    el.append(h('h1', { class: 'screen-title', text: 'Alarms' }), h('div', { class: 'tabs', role: 'group', 'aria-label': 'Alarm views' }, onlineTab, historyTab), body);
 
     let cleanup = () => {};
     const showTab = (which) => {
       cleanup();
-      onlineTab.setAttribute('aria-selected', String(which === 'online'));
-      historyTab.setAttribute('aria-selected', String(which === 'history'));
       onlineTab.setAttribute('aria-pressed', String(which === 'online'));
       historyTab.setAttribute('aria-pressed', String(which === 'history'));
       replace(body);
@@ -51,10 +51,14 @@ export default {
       const selected = new Set();
       const tbody = h('tbody');
       const ackSel = canAck ? h('button', { type: 'button', class: 'btn', id: 'alarms-ack-selected', text: 'Acknowledge selected' }) : null;
+      // The summary per area: standing alarms by priority for each selection; an area opens its list.
+      const summaryBox = h('div', { id: 'alarms-summary' });
+      body.append(h('section', { class: 'card summary-card', 'aria-labelledby': 'alarms-summary-title' },
+        h('h2', { id: 'alarms-summary-title', text: 'Summary by area' }), summaryBox));
       body.append(h('div', { class: 'card' },
         h('div', { class: 'filters' }, field('Selection', selection), selList, field('Priority', prio), field('State', state), field('Text', text), count,
           h('div', { class: 'btn-row' }, ackSel)),
-        h('div', { class: 'table-wrap' }, h('table', { class: 'data alarms', id: 'alarms-online' },
+        h('div', { class: 'table-wrap', tabindex: '0' }, h('table', { class: 'data alarms', id: 'alarms-online' },
           h('thead', {}, h('tr', {}, [h('th', { scope: 'col' }, h('span', { class: 'sr-only', text: 'Select' })), ...ALARM_HEADERS.map((t) => h('th', { scope: 'col', text: t })), h('th', { scope: 'col', text: 'Actions' })])),
           tbody))));
 
@@ -69,6 +73,7 @@ export default {
         if (a.shelved && a.shelved.reason) out.push(h('span', { class: 'hint', text: ` shelved: ${a.shelved.reason}` }));
         return out;
       };
+      let summaryKey = '';
       const draw = () => {
         const list = live.alarms;
         replace(selList, [...new Set(list.map((a) => a.selection))].sort().map((s) => h('option', { value: s })));
@@ -76,6 +81,13 @@ export default {
         if (state.value) shown = shown.filter((a) => a.state === state.value);
         shown = sortAlarms(shown);
         count.textContent = `${shown.length} of ${list.length} alarms`;
+        // Redrawn only when a count or the area chosen changed.
+        const key = JSON.stringify([summarize(list), selection.value.trim()]);
+        if (key !== summaryKey) {
+          summaryKey = key;
+          replace(summaryBox, summaryTable(list, { id: 'alarms-summary-table', current: selection.value.trim(),
+            onPick: (sel) => { selection.value = sel; draw(); } }));
+        }
         drawAlarmRows(tbody, shown, { extra: actions, selectable: canAck, selected });
       };
       tbody.addEventListener('change', (e) => {
@@ -118,7 +130,7 @@ export default {
       const prio = select({ id: 'hist-priority' }, PRIORITY_LEVELS, '');
       const text = h('input', { type: 'search', id: 'hist-text', size: 16 });
       const limit = select({ id: 'hist-limit' }, ['100', '500', '2000'], '500');
-      const out = h('div', { class: 'table-wrap' });
+      const out = h('div', { class: 'table-wrap', tabindex: '0' });
       const form = h('form', { class: 'filters' }, field('From', from), field('To', to), field('Selection', selection), field('Priority', prio),
         field('Text', text), field('Rows', limit), h('div', { class: 'btn-row' }, h('button', { type: 'submit', class: 'btn btn-primary', id: 'hist-search', text: 'Search' })));
       body.append(h('div', { class: 'card' }, form, out));
@@ -139,7 +151,7 @@ export default {
                 h('td', { class: 'nowrap', text: `${STATE_LABELS[t.from_state] || t.from_state} → ${STATE_LABELS[t.to_state] || t.to_state}` }),
                 h('td', { class: 'num', text: fmtValue(t.value) }),
                 h('td', { class: 'num', text: fmtValue(t.limit) }),
-                h('td', { class: 'num', text: String(t.priority ?? '') }),
+                h('td', { class: 'num' }, t.priority === null || t.priority === undefined ? '' : priorityChip(t.priority)),
                 h('td', { text: t.selection ?? '' }),
                 h('td', { text: t.user ?? '' }),
                 h('td', { text: t.message ?? '' }))))));

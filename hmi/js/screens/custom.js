@@ -78,7 +78,8 @@ export function drawElement(e, i, live) {
     case 'bar': {
       const fill = h('span', { class: 'el-bar-fill' });
       const text = h('span', { class: 'value' });
-      const track = h('span', { class: 'el-bar-track', role: 'meter', 'aria-label': e.label || e.tag, 'aria-valuemin': e.min, 'aria-valuemax': e.max }, fill);
+      // A meter always has a value: the minimum, said to be unknown, until a usable sample comes.
+      const track = h('span', { class: 'el-bar-track', role: 'meter', 'aria-label': e.label || e.tag, 'aria-valuemin': e.min, 'aria-valuemax': e.max, 'aria-valuenow': e.min, 'aria-valuetext': 'unknown' }, fill);
       box.append(label(e.label), track, text);
       const meta = live.tags.get(e.tag);
       binder.on(e.tag, (smp, connected) => {
@@ -88,7 +89,8 @@ export function drawElement(e, i, live) {
         const frac = ok ? Math.min(1, Math.max(0, (smp.value - e.min) / (e.max - e.min))) : 0;
         fill.style.width = `${frac * 100}%`;
         fill.className = `el-bar-fill${ok ? '' : ' q-bad'}`;
-        if (ok) track.setAttribute('aria-valuenow', String(smp.value));
+        track.setAttribute('aria-valuenow', String(ok ? Math.min(e.max, Math.max(e.min, smp.value)) : e.min));
+        track.setAttribute('aria-valuetext', ok ? text.textContent : `unknown${q.reason ? `: ${q.reason}` : ''}`);
       });
       break;
     }

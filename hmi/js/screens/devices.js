@@ -19,8 +19,9 @@ const num = (v, digits = 0) => h('td', { class: 'num', text: Number.isFinite(v) 
 export default {
   mount(el) {
     const summary = h('p', { class: 'hint', id: 'devices-summary', role: 'status' });
-    const devBox = h('div', { class: 'table-wrap' });
-    const linkBox = h('div', { class: 'table-wrap' });
+    // Scrolling tables are reachable from the keyboard.
+    const devBox = h('div', { class: 'table-wrap', tabindex: '0', role: 'group', 'aria-label': 'Devices table' });
+    const linkBox = h('div', { class: 'table-wrap', tabindex: '0', role: 'group', 'aria-label': 'Connections table' });
     el.append(h('h1', { class: 'screen-title', text: 'Devices' }), summary,
       h('section', { class: 'card', 'aria-labelledby': 'devices-title' }, h('h2', { id: 'devices-title', text: 'Devices' }), devBox),
       h('section', { class: 'card', 'aria-labelledby': 'links-title' }, h('h2', { id: 'links-title', text: 'Connections and serial ports' }), linkBox));

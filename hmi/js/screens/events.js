@@ -19,7 +19,7 @@ export default {
     const types = h('datalist', { id: 'events-types' }, KNOWN_TYPES.map((t) => h('option', { value: t })));
     const user = h('input', { id: 'events-user', size: 12 });
     const text = h('input', { type: 'search', id: 'events-text', size: 16 });
-    const out = h('div', { class: 'table-wrap' });
+    const out = h('div', { class: 'table-wrap', tabindex: '0' });
     let todayMode = true;
     const form = h('form', { class: 'filters' },
       field('From date', from), field('To date', to), field('Type', type), types, field('User', user), field('Text', text),

@@ -47,7 +47,7 @@ export default {
           const prefix = panelPrefix(p);
           const devices = await devicesUnder(prefix);
           const open = ctx.session.screens.includes(p.id)
-            ? h('a', { class: 'btn btn-small', href: `#/${p.id}`, 'aria-label': `Open the ${p.name} screen`, text: 'Open panel' }) : null;
+            ? h('a', { class: 'btn btn-small', href: `#/${p.id}`, 'aria-label': `Open panel: ${p.name}`, text: 'Open panel' }) : null;
           const badge = modeBadge(p.id);
           const diagram = singleLine(binder, { prefix, title: p.name, zones: p.zones, devices });
           shown.set(p.id, { badge, diagram });

@@ -130,7 +130,7 @@ export default {
         return h('tr', { dataset: { unit: u.id } }, cells);
       });
       replace(unitsBox, h('h2', { id: 'mg-units', text: 'Units' }),
-        h('div', { class: 'table-wrap' }, h('table', { class: 'data', id: 'mg-units-table' },
+        h('div', { class: 'table-wrap', tabindex: '0' }, h('table', { class: 'data', id: 'mg-units-table' },
           h('thead', {}, h('tr', {}, head.map((t) => h('th', { scope: 'col', text: t })))), h('tbody', {}, rows))));
 
       // The demand tag, and the load meter's other readings beside it where they exist.

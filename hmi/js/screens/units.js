@@ -16,7 +16,7 @@ export default {
     let chart = null;
     let timer = null;
     let disposed = false;
-    const tabs = h('div', { class: 'tabs', role: 'tablist', 'aria-label': 'Units' });
+    const tabs = h('div', { class: 'tabs', role: 'group', 'aria-label': 'Units' });
     const body = h('div', {});
     el.append(h('h1', { class: 'screen-title', text: 'Units' }), tabs, body);
 
@@ -26,7 +26,7 @@ export default {
       clearInterval(timer);
       binder = new Binder();
       history.replaceState(null, '', `#/units/${u.id}`);
-      for (const b of tabs.children) b.setAttribute('aria-selected', String(b.dataset.unit === u.id));
+      for (const b of tabs.children) b.setAttribute('aria-pressed', String(b.dataset.unit === u.id));
       const tags = (await tagList()).filter((t) => t.name.startsWith(`${u.prefix}.`));
       const canvas = h('canvas', { id: 'unit-canvas' });
       chart = new TrendChart(canvas);
@@ -64,7 +64,7 @@ export default {
       }
       if (disposed) return;
       const wanted = (location.hash.match(/^#\/units\/([\w.-]+)/) || [])[1];
-      replace(tabs, units.map((u) => h('button', { type: 'button', role: 'tab', class: 'btn', dataset: { unit: u.id },
+      replace(tabs, units.map((u) => h('button', { type: 'button', class: 'btn', 'aria-pressed': 'false', dataset: { unit: u.id },
         onclick: () => show(units, u), text: u.label })));
       const first = units.find((u) => u.id === wanted) || units[0];
       if (first) show(units, first); else replace(body, h('p', { class: 'empty', text: 'No microgrid units are configured.' }));

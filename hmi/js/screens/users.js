@@ -24,7 +24,7 @@ export default {
         return;
       }
       replace(listBox, h('h2', { id: 'users-title', text: 'Users' }),
-        h('div', { class: 'table-wrap' }, h('table', { class: 'data', id: 'users-table' },
+        h('div', { class: 'table-wrap', tabindex: '0' }, h('table', { class: 'data', id: 'users-table' },
           h('thead', {}, h('tr', {}, ['Name', 'Role', 'Group', 'Status', 'Created', 'Password changed', 'Actions'].map((t) => h('th', { scope: 'col', text: t })))),
           h('tbody', {}, users.map(userRow)))));
       drawGroupPicker();

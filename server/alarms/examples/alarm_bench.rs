@@ -57,6 +57,7 @@ fn main() {
                 message: "{tag} {value} {units} (limit {limit})".into(),
                 units: "V".into(),
                 device: None,
+                states: None,
                 condition: cond,
                 on_delay: Duration::from_secs(2),
                 off_delay: Duration::ZERO,

@@ -73,6 +73,9 @@ pub struct AlarmDef {
     pub units: String,
     /// For comm alarms, the device name.
     pub device: Option<String>,
+    /// The tag's words for its values (`states` in the configuration):
+    /// `{value}` and the alarm list show `TRIPPED`, not `false`.
+    pub states: Option<std::sync::Arc<std::collections::BTreeMap<String, String>>>,
     pub condition: Condition,
     pub on_delay: Duration,
     pub off_delay: Duration,
@@ -89,6 +92,10 @@ pub struct Alarm {
     /// The condition wants to change to `.0` since `.1` (delay running).
     pending: Option<(bool, Timestamp)>,
     active_since: Option<Timestamp>,
+    /// The latest activation, kept after the alarm clears.
+    activated_at: Option<Timestamp>,
+    /// When the condition last cleared (`None` while active).
+    cleared_at: Option<Timestamp>,
     last_change: Timestamp,
     value: Option<Value>,
     message: String,
@@ -109,6 +116,8 @@ impl Alarm {
             acked: true,
             pending: None,
             active_since: None,
+            activated_at: None,
+            cleared_at: None,
             last_change: Timestamp::from_millis(0),
             value: None,
             message,
@@ -295,12 +304,15 @@ impl Alarm {
             a.active = active;
             if active {
                 a.active_since = Some(now);
+                a.activated_at = Some(now);
+                a.cleared_at = None;
                 a.message = render(&a.def, a.value.as_ref(), a.detail.as_deref());
                 if !a.is_hidden() {
                     a.acked = false;
                 }
             } else {
                 a.active_since = None;
+                a.cleared_at = Some(now);
             }
         });
     }
@@ -489,10 +501,13 @@ impl Alarm {
             priority: self.def.priority,
             selection: self.def.selection.clone(),
             message: self.message.clone(),
+            value_text: self.value.as_ref().and_then(|v| value_text(&self.def, v)),
             value: self.value.clone(),
             limit: self.def.condition.limit(),
             units: self.def.units.clone(),
             active_since: self.active_since,
+            activated_at: self.activated_at,
+            cleared_at: self.cleared_at,
             last_change: self.last_change,
             shelved: self.shelved.clone(),
             out_of_service: self.out_of_service.clone(),
@@ -507,7 +522,9 @@ impl Alarm {
             state: self.state(),
             active: self.active,
             acked: self.acked,
-            active_since: self.active_since,
+            // The latest activation, also once cleared (an unacknowledged
+            // return keeps its activation time across a restart).
+            active_since: self.activated_at,
             last_change: self.last_change,
             message: self.message.clone(),
             priority: self.def.priority,
@@ -532,6 +549,9 @@ impl Alarm {
         } else {
             None
         };
+        self.activated_at = self.active_since.or(r.active_since);
+        // A return not yet acknowledged was the last change.
+        self.cleared_at = (!r.active && r.active_since.is_some()).then_some(r.last_change);
         self.last_change = r.last_change;
         self.pending = None;
         if !r.message.is_empty() {
@@ -604,6 +624,12 @@ pub fn format_value(v: &Value) -> String {
 
 /// Substitutes `{tag}`, `{value}`, `{limit}`, `{units}`, `{device}` and
 /// `{error}` in the alarm's message template. Unknown placeholders stay as written.
+/// The configured word for a value of the alarm's tag, if any.
+pub fn value_text(def: &AlarmDef, value: &Value) -> Option<String> {
+    let states = def.states.as_ref()?;
+    gridscada_config::state_label(states, value).map(str::to_owned)
+}
+
 pub fn render(def: &AlarmDef, value: Option<&Value>, detail: Option<&str>) -> String {
     let template = &def.message;
     let mut out = String::with_capacity(template.len() + 16);
@@ -618,7 +644,11 @@ pub fn render(def: &AlarmDef, value: Option<&Value>, detail: Option<&str>) -> St
         let name = &after[1..close];
         let text = match name {
             "tag" => Some(def.tag.clone().unwrap_or_else(|| def.key.clone())),
-            "value" => Some(value.map(format_value).unwrap_or_else(|| "?".into())),
+            "value" => Some(
+                value
+                    .map(|v| value_text(def, v).unwrap_or_else(|| format_value(v)))
+                    .unwrap_or_else(|| "?".into()),
+            ),
             "limit" => Some(
                 def.condition
                     .limit()

@@ -314,9 +314,15 @@ pub struct AlarmView {
     pub message: String,
     /// The tag's latest value.
     pub value: Option<Value>,
+    /// The value in the tag's words (`states`), e.g. `TRIPPED`.
+    pub value_text: Option<String>,
     pub limit: Option<Value>,
     pub units: String,
     pub active_since: Option<Timestamp>,
+    /// The latest activation, kept after the alarm clears ("Since" in a list).
+    pub activated_at: Option<Timestamp>,
+    /// When the condition cleared; `None` while active.
+    pub cleared_at: Option<Timestamp>,
     /// The time of the latest transition (what "newest" means for Ack Top).
     pub last_change: Timestamp,
     pub shelved: Option<ShelveInfo>,

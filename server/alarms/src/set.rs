@@ -33,10 +33,6 @@ pub use defs::{display_value, first_segment, plant_defs};
 use defs::validate_def;
 use operations::secs;
 
-/// Priority of communication-failure alarms: high, since every value of the
-/// device is stale while it stands.
-pub const COMM_PRIORITY: u32 = 800;
-
 /// Longest shelving an operator may ask for (7 days): shelving is temporary by
 /// definition; longer removal is "out of service".
 pub const MAX_SHELVE: Duration = Duration::from_secs(7 * 24 * 3600);

@@ -199,9 +199,11 @@ async fn engine_evaluates_suppresses_and_reports() {
     assert!(list.iter().all(|v| !v.key.starts_with("SS1.PA.V_L1")));
     assert!(list.iter().any(|v| v.key == "SS1.ELCB.Closed:discrete"));
 
-    // Comm loss with the poller's error text.
+    // Comm loss with the poller's error text, after the comm alarm's
+    // on-delay (2 s by default).
     r.set("SS1.PA.Comm.LastError", "timeout after 1000 ms");
-    r.set("SS1.PA.Comm.Connected", false);
+    r.set_and_wait("SS1.PA.Comm.Connected", false).await;
+    r.clock.0.fetch_add(2_000, Ordering::SeqCst);
     let t = r.next_transition("SS1.PA:comm").await;
     assert_eq!(
         t.message,
@@ -225,7 +227,7 @@ async fn engine_evaluates_suppresses_and_reports() {
     );
     let elcb = r.engine.id_of("SS1.ELCB.Closed:discrete").unwrap();
     let until = r.engine.shelve(elcb, "sup", 30, "ELCB under test").unwrap();
-    assert_eq!(until, Timestamp::from_millis(1_016_000 + 30 * 60_000));
+    assert_eq!(until, Timestamp::from_millis(1_018_000 + 30 * 60_000));
     let e = tokio::time::timeout(Duration::from_secs(10), r.events.recv())
         .await
         .unwrap()
@@ -244,7 +246,7 @@ async fn engine_evaluates_suppresses_and_reports() {
     assert!(saw_shelved_record);
 
     // The shelving expires on plant time, with an event and no user.
-    r.clock.set(1016.0 + 30.0 * 60.0);
+    r.clock.set(1018.0 + 30.0 * 60.0);
     let mut t = r.next_transition("SS1.ELCB.Closed:discrete").await;
     if t.cause == TransitionCause::Shelve {
         t = r.next_transition("SS1.ELCB.Closed:discrete").await;

@@ -32,6 +32,7 @@ fn limit(tag: &str, kind: AlarmKind, limit: f64, deadband: f64, on: f64, off: f6
         message: "{tag} {value} {units} (limit {limit} {units})".into(),
         units: "V".into(),
         device: Some("SS1.PA".into()),
+        states: None,
         condition,
         on_delay: Duration::from_secs_f64(on),
         off_delay: Duration::from_secs_f64(off),
@@ -48,6 +49,7 @@ fn discrete(tag: &str, when: Value, priority: u32) -> AlarmDef {
         message: "{tag} is {value}".into(),
         units: String::new(),
         device: Some("SS1.IO1".into()),
+        states: None,
         condition: Condition::Equals(when),
         on_delay: Duration::ZERO,
         off_delay: Duration::ZERO,
@@ -64,6 +66,7 @@ fn comm(device: &str) -> AlarmDef {
         message: "Communication lost with {device}: {error}".into(),
         units: String::new(),
         device: Some(device.into()),
+        states: None,
         condition: Condition::CommLost,
         on_delay: Duration::ZERO,
         off_delay: Duration::ZERO,
@@ -153,6 +156,36 @@ fn return_before_ack_then_ack_and_realarm_from_rtn() {
     r.take();
     r.set.ack(r.id(HI), "bob", ts(5.0), &mut r.out).unwrap();
     assert_eq!(r.take(), vec![(C::Ack, UnackRtn, Normal)]);
+}
+
+/// A cleared alarm keeps its activation time, and shows when it cleared;
+/// both survive a restart while the return waits for its acknowledgement.
+#[test]
+fn a_cleared_alarm_keeps_its_activation_time_and_shows_its_clear_time() {
+    let mut r = Rig::new(vec![limit(V, AlarmKind::Hi, 253.0, 0.0, 0.0, 0.0)]);
+    r.feed(V, 260.0, 1.0);
+    let v = r.set.view(r.id(HI)).unwrap();
+    assert_eq!((v.activated_at, v.cleared_at), (Some(ts(1.0)), None));
+    r.feed(V, 240.0, 7.0);
+    let v = r.set.view(r.id(HI)).unwrap();
+    assert_eq!(v.state, UnackRtn);
+    assert_eq!(v.active_since, None);
+    assert_eq!(
+        (v.activated_at, v.cleared_at),
+        (Some(ts(1.0)), Some(ts(7.0)))
+    );
+    let mut r2 = Rig::new(vec![limit(V, AlarmKind::Hi, 253.0, 0.0, 0.0, 0.0)]);
+    r2.set.restore(&r.set.records());
+    let v = r2.set.view(r2.id(HI)).unwrap();
+    assert_eq!(v.state, UnackRtn);
+    assert_eq!(
+        (v.activated_at, v.cleared_at),
+        (Some(ts(1.0)), Some(ts(7.0)))
+    );
+    // Active again: a new activation time, no clear time.
+    r2.feed(V, 261.0, 9.0);
+    let v = r2.set.view(r2.id(HI)).unwrap();
+    assert_eq!((v.activated_at, v.cleared_at), (Some(ts(9.0)), None));
 }
 
 #[test]

@@ -378,6 +378,7 @@ impl Stack {
             events_tx.clone(),
             alarms.clone(),
             selections,
+            sinks::panels_annunciating_trips(&plant),
             clock.clone(),
         ));
         let mut panels = Vec::new();

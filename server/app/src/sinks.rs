@@ -3,14 +3,14 @@
 //! the store and the alarm engine. Each batches what it can, and none of them
 //! ever blocks the producer's hot path: producers hand over through channels.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 use std::time::Duration;
 
 use gridscada_alarms::AlarmEngine;
 use gridscada_config::Plant;
 use gridscada_control::dispatch::{self, DispatchMode, DispatchNotice, DispatchStatus};
-use gridscada_control::fault_isolation::{PanelNotice, PanelStatus, Retained};
+use gridscada_control::fault_isolation::{self, PanelNotice, PanelStatus, Retained};
 use gridscada_store::{
     HistorianHandle, NewDispatch, NewEvent, RecordPolicy, Recorder, RetentionPolicy, Store,
 };
@@ -163,13 +163,32 @@ pub fn panel_alarm_key(panel: &str, key: &str) -> String {
     format!("{panel}:{key}")
 }
 
+/// The panels whose ELCB status tag has its own discrete alarm on "tripped"
+/// (`when = false`): their trip is annunciated by that alarm, so the
+/// sequence's ELCB trip alarm would only repeat it.
+pub fn panels_annunciating_trips(plant: &Plant) -> HashSet<String> {
+    plant
+        .panels
+        .iter()
+        .filter(|p| {
+            plant
+                .tag(&p.io().elcb_closed)
+                .and_then(|t| t.alarm.as_ref())
+                .is_some_and(|a| a.alarms_when(false))
+        })
+        .map(|p| p.id.get_ref().clone())
+        .collect()
+}
+
 /// Panel notices: events to the log, alarm conditions to the alarm engine
-/// (keyed `PANEL:KEY`, in the panel's selection).
+/// (keyed `PANEL:KEY`, in the panel's selection). The ELCB trip alarm of a
+/// panel in `trip_on_tag` is dropped: its status tag's alarm annunciates it.
 pub async fn panel_notices(
     mut rx: mpsc::Receiver<PanelNotice>,
     events: mpsc::Sender<NewEvent>,
     alarms: Arc<AlarmEngine>,
     selection_of: HashMap<String, String>,
+    trip_on_tag: HashSet<String>,
     clock: Arc<dyn Clock>,
 ) {
     while let Some(n) = rx.recv().await {
@@ -198,6 +217,9 @@ pub async fn panel_notices(
                 priority,
                 message,
             } => {
+                if key == fault_isolation::ELCB_TRIP_ALARM && trip_on_tag.contains(&panel) {
+                    continue;
+                }
                 let selection = selection_of
                     .get(&panel)
                     .cloned()

@@ -154,6 +154,45 @@ pub struct DeviceConfig {
     /// their timestamp from it instead of the time their reply arrived.
     #[serde(default)]
     pub time_tag: Option<Spanned<String>>,
+    /// The device's communication-failure alarm.
+    #[serde(default)]
+    pub comm_alarm: CommAlarmConfig,
+}
+
+/// A device's communication-failure alarm (`[device.comm_alarm]`): active
+/// once the device has not answered for `on_delay_s`, cleared once it has
+/// answered again for `off_delay_s`, so a device that drops out for a moment,
+/// or answers in fits, does not chatter.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct CommAlarmConfig {
+    #[serde(default = "default_comm_on_delay")]
+    pub on_delay_s: Spanned<f64>,
+    #[serde(default = "default_comm_off_delay")]
+    pub off_delay_s: Spanned<f64>,
+    #[serde(default = "default_comm_priority")]
+    pub priority: u32,
+}
+
+impl Default for CommAlarmConfig {
+    fn default() -> Self {
+        CommAlarmConfig {
+            on_delay_s: default_comm_on_delay(),
+            off_delay_s: default_comm_off_delay(),
+            priority: default_comm_priority(),
+        }
+    }
+}
+
+fn default_comm_on_delay() -> Spanned<f64> {
+    Spanned::new(0..0, 2.0)
+}
+fn default_comm_off_delay() -> Spanned<f64> {
+    Spanned::new(0..0, 5.0)
+}
+/// High: every value of the device is stale while it stands.
+fn default_comm_priority() -> u32 {
+    800
 }
 
 fn default_unit_id() -> Spanned<u8> {
@@ -372,6 +411,11 @@ pub struct TagConfig {
     /// the device's `time_tag`; `"receive"` keeps the time the reply arrived.
     #[serde(default)]
     pub time_tag: Option<Spanned<String>>,
+    /// Words for the values of a bool or integer tag, shown instead of the
+    /// number: `states = { false = "TRIPPED", true = "CLOSED" }`,
+    /// `states = { 0 = "Stopped", 1 = "Manual", 2 = "Automatic" }`.
+    #[serde(default)]
+    pub states: Option<Spanned<std::collections::BTreeMap<String, String>>>,
     pub alarm: Option<AlarmConfig>,
     #[serde(default)]
     pub history: HistoryConfig,
@@ -423,6 +467,12 @@ impl TagConfig {
         }
     }
     /// The effective scan period.
+    /// The word configured for `value` in `states`, if any.
+    pub fn state_label(&self, value: &gridscada_tagdb::Value) -> Option<&str> {
+        let states = self.states.as_ref()?.get_ref();
+        state_label(states, value)
+    }
+
     /// The device clock tag that stamps this tag's samples, if any: the
     /// tag's own `time_tag`, else its device's; never the clock itself.
     /// `None` means the receive time.
@@ -443,6 +493,27 @@ impl TagConfig {
     }
 }
 
+/// The word for `value` in a `states` table: keyed `true`/`false` for a
+/// bool, the decimal integer for a number (a bool reads as 0/1 there too).
+pub fn state_label<'a>(
+    states: &'a std::collections::BTreeMap<String, String>,
+    value: &gridscada_tagdb::Value,
+) -> Option<&'a str> {
+    use gridscada_tagdb::Value;
+    let key = match value {
+        Value::Bool(b) => {
+            if let Some(l) = states.get(if *b { "true" } else { "false" }) {
+                return Some(l);
+            }
+            i64::from(*b).to_string()
+        }
+        Value::Float(f) if f.fract() == 0.0 && f.abs() < 1e15 => (*f as i64).to_string(),
+        Value::Int(_) | Value::UInt(_) => value.to_string(),
+        _ => return None,
+    };
+    states.get(&key).map(String::as_str)
+}
+
 /// The `time_tag` value that keeps a tag's receive time.
 pub const RECEIVE_TIME: &str = "receive";
 
@@ -459,6 +530,15 @@ pub struct AlarmConfig {
     /// Discrete alarms: active while the value equals `when`.
     #[serde(default)]
     pub discrete: Vec<DiscreteAlarm>,
+}
+
+impl AlarmConfig {
+    /// Whether one of the discrete alarms is active while a bool tag reads `v`.
+    pub fn alarms_when(&self, v: bool) -> bool {
+        self.discrete
+            .iter()
+            .any(|d| matches!(d.when.get_ref(), toml::Value::Boolean(b) if *b == v))
+    }
 }
 
 #[derive(Debug, Clone, Deserialize, Serialize)]

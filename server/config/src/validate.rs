@@ -142,6 +142,18 @@ fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
 fn check_device(cx: &mut Ctx<'_>, f: usize, d: &DeviceConfig) {
     let name = d.name.get_ref();
     let at = d.name.span();
+    for (field, v) in [
+        ("on_delay_s", &d.comm_alarm.on_delay_s),
+        ("off_delay_s", &d.comm_alarm.off_delay_s),
+    ] {
+        if !(v.get_ref().is_finite() && (0.0..=3600.0).contains(v.get_ref())) {
+            cx.err(
+                f,
+                v.span(),
+                format!("device '{name}': comm_alarm {field} must be 0 to 3600 seconds"),
+            );
+        }
+    }
     match d.protocol {
         Protocol::Tcp => {
             match &d.address {
@@ -410,6 +422,40 @@ fn check_tag(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, device: Option<&DeviceCo
     }
     // Writes.
     let writable = *t.writable.get_ref();
+    if let Some(states) = &t.states {
+        let kind = t.value_kind();
+        for (key, label) in states.get_ref() {
+            let key_ok = match kind {
+                ValueKind::Bool => key == "true" || key == "false",
+                ValueKind::Int => key.parse::<i64>().is_ok(),
+                _ => false,
+            };
+            if !key_ok {
+                let want = match kind {
+                    ValueKind::Bool => "true or false",
+                    ValueKind::Int => "whole numbers",
+                    _ => "nothing: states are for bool and integer tags",
+                };
+                cx.err(
+                    f,
+                    states.span(),
+                    format!("tag '{name}': states key '{key}' is not a value of this tag (keys are {want})"),
+                );
+            }
+            if label.trim().is_empty()
+                || label.chars().count() > 40
+                || label.chars().any(char::is_control)
+            {
+                cx.err(
+                    f,
+                    states.span(),
+                    format!(
+                        "tag '{name}': states label for {key} must be 1 to 40 printable characters"
+                    ),
+                );
+            }
+        }
+    }
     if writable && ty == DataType::DateTime {
         cx.err(
             f,

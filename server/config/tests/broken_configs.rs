@@ -474,3 +474,16 @@ fn device_clocks_are_checked() {
         ],
     );
 }
+
+#[test]
+fn comm_alarm_delays_are_checked() {
+    let tags = format!("{DEVICE}\n[device.comm_alarm]\non_delay_s = -1.0\noff_delay_s = 4000.0\n");
+    assert_problems(
+        MAIN,
+        &tags,
+        &[
+            "DIR/tags.toml:7:14: error: device 'D1': comm_alarm on_delay_s must be 0 to 3600 seconds",
+            "DIR/tags.toml:8:15: error: device 'D1': comm_alarm off_delay_s must be 0 to 3600 seconds",
+        ],
+    );
+}

@@ -482,9 +482,17 @@ impl FieldIo {
                 counters: Arc::clone(&lc),
                 last_error: Arc::clone(&last_error),
             });
+            // The longest the link can be held by one request and its
+            // retries: how late a neighbour's scan may be without being lost.
+            let longest_hold = devices
+                .iter()
+                .map(|d| d.timeout * (1 + d.retries))
+                .max()
+                .unwrap_or_default();
             links.push(Link {
                 name: key.clone(),
                 transport,
+                longest_hold,
                 devices,
                 tags: std::mem::take(&mut link_tags[li]),
                 db: Arc::clone(&db),

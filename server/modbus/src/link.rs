@@ -135,6 +135,9 @@ pub(crate) struct LinkCounters {
 pub(crate) struct Link {
     pub name: String,
     pub transport: Transport,
+    /// The longest one device's request and its retries hold the link
+    /// (timeout × (1 + retries)); see [`Link::stale_after`].
+    pub longest_hold: Duration,
     pub devices: Vec<DeviceRt>,
     pub tags: Vec<LinkTag>,
     pub db: Arc<TagDb>,
@@ -230,25 +233,37 @@ impl Link {
         best
     }
 
+    /// How long a scan class may go unanswered before it is stale: two scan
+    /// periods, plus the longest a neighbour's request with its retries may
+    /// hold the shared link. Without that allowance a fast-scanned device
+    /// behind a gateway went stale, and showed as disconnected, every time a
+    /// dead neighbour's request timed out (a comm alarm chattering on a
+    /// healthy device).
+    fn stale_after(&self, period: Duration) -> Duration {
+        stale_after(period, self.longest_hold)
+    }
+
     fn next_stale_check(&self) -> Timestamp {
         let mut t = self.clock.now().add(Duration::from_secs(3600));
         for dev in &self.devices {
             for c in dev.classes.iter().filter(|c| !c.stale) {
-                t = t.min(c.last_answer.add(c.period * 2));
+                t = t.min(c.last_answer.add(self.stale_after(c.period)));
             }
         }
         t
     }
 
-    /// A class whose device has not answered for two scan periods turns Bad,
-    /// whatever else is going on (a stalled line, retries still pending).
+    /// A class whose device has not answered within [`Link::stale_after`]
+    /// turns Bad, whatever else is going on (a stalled line, retries still
+    /// pending).
     fn watch_staleness(&mut self) {
         let now = self.clock.now();
         for d in 0..self.devices.len() {
+            let hold = self.longest_hold;
             let dev = &mut self.devices[d];
             let mut ids = Vec::new();
             for c in dev.classes.iter_mut() {
-                if !c.stale && now.since(c.last_answer) >= c.period * 2 {
+                if !c.stale && now.since(c.last_answer) >= stale_after(c.period, hold) {
                     c.stale = true;
                     ids.extend(c.tags.iter().map(|&t| self.tags[t].id));
                 }
@@ -261,7 +276,7 @@ impl Link {
             } else {
                 format!("no answer from the device: {}", dev.last_error)
             };
-            // Not heard from for two periods: not connected either.
+            // Not heard from in that time: not connected either.
             dev.answering = false;
             dev.counters.connected.store(false, Ordering::Relaxed);
             let q = Quality::bad(reason);
@@ -882,6 +897,11 @@ fn decode_sample(tag: &LinkTag, words: Option<&[u16]>, ts: Timestamp) -> Sample 
             timestamp: ts,
         },
     }
+}
+
+/// See [`Link::stale_after`].
+fn stale_after(period: Duration, longest_hold: Duration) -> Duration {
+    period * 2 + longest_hold
 }
 
 /// The device's communication status tags, always Good: they are the

@@ -769,3 +769,51 @@ async fn device_clocks_stamp_the_tags_read_with_them() {
     assert!(bad_reason(&db, "M.Clock").unwrap().contains("not a date"));
     io.shutdown().await;
 }
+
+/// A dead device behind a gateway holds the shared connection for its
+/// timeouts; its fast-scanned neighbour is late, but never shown as lost
+/// (the comm alarm of a healthy device must not chatter).
+#[tokio::test]
+async fn a_dead_neighbour_behind_the_gateway_never_makes_a_healthy_device_look_lost() {
+    let bank = Bank::with_units(&[1, 2]);
+    bank.unit(1, |u| u.holding[0] = 1);
+    bank.unit(2, |u| u.silent = true);
+    let (addr, _server) = serve(Arc::clone(&bank), "127.0.0.1:0").await;
+    let tag = |dev: &str| {
+        format!("[[tag]]\nname = \"{dev}.V\"\ndevice = \"{dev}\"\nkind = \"holding_register\"\naddress = 0\n")
+    };
+    let text = [
+        device("IO", addr, 1, 100, 300),
+        device("PA", addr, 2, 1000, 300),
+        tag("IO"),
+        tag("PA"),
+    ]
+    .concat();
+    let (db, io) = start(&plant(&text));
+    eventually("IO read", 5 * SECOND, || value(&db, "IO.V").is_some()).await;
+    let connected = |n: &str| db.get_by_name(n).map(|s| s.value);
+    // Every change, as the alarm engine sees them (a flicker may last
+    // microseconds).
+    let watched = [db.id("IO.Comm.Connected").unwrap(), db.id("IO.V").unwrap()];
+    let mut changes = db.subscribe(&watched);
+    let mut lost = 0;
+    let started = tokio::time::Instant::now();
+    // Long enough for several timeouts and probes of the dead neighbour.
+    while started.elapsed() < 4 * SECOND {
+        let Ok(Some(update)) = tokio::time::timeout(SECOND, changes.recv()).await else {
+            continue;
+        };
+        let batch = match update {
+            gridscada_tagdb::Update::Changes(b) | gridscada_tagdb::Update::Snapshot(b) => b,
+        };
+        lost += batch
+            .changes
+            .iter()
+            .filter(|(_, s)| !s.quality.is_good() || s.value == Value::Bool(false))
+            .count();
+    }
+    assert_eq!(connected("PA.Comm.Connected"), Some(Value::Bool(false)));
+    assert!(bad_reason(&db, "PA.V").is_some());
+    assert_eq!(lost, 0, "the healthy device looked lost {lost} times");
+    io.shutdown().await;
+}

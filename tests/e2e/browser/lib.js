@@ -128,3 +128,31 @@ export async function until(what, f, timeoutMs = 20_000, stepMs = 250) {
   }
   throw new Error(`timed out after ${timeoutMs} ms waiting for ${what}`);
 }
+
+/** axe-core's source, run in the page through the debugger protocol (the page's CSP allows no injected script tag). */
+let axeSource = null;
+function axe() {
+  if (!axeSource) axeSource = fs.readFileSync(path.join(here, 'node_modules/axe-core/axe.min.js'), 'utf8');
+  return axeSource;
+}
+
+/**
+ * Runs axe-core (WCAG 2.x A and AA, and best practice) on the page as it is;
+ * returns the violations as [{id, impact, help, nodes: [target...]}].
+ */
+export async function runAxe(page) {
+  if (!(await page.evaluate(() => typeof window.axe === 'object'))) await page.evaluate(axe());
+  return page.evaluate(async () => {
+    const r = await window.axe.run(document, { resultTypes: ['violations'] });
+    return r.violations.map((v) => ({ id: v.id, impact: v.impact, help: v.help,
+      nodes: v.nodes.map((n) => `${n.target.join(' ')}${n.any[0] && n.any[0].message ? `: ${n.any[0].message}` : ''}`) }));
+  });
+}
+
+/** The serious and critical findings of runAxe. */
+export const seriousFindings = (violations) => violations.filter((v) => v.impact === 'serious' || v.impact === 'critical');
+
+/** Waits until a screen has drawn: no "Loading…" left. */
+export async function settled(page) {
+  await page.waitForFunction(() => !document.querySelector('#screen .loading') && document.querySelector('#screen').children.length > 0, null, { timeout: 15_000 });
+}

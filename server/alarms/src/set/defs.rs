@@ -1,6 +1,7 @@
 //! Alarm definitions: from the plant's tags and devices, for system alarms,
 //! their validation, and how their messages show values.
 
+use std::sync::Arc;
 use std::time::Duration;
 
 use gridscada_config::{AlarmConfig, LimitAlarm, Plant, TagConfig};
@@ -11,7 +12,6 @@ use crate::model::{comm_key, discrete_key, limit_key};
 use crate::model::{AlarmError, AlarmKind};
 
 use super::operations::secs;
-use super::COMM_PRIORITY;
 
 pub(super) fn validate_def(def: &AlarmDef) -> Result<(), AlarmError> {
     if def.key.trim().is_empty() {
@@ -53,6 +53,7 @@ pub(super) fn system_def(key: &str, priority: u32, selection: &str, message: &st
         message: message.to_owned(),
         units: String::new(),
         device: None,
+        states: None,
         condition: Condition::External,
         on_delay: Duration::ZERO,
         off_delay: Duration::ZERO,
@@ -79,14 +80,15 @@ pub fn plant_defs(plant: &Plant) -> Result<Vec<AlarmDef>, AlarmError> {
             key: comm_key(device),
             tag: Some(format!("{device}.Comm.Connected")),
             kind: AlarmKind::CommFail,
-            priority: COMM_PRIORITY,
+            priority: d.comm_alarm.priority,
             selection: first_segment(device).to_owned(),
             message: "Communication lost with {device}: {error}".into(),
             units: String::new(),
             device: Some(device.clone()),
+            states: None,
             condition: Condition::CommLost,
-            on_delay: Duration::ZERO,
-            off_delay: Duration::ZERO,
+            on_delay: Duration::from_secs_f64(*d.comm_alarm.on_delay_s.get_ref()),
+            off_delay: Duration::from_secs_f64(*d.comm_alarm.off_delay_s.get_ref()),
         });
     }
     Ok(defs)
@@ -136,6 +138,7 @@ fn tag_defs(tag: &TagConfig, a: &AlarmConfig, defs: &mut Vec<AlarmDef>) -> Resul
                 .unwrap_or_else(|| default_limit_message(kind, &tag.units)),
             units: tag.units.clone(),
             device: Some(tag.device.get_ref().clone()),
+            states: tag.states.as_ref().map(|s| Arc::new(s.get_ref().clone())),
             condition,
         });
     }
@@ -180,6 +183,7 @@ fn tag_defs(tag: &TagConfig, a: &AlarmConfig, defs: &mut Vec<AlarmDef>) -> Resul
             message,
             units: tag.units.clone(),
             device: Some(tag.device.get_ref().clone()),
+            states: tag.states.as_ref().map(|s| Arc::new(s.get_ref().clone())),
             condition: Condition::Equals(when),
         });
     }

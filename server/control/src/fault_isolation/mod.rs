@@ -28,5 +28,5 @@ pub use driver::{
 };
 pub use machine::{
     priority, Breaker, CommandError, Input, Metrics, Mode, OperatorCommand, Outcome, Output,
-    PanelState, Reading, Retained, Sequence, Settings, Snapshot, Step, Timer,
+    PanelState, Reading, Retained, Sequence, Settings, Snapshot, Step, Timer, ELCB_TRIP_ALARM,
 };

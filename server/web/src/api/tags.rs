@@ -28,6 +28,8 @@ pub struct TagView {
     /// Where the value comes from; `None` for derived tags (device status,
     /// sequence and dispatch tags).
     pub source: Option<TagSource>,
+    /// Words for the tag's values (`states` in the configuration).
+    pub states: Option<std::collections::BTreeMap<String, String>>,
     #[serde(flatten)]
     pub sample: Sample,
 }
@@ -92,6 +94,7 @@ impl WebState {
                     .and_then(|d| t.time_tag(d))
                     .map(str::to_owned),
             }),
+            states: config.and_then(|t| t.states.as_ref().map(|s| s.get_ref().clone())),
             sample,
         })
     }

@@ -179,6 +179,9 @@ pub struct Tag {
     /// The field register behind the tag; null for derived tags
     #[schema(required = true)]
     pub source: Option<crate::api::tags::TagSource>,
+    /// Words for the tag's values (keys "true"/"false" or whole numbers), e.g. {"false": "TRIPPED", "true": "CLOSED"}; null when none are configured
+    #[schema(required = true)]
+    pub states: Option<BTreeMap<String, String>>,
 }
 
 /// `gridscada_store::UserSummary`.
@@ -219,8 +222,7 @@ pub enum AlarmState {
     OutOfService,
 }
 
-/// An alarm as the alarm list shows it (more fields: tag, kind, value, limit,
-/// units, active_since, shelved, out_of_service, suppressed).
+/// An alarm as the alarm list shows it (more fields: tag, kind, value, limit, units, active_since (while active), activated_at (the latest activation, kept after it clears), cleared_at (when it cleared, null while active), shelved, out_of_service, suppressed).
 #[derive(ToSchema)]
 #[schema(as = Alarm)]
 pub struct Alarm {

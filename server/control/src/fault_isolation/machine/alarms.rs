@@ -14,8 +14,17 @@ pub mod priority {
     pub const ZONE_ISOLATED: u32 = 700;
 }
 
+/// Key of the ELCB trip alarm. A plant whose ELCB status tag carries its own
+/// discrete alarm annunciates the trip there; the wiring then drops this one
+/// so one trip is one alarm.
+pub const ELCB_TRIP_ALARM: &str = "elcb.trip";
+
 /// Key of the lockout alarm.
 pub(super) const LOCKOUT_ALARM: &str = "lockout";
+
+/// Key of the alarm of healthy loads left off in automatic mode (cleared by
+/// the next sequence, or by manual mode).
+pub(super) const LOADS_OFF_ALARM: &str = "loads_off";
 
 /// Key of the alarm of a faulty load.
 pub(super) fn faulty_alarm_key(load: u8) -> String {
@@ -44,7 +53,7 @@ impl Sequence {
 
     pub(super) fn raise_trip_alarm(&mut self, out: &mut Vec<Output>) {
         self.raise(
-            "elcb.trip",
+            ELCB_TRIP_ALARM,
             priority::ELCB_TRIP,
             "ELCB tripped: supply to all zones lost".into(),
             out,

@@ -126,16 +126,56 @@ impl Sequence {
         }
     }
 
+    /// The loads energised (or being closed) as far as the machine knows:
+    /// closed in the last good snapshot, the batch being closed, and `also`.
+    pub(super) fn energised_loads(&self, also: Option<u8>) -> Vec<u8> {
+        let n = self.settings.zones;
+        let closed = |l: u8| {
+            self.known
+                .as_ref()
+                .is_some_and(|k| k.closed(Breaker::load(l)))
+        };
+        (0..=n)
+            .filter(|l| closed(*l) || self.closing_batch.contains(l) || also == Some(*l))
+            .collect()
+    }
+
     /// The load being switched on when the ELCB tripped is faulty.
     pub(super) fn on_trip_during_sequence(&mut self, now_s: f64, out: &mut Vec<Output>) {
         if self.closing_proven || self.settling || !self.batch.is_empty() {
-            self.on_proven_batch_trip(now_s, out);
+            let mut suspects = self.batch.clone();
+            if self.closing_proven && !self.closing_batch.is_empty() {
+                suspects.extend(self.closing_batch.iter().copied());
+            } else if self.closing_proven {
+                suspects.push(if self.step == Step::Oldc {
+                    self.oldc
+                } else {
+                    self.count_c
+                });
+            }
+            let list: Vec<String> = suspects.iter().map(|l| l.to_string()).collect();
+            self.on_unattributable_trip(
+                "proven_load_trip",
+                &format!(
+                    "the ELCB tripped while re-closing load(s) {} that proved healthy earlier \
+                     in this sequence: a new fault",
+                    list.join(", ")
+                ),
+                suspects,
+                now_s,
+                out,
+            );
             return;
         }
         let load = match self.step {
             Step::Oluc | Step::OlucDwell => self.count_c,
             _ => self.oldc,
         };
+        let energised: std::collections::BTreeSet<u8> = self
+            .energised_loads(Some(load))
+            .into_iter()
+            .filter(|l| *l != load)
+            .collect();
         self.cancel(Timer::Dwell, out);
         self.cancel(Timer::Confirm, out);
         self.pending.clear();
@@ -145,6 +185,7 @@ impl Sequence {
         self.count_sv = load;
         self.found_new = true;
         self.faulty.insert(load);
+        self.marks.insert(load, energised);
         self.raise_trip_alarm(out);
         let b = Breaker::load(load);
         event(
@@ -153,6 +194,7 @@ impl Sequence {
             format!("ELCB tripped when {b} was switched on: load {load} is faulty"),
         );
         self.raise_faulty_alarm(load, out);
+        self.revisit_blames(load, out);
         // Leave everything off in every case, then decide.
         self.enter_tripped(now_s, out);
         if load == 0 {
@@ -168,21 +210,47 @@ impl Sequence {
         }
     }
 
-    /// The ELCB tripped while proven loads were being re-closed without dwell
-    /// or during their settle dwell: which one is faulty cannot be told, so
-    /// none is marked faulty; the proofs are withdrawn and the sequence starts
-    /// over with a full dwell on every load (see the module docs).
-    fn on_proven_batch_trip(&mut self, now_s: f64, out: &mut Vec<Output>) {
-        let mut suspects = self.batch.clone();
-        if self.closing_proven && !self.closing_batch.is_empty() {
-            suspects.extend(self.closing_batch.iter().copied());
-        } else if self.closing_proven {
-            suspects.push(if self.step == Step::Oldc {
-                self.oldc
-            } else {
-                self.count_c
-            });
+    /// A load just found faulty was energised when an earlier trip of this
+    /// sequence was pinned on another load: that blame may have been this
+    /// fault's, so it is withdrawn and the load is tested again (once; see
+    /// "Revisiting a blame" in the module docs).
+    fn revisit_blames(&mut self, found: u8, out: &mut Vec<Output>) {
+        let doubtful: Vec<u8> = self
+            .marks
+            .iter()
+            .filter(|(m, energised)| **m != found && energised.contains(&found))
+            .map(|(m, _)| *m)
+            .filter(|m| *m != 0 && !self.retested.contains(m))
+            .collect();
+        for m in doubtful {
+            self.marks.remove(&m);
+            self.faulty.remove(&m);
+            self.retested.insert(m);
+            self.clear(&super::alarms::faulty_alarm_key(m), out);
+            event(
+                out,
+                "blame_withdrawn",
+                format!(
+                    "load {m} was blamed for a trip while load {found} was energised, and load \
+                     {found} is faulty: load {m} is switched on again to be tested once more"
+                ),
+            );
         }
+    }
+
+    /// A trip that cannot be pinned on one load: while proven loads were
+    /// being re-closed without dwell or during their settle dwell, or while
+    /// communication with the panel was lost. None is marked faulty; the
+    /// proofs are withdrawn and the sequence goes on with a full dwell on
+    /// every load (see the module docs), which attributes the fault.
+    pub(super) fn on_unattributable_trip(
+        &mut self,
+        kind: &'static str,
+        why: &str,
+        suspects: Vec<u8>,
+        now_s: f64,
+        out: &mut Vec<Output>,
+    ) {
         self.cancel(Timer::Dwell, out);
         self.cancel(Timer::Confirm, out);
         self.pending.clear();
@@ -194,11 +262,10 @@ impl Sequence {
         let list: Vec<String> = suspects.iter().map(|l| l.to_string()).collect();
         event(
             out,
-            "proven_load_trip",
+            kind,
             format!(
-                "ELCB tripped while re-closing load(s) {} that proved healthy earlier in this \
-                 sequence: new fault, not attributable to one load; none is marked faulty, \
-                 every load is switched on again with a full dwell",
+                "{why}; the fault cannot be pinned on one of load(s) {}: none is marked \
+                 faulty, every load is switched on again with a full dwell",
                 list.join(", ")
             ),
         );

@@ -53,7 +53,15 @@ impl Sequence {
             out,
         );
         if from.expects_elcb_closed() && !elcb {
-            self.on_trip_during_sequence(now_s, out);
+            // When it tripped, and what was energised then, is unknown: the
+            // load dwelling when the panel went silent may be innocent.
+            self.on_unattributable_trip(
+                "comm_loss_trip",
+                "the ELCB tripped while communication with the panel was lost",
+                self.energised_loads(None),
+                now_s,
+                out,
+            );
             return;
         }
         // Restart the step from its beginning.

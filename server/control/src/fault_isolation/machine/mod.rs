@@ -80,6 +80,33 @@
 //! The batch's settle dwell counts from its last close command (the MCCB),
 //! like any dwell.
 //!
+//! ## Revisiting a blame
+//! A trip while load `k` dwells is pinned on `k`, but a fault may also arise
+//! during the sequence on a load energised beside `k` (one proven earlier).
+//! The two cannot be told apart at the trip. So each blame of a sequence
+//! remembers the other loads energised when its trip came; when one of them
+//! is later found faulty (which the plain algorithm does, after the batch of
+//! proven loads trips), every blame it may have caused is withdrawn: the
+//! load's faulty mark and alarm are cleared (event `blame_withdrawn`) and it
+//! is switched on again, with a full dwell, in the next pass. A load's blame
+//! is withdrawn at most once per sequence.
+//!
+//! A trip read only after a **communication loss** (the ELCB found open on
+//! resume) came at an unknown moment, with unknown loads energised: it is
+//! pinned on no load (event `comm_loss_trip`) and handled like a trip of a
+//! proven batch: the proofs are withdrawn and every load is switched on
+//! again with a full dwell.
+//!
+//! **Bounds.** With faults present from the start nothing is withdrawn:
+//! each faulty zone is energised exactly once and there are F + 1 trips for F
+//! faulty zones. Each trip that cannot be pinned (a proven batch, or one seen
+//! after a communication loss) re-energises a faulty load at most once more
+//! and adds at most two trips; each withdrawn blame re-energises a healthy
+//! load once more. The exhaustive test with one fault arising at any step
+//! (watched or blind) on top of one or two present from the start measures
+//! at most 3 × F + 1 trips. Whatever happens, more than `max_trips` trips
+//! lock out with everything off, so a panel never cycles.
+//!
 //! ## Timing
 //! Restore time (`restore_s`: from the first trip read to all healthy loads
 //! confirmed closed) for a permanent fault on zone k of N: 2 × reclose +
@@ -118,13 +145,16 @@
 //!   that state is consistent with what the machine knew: every MCCB/zone status
 //!   equals its last known value, or is explained by a command (awaiting
 //!   confirmation or within the confirm window); the ELCB has not closed unless a reset was pending. An ELCB
-//!   that opened while blind is a trip and is handled as one at the step in
-//!   progress. Anything else locks out. On resume the step in progress is
+//!   that opened while blind is a trip, pinned on no load (see "Revisiting a
+//!   blame"). Anything else locks out. On resume the step in progress is
 //!   restarted from its beginning (its timer runs again in full, an unconfirmed
 //!   command is re-issued), which is never shorter than the original wait.
 //! - Switching to manual mode stops the sequence at once (nothing further is
 //!   switched); manual breaker commands are refused in automatic mode.
-//!   In manual mode nothing switches by itself.
+//!   In manual mode nothing switches by itself. Back in automatic mode,
+//!   loads left off and not known faulty stay off (a mode change switches
+//!   nothing on) under a standing `loads_off` alarm until Reset restores
+//!   them.
 //!
 //! ## Asynchronous status inputs
 //! Over real I/O the panel's signals sit on different modules, each scanned on
@@ -173,7 +203,7 @@ mod steps;
 
 pub use gridscada_config::PanelMode as Mode;
 
-pub use alarms::priority;
+pub use alarms::{priority, ELCB_TRIP_ALARM};
 pub use io::{
     Breaker, CommandError, Input, OperatorCommand, Output, PanelState, Reading, Settings, Snapshot,
     Timer,
@@ -227,6 +257,12 @@ pub struct Sequence {
     dwell_due: bool,
     /// Known-faulty loads (0 = MCCB / busbar).
     faulty: BTreeSet<u8>,
+    /// The loads marked faulty in this sequence, each with the other loads
+    /// that were energised when its trip came (see "Revisiting a blame").
+    marks: BTreeMap<u8, BTreeSet<u8>>,
+    /// Loads whose blame was withdrawn once in this sequence: never again,
+    /// so each is re-energised at most once more.
+    retested: BTreeSet<u8>,
     lockout: bool,
     /// Last state read with every signal Good.
     known: Option<PanelState>,
@@ -285,6 +321,8 @@ impl Sequence {
             reclose_due: false,
             dwell_due: false,
             faulty: BTreeSet::new(),
+            marks: BTreeMap::new(),
+            retested: BTreeSet::new(),
             lockout: false,
             known: None,
             comm_good: false,

@@ -1,6 +1,6 @@
 //! Operator commands: the mode switch, Reset and manual breaker commands.
 
-use super::alarms::event;
+use super::alarms::{event, priority, LOADS_OFF_ALARM};
 use super::io::{Breaker, CommandError, Output, Timer};
 use super::step::{Outcome, Step};
 use super::steps::Cause;
@@ -12,6 +12,7 @@ impl Sequence {
             return;
         }
         self.mode = Mode::Manual;
+        self.clear(LOADS_OFF_ALARM, out);
         let was = self.step;
         self.cancel(Timer::RecloseDelay, out);
         self.cancel(Timer::Dwell, out);
@@ -56,6 +57,28 @@ impl Sequence {
         self.set_rest_step("automatic mode", out);
         if self.comm_good && self.known.as_ref().is_some_and(|k| !k.elcb) {
             self.start_sequence(Cause::Trip, now_s, out);
+            return;
+        }
+        // Loads left off (an interrupted sequence, or switched off by hand)
+        // are not switched on by a mode change: that is Reset's job, and the
+        // operator is told so by a standing alarm.
+        let off: Vec<String> = match &self.known {
+            Some(k) if self.comm_good && k.elcb => (0..=self.settings.zones)
+                .filter(|l| !self.faulty.contains(l) && !k.closed(Breaker::load(*l)))
+                .map(|l| l.to_string())
+                .collect(),
+            _ => Vec::new(),
+        };
+        if !off.is_empty() {
+            self.raise(
+                LOADS_OFF_ALARM,
+                priority::ZONE_ISOLATED,
+                format!(
+                    "automatic mode with load(s) {} off and not known faulty: press Reset to restore them",
+                    off.join(", ")
+                ),
+                out,
+            );
         }
     }
 

@@ -2,7 +2,7 @@
 //! OLUC and OLDC walks with their dwells, the end of a sequence and the
 //! lockout, and moving between steps and timers.
 
-use super::alarms::{event, priority, LOCKOUT_ALARM};
+use super::alarms::{event, priority, ELCB_TRIP_ALARM, LOADS_OFF_ALARM, LOCKOUT_ALARM};
 use super::io::{Breaker, Output, Timer};
 use super::step::{Metrics, Outcome, Step};
 use super::{Mode, Sequence};
@@ -16,6 +16,7 @@ pub(super) enum Cause {
 impl Sequence {
     pub(super) fn start_sequence(&mut self, cause: Cause, now_s: f64, out: &mut Vec<Output>) {
         self.cause = cause;
+        self.clear(LOADS_OFF_ALARM, out);
         self.found_new = false;
         self.restored = false;
         self.started_s = now_s;
@@ -32,6 +33,8 @@ impl Sequence {
         self.in_oldc = false;
         self.proven.clear();
         self.fast_reclose = true;
+        self.marks.clear();
+        self.retested.clear();
         self.batch.clear();
         self.closing_proven = false;
         self.settling = false;
@@ -120,7 +123,7 @@ impl Sequence {
         match self.step {
             Step::Tripped => self.on_confirmed_tripped(now_s, out),
             Step::ElcbReset => {
-                self.clear("elcb.trip", out);
+                self.clear(ELCB_TRIP_ALARM, out);
                 event(
                     out,
                     "elcb_reclosed",
