@@ -88,7 +88,13 @@ impl Store {
     ) -> Result<ScreenRecord> {
         check_text("screen id", id, 64)?;
         check_text("screen name", name, 1024)?;
-        let version = expected + 1;
+        // No screen reaches the last version: one claimed from there was
+        // never loaded (and adding one would overflow).
+        let version = expected.checked_add(1).ok_or_else(|| {
+            StoreError::Conflict(format!(
+                "screen '{id}' is at no version {expected}: load it again"
+            ))
+        })?;
         let mut body = body.clone();
         if let Some(o) = body.as_object_mut() {
             o.insert("version".into(), version.into());

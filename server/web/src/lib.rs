@@ -14,6 +14,7 @@ pub mod auth;
 pub mod error;
 mod hmi;
 pub mod metrics;
+pub mod openapi;
 pub mod routes;
 
 use std::net::SocketAddr;

@@ -15,6 +15,7 @@ use gridscada_config::Role;
 use crate::api;
 use crate::auth::{token_from_cookies, Principal};
 use crate::error::ApiError;
+use crate::openapi::{doc, Doc};
 use crate::WebState;
 
 /// What a route requires of its caller.
@@ -90,6 +91,9 @@ pub struct Route {
     /// Only present when the server runs simulators (`demo`, `replay`).
     pub sim_only: bool,
     handler: fn() -> MethodRouter<WebState>,
+    /// Its OpenAPI operation: `doc::<api::module::__path_handler>`, from the
+    /// handler's `#[utoipa::path]` annotation.
+    pub doc: fn() -> Doc,
 }
 
 const fn r(
@@ -97,6 +101,7 @@ const fn r(
     path: &'static str,
     perm: Perm,
     handler: fn() -> MethodRouter<WebState>,
+    doc: fn() -> Doc,
 ) -> Route {
     Route {
         method,
@@ -104,16 +109,23 @@ const fn r(
         perm,
         sim_only: false,
         handler,
+        doc,
     }
 }
 
-const fn sim(method: Method, path: &'static str, handler: fn() -> MethodRouter<WebState>) -> Route {
+const fn sim(
+    method: Method,
+    path: &'static str,
+    handler: fn() -> MethodRouter<WebState>,
+    doc: fn() -> Doc,
+) -> Route {
     Route {
         method,
         path,
         perm: Perm::Role(Role::Administrator),
         sim_only: true,
         handler,
+        doc,
     }
 }
 
@@ -123,113 +135,182 @@ use Role::{Administrator as Admin, Operator, Supervisor};
 pub fn table() -> Vec<Route> {
     use axum::routing::{delete, get, patch, post, put};
     vec![
-        r(Method::GET, "/healthz", Perm::Public, || {
-            get(api::misc::healthz)
-        }),
-        r(Method::GET, "/metrics", Perm::Public, || {
-            get(api::misc::metrics)
-        }),
-        r(Method::GET, "/api/openapi.json", Perm::Public, || {
-            get(api::misc::openapi)
-        }),
+        r(
+            Method::GET,
+            "/healthz",
+            Perm::Public,
+            || get(api::misc::healthz),
+            doc::<api::misc::__path_healthz>,
+        ),
+        r(
+            Method::GET,
+            "/metrics",
+            Perm::Public,
+            || get(api::misc::metrics),
+            doc::<api::misc::__path_metrics>,
+        ),
+        r(
+            Method::GET,
+            "/api/openapi.json",
+            Perm::Public,
+            || get(api::misc::openapi),
+            doc::<api::misc::__path_openapi>,
+        ),
         // Session.
-        r(Method::POST, "/api/session", Perm::Public, || {
-            post(api::session::login)
-        }),
-        r(Method::GET, "/api/session", Perm::Public, || {
-            get(api::session::current)
-        }),
-        r(Method::DELETE, "/api/session", Perm::Public, || {
-            delete(api::session::logout)
-        }),
+        r(
+            Method::POST,
+            "/api/session",
+            Perm::Public,
+            || post(api::session::login),
+            doc::<api::session::__path_login>,
+        ),
+        r(
+            Method::GET,
+            "/api/session",
+            Perm::Public,
+            || get(api::session::current),
+            doc::<api::session::__path_current>,
+        ),
+        r(
+            Method::DELETE,
+            "/api/session",
+            Perm::Public,
+            || delete(api::session::logout),
+            doc::<api::session::__path_logout>,
+        ),
         // Tags.
-        r(Method::GET, "/api/tags", Perm::LoggedIn, || {
-            get(api::tags::list)
-        }),
+        r(
+            Method::GET,
+            "/api/tags",
+            Perm::LoggedIn,
+            || get(api::tags::list),
+            doc::<api::tags::__path_list>,
+        ),
         // Readable tags only (see access::Readable), checked in the handlers.
-        r(Method::GET, "/api/tags/tree", Perm::LoggedIn, || {
-            get(api::tags::tree)
-        }),
-        r(Method::GET, "/api/tags/{name}", Perm::LoggedIn, || {
-            get(api::tags::one)
-        }),
+        r(
+            Method::GET,
+            "/api/tags/tree",
+            Perm::LoggedIn,
+            || get(api::tags::tree),
+            doc::<api::tags::__path_tree>,
+        ),
+        r(
+            Method::GET,
+            "/api/tags/{name}",
+            Perm::LoggedIn,
+            || get(api::tags::one),
+            doc::<api::tags::__path_one>,
+        ),
         // The tag's own write_role is checked in the handler, on the server.
         r(
             Method::POST,
             "/api/tags/{name}/write",
             Perm::Role(Operator),
             || post(api::tags::write),
+            doc::<api::tags::__path_write>,
         ),
         // Devices.
-        r(Method::GET, "/api/devices", Perm::Screen("devices"), || {
-            get(api::devices::list)
-        }),
+        r(
+            Method::GET,
+            "/api/devices",
+            Perm::Screen("devices"),
+            || get(api::devices::list),
+            doc::<api::devices::__path_list>,
+        ),
         // Screens: the catalog, and the screens users draw.
-        r(Method::GET, "/api/screens", Perm::LoggedIn, || {
-            get(api::screens::catalog)
-        }),
+        r(
+            Method::GET,
+            "/api/screens",
+            Perm::LoggedIn,
+            || get(api::screens::catalog),
+            doc::<api::screens::__path_catalog>,
+        ),
         // The screen's own access (or the editor's) is checked in the handler.
-        r(Method::GET, "/api/screens/{id}", Perm::LoggedIn, || {
-            get(api::screens::one)
-        }),
+        r(
+            Method::GET,
+            "/api/screens/{id}",
+            Perm::LoggedIn,
+            || get(api::screens::one),
+            doc::<api::screens::__path_one>,
+        ),
         r(
             Method::PUT,
             "/api/screens/{id}",
             Perm::RoleScreen(Admin, "editor"),
             || put(api::screens::save),
+            doc::<api::screens::__path_save>,
         ),
         r(
             Method::DELETE,
             "/api/screens/{id}",
             Perm::RoleScreen(Admin, "editor"),
             || delete(api::screens::remove),
+            doc::<api::screens::__path_remove>,
         ),
         // Alarms.
-        r(Method::GET, "/api/alarms", Perm::LoggedIn, || {
-            get(api::alarms::summary)
-        }),
+        r(
+            Method::GET,
+            "/api/alarms",
+            Perm::LoggedIn,
+            || get(api::alarms::summary),
+            doc::<api::alarms::__path_summary>,
+        ),
         r(
             Method::POST,
             "/api/alarms/ack",
             Perm::Role(Operator),
             || post(api::alarms::ack),
+            doc::<api::alarms::__path_ack>,
         ),
         r(
             Method::POST,
             "/api/alarms/{id}/shelve",
             Perm::Role(Supervisor),
             || post(api::alarms::shelve),
+            doc::<api::alarms::__path_shelve>,
         ),
         r(
             Method::DELETE,
             "/api/alarms/{id}/shelve",
             Perm::Role(Supervisor),
             || delete(api::alarms::unshelve),
+            doc::<api::alarms::__path_unshelve>,
         ),
         r(
             Method::GET,
             "/api/alarms/history",
             Perm::Screen("alarms"),
             || get(api::alarms::history),
+            doc::<api::alarms::__path_history>,
         ),
         r(
             Method::GET,
             "/api/alarms/metrics",
             Perm::Screen("alarms"),
             || get(api::alarms::metrics),
+            doc::<api::alarms::__path_metrics>,
         ),
         // Events and trends.
-        r(Method::GET, "/api/events", Perm::Screen("events"), || {
-            get(api::events::list)
-        }),
-        r(Method::GET, "/api/trends", Perm::Screen("trends"), || {
-            get(api::trends::trend)
-        }),
+        r(
+            Method::GET,
+            "/api/events",
+            Perm::Screen("events"),
+            || get(api::events::list),
+            doc::<api::events::__path_list>,
+        ),
+        r(
+            Method::GET,
+            "/api/trends",
+            Perm::Screen("trends"),
+            || get(api::trends::trend),
+            doc::<api::trends::__path_trend>,
+        ),
         r(
             Method::GET,
             "/api/trends.csv",
             Perm::Screen("trends"),
             || get(api::trends::csv),
+            doc::<api::trends::__path_csv>,
         ),
         // Users and groups.
         r(
@@ -237,24 +318,28 @@ pub fn table() -> Vec<Route> {
             "/api/users",
             Perm::RoleScreen(Admin, "users"),
             || get(api::users::list),
+            doc::<api::users::__path_list>,
         ),
         r(
             Method::POST,
             "/api/users",
             Perm::RoleScreen(Admin, "users"),
             || post(api::users::create),
+            doc::<api::users::__path_create>,
         ),
         r(
             Method::PATCH,
             "/api/users/{name}",
             Perm::RoleScreen(Admin, "users"),
             || patch(api::users::update),
+            doc::<api::users::__path_update>,
         ),
         r(
             Method::DELETE,
             "/api/users/{name}",
             Perm::RoleScreen(Admin, "users"),
             || delete(api::users::remove),
+            doc::<api::users::__path_remove>,
         ),
         // Own password for anyone; anyone else's for administrators (checked in the handler).
         r(
@@ -262,43 +347,57 @@ pub fn table() -> Vec<Route> {
             "/api/users/{name}/password",
             Perm::LoggedIn,
             || post(api::users::password),
+            doc::<api::users::__path_password>,
         ),
         r(
             Method::GET,
             "/api/groups/{group}/screens",
             Perm::RoleScreen(Admin, "users"),
             || get(api::users::group_screens),
+            doc::<api::users::__path_group_screens>,
         ),
         r(
             Method::PUT,
             "/api/groups/{group}/screens",
             Perm::RoleScreen(Admin, "users"),
             || put(api::users::set_group_screens),
+            doc::<api::users::__path_set_group_screens>,
         ),
         // Panels (fault isolation).
-        r(Method::GET, "/api/panels", Perm::LoggedIn, || {
-            get(api::panels::list)
-        }),
-        r(Method::GET, "/api/panels/{id}", Perm::LoggedIn, || {
-            get(api::panels::one)
-        }),
+        r(
+            Method::GET,
+            "/api/panels",
+            Perm::LoggedIn,
+            || get(api::panels::list),
+            doc::<api::panels::__path_list>,
+        ),
+        r(
+            Method::GET,
+            "/api/panels/{id}",
+            Perm::LoggedIn,
+            || get(api::panels::one),
+            doc::<api::panels::__path_one>,
+        ),
         r(
             Method::POST,
             "/api/panels/{id}/mode",
             Perm::Role(Supervisor),
             || post(api::panels::mode),
+            doc::<api::panels::__path_mode>,
         ),
         r(
             Method::POST,
             "/api/panels/{id}/reset",
             Perm::Role(Operator),
             || post(api::panels::reset),
+            doc::<api::panels::__path_reset>,
         ),
         r(
             Method::POST,
             "/api/panels/{id}/breakers/{breaker}",
             Perm::Role(Operator),
             || post(api::panels::breaker),
+            doc::<api::panels::__path_breaker>,
         ),
         // Dispatch.
         r(
@@ -306,36 +405,55 @@ pub fn table() -> Vec<Route> {
             "/api/dispatch",
             Perm::Screen("microgrid"),
             || get(api::dispatch::latest),
+            doc::<api::dispatch::__path_latest>,
         ),
         r(
             Method::GET,
             "/api/dispatch/history",
             Perm::Screen("microgrid"),
             || get(api::dispatch::history),
+            doc::<api::dispatch::__path_history>,
         ),
         r(
             Method::GET,
             "/api/microgrid/units",
             Perm::Screen("microgrid"),
             || get(api::dispatch::units),
+            doc::<api::dispatch::__path_units>,
         ),
         // Live push.
-        r(Method::GET, "/api/live", Perm::LoggedIn, || {
-            get(api::live::upgrade)
-        }),
+        r(
+            Method::GET,
+            "/api/live",
+            Perm::LoggedIn,
+            || get(api::live::upgrade),
+            doc::<api::live::__path_upgrade>,
+        ),
         // Simulation: demo and replay only.
-        sim(Method::POST, "/api/sim/faults", || {
-            post(api::sim::inject_fault)
-        }),
-        sim(Method::DELETE, "/api/sim/faults/{panel}/{zone}", || {
-            delete(api::sim::repair)
-        }),
-        sim(Method::POST, "/api/sim/devices/{device}/offline", || {
-            post(api::sim::offline)
-        }),
-        sim(Method::POST, "/api/sim/devices/{device}/online", || {
-            post(api::sim::online)
-        }),
+        sim(
+            Method::POST,
+            "/api/sim/faults",
+            || post(api::sim::inject_fault),
+            doc::<api::sim::__path_inject_fault>,
+        ),
+        sim(
+            Method::DELETE,
+            "/api/sim/faults/{panel}/{zone}",
+            || delete(api::sim::repair),
+            doc::<api::sim::__path_repair>,
+        ),
+        sim(
+            Method::POST,
+            "/api/sim/devices/{device}/offline",
+            || post(api::sim::offline),
+            doc::<api::sim::__path_offline>,
+        ),
+        sim(
+            Method::POST,
+            "/api/sim/devices/{device}/online",
+            || post(api::sim::online),
+            doc::<api::sim::__path_online>,
+        ),
     ]
 }
 

@@ -1,6 +1,8 @@
-//! The OpenAPI document and the route table cannot drift: every route is
-//! documented with its method, nothing else is, path parameters are declared,
-//! and public and protected routes say so.
+//! The OpenAPI document (generated from the handlers' annotations and the
+//! route table, `gridscada_web::openapi`) and the route table cannot drift:
+//! every route is documented with its method and its permission, nothing else
+//! is, path parameters are declared, public and protected routes say so, and
+//! every schema it refers to is in it.
 
 mod common;
 
@@ -8,11 +10,38 @@ use std::collections::BTreeSet;
 
 use axum::http::{Method, StatusCode};
 use common::*;
+use gridscada_web::openapi::permission_text;
 use gridscada_web::routes::{table, Perm};
 use serde_json::Value;
 
 fn document() -> Value {
-    serde_json::from_str(include_str!("../openapi.json")).expect("openapi.json is JSON")
+    gridscada_web::openapi::document().clone()
+}
+
+/// `schema`, or the component it refers to.
+fn resolve<'a>(doc: &'a Value, schema: &'a Value) -> &'a Value {
+    match schema["$ref"].as_str() {
+        Some(r) => {
+            let name = r
+                .strip_prefix("#/components/schemas/")
+                .unwrap_or_else(|| panic!("a reference outside the components: {r}"));
+            &doc["components"]["schemas"][name]
+        }
+        None => schema,
+    }
+}
+
+fn refs(v: &Value, out: &mut Vec<String>) {
+    match v {
+        Value::Object(o) => {
+            if let Some(Value::String(r)) = o.get("$ref") {
+                out.push(r.clone());
+            }
+            o.values().for_each(|v| refs(v, out));
+        }
+        Value::Array(a) => a.iter().for_each(|v| refs(v, out)),
+        _ => {}
+    }
 }
 
 #[test]
@@ -43,11 +72,11 @@ fn every_route_is_documented_and_nothing_else() {
     let extra: Vec<_> = documented.difference(&routed).collect();
     assert!(
         missing.is_empty(),
-        "routes missing from openapi.json: {missing:?}"
+        "routes missing from the OpenAPI document: {missing:?}"
     );
     assert!(
         extra.is_empty(),
-        "openapi.json documents routes that do not exist: {extra:?}"
+        "the OpenAPI document has routes that do not exist: {extra:?}"
     );
 }
 
@@ -98,11 +127,18 @@ fn parameters_security_and_errors_match_the_table() {
             responses.keys().any(|k| k.starts_with('2') || k == "101"),
             "{what}: no success response"
         );
+        // The permission of the route table, in words.
+        assert_eq!(
+            op["x-permission"],
+            permission_text(route.perm),
+            "{what}: x-permission"
+        );
         // Request bodies are closed objects where the handler refuses unknown fields.
-        if let Some(schema) = op["requestBody"]["content"]["application/json"]["schema"].as_object()
-        {
+        let body = &op["requestBody"]["content"]["application/json"]["schema"];
+        if !body.is_null() {
             assert_eq!(
-                schema["additionalProperties"], false,
+                resolve(&doc, body)["additionalProperties"],
+                false,
                 "{what}: request body"
             );
         }
@@ -113,11 +149,48 @@ fn parameters_security_and_errors_match_the_table() {
     );
 }
 
+/// Also writes the document to `$GRIDSCADA_OPENAPI_OUT` when set, to read
+/// or compare it.
+#[test]
+fn every_reference_resolves() {
+    let doc = document();
+    if let Ok(path) = std::env::var("GRIDSCADA_OPENAPI_OUT") {
+        std::fs::write(&path, gridscada_web::openapi::document_text()).expect("written");
+    }
+    let mut found = vec![];
+    refs(&doc, &mut found);
+    assert!(!found.is_empty());
+    for r in found {
+        assert!(
+            !resolve(&doc, &serde_json::json!({ "$ref": r })).is_null(),
+            "{r} is not in the components"
+        );
+    }
+}
+
 #[tokio::test]
-async fn the_served_document_is_the_file() {
+async fn the_served_document_is_the_generated_one() {
     let h = Harness::new(Options::default()).await;
     let r = h.call(Method::GET, "/api/openapi.json", None, None).await;
     assert_eq!(r.status, StatusCode::OK);
     assert!(r.content_type().starts_with("application/json"));
     assert_eq!(r.json(), document());
+}
+
+/// The schemas kept by hand for other crates' types follow those types: the
+/// roles are every `Role`, lowest first.
+#[test]
+fn hand_kept_shapes_follow_their_types() {
+    let doc = document();
+    let roles: Vec<&str> = doc["components"]["schemas"]["Role"]["enum"]
+        .as_array()
+        .expect("Role is an enum")
+        .iter()
+        .filter_map(|v| v.as_str())
+        .collect();
+    let want: Vec<&str> = gridscada_config::Role::ALL
+        .iter()
+        .map(|r| r.label())
+        .collect();
+    assert_eq!(roles, want);
 }

@@ -9,13 +9,15 @@ use axum::{Extension, Json};
 use gridscada_alarms::{AlarmEngine, AlarmError, AlarmFilter, AlarmId, AlarmState};
 use gridscada_store::AlarmHistoryFilter;
 use gridscada_tagdb::Timestamp;
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 use std::sync::Arc;
+use utoipa::{IntoParams, ToSchema};
 
 use crate::api::parse_time;
 use crate::auth::Principal;
 use crate::error::{ApiError, ApiResult};
+use crate::openapi::shapes;
 use crate::WebState;
 
 fn engine(s: &WebState) -> ApiResult<&Arc<AlarmEngine>> {
@@ -56,12 +58,16 @@ fn alarm_error(e: AlarmError) -> ApiError {
 }
 
 /// Filters as query parameters (the summary) or JSON (ack all).
-#[derive(Deserialize, Default, Clone)]
+#[derive(Deserialize, Default, Clone, IntoParams, ToSchema)]
+#[into_params(parameter_in = Query)]
+#[schema(as = AlarmFilter)]
 #[serde(deny_unknown_fields)]
 pub struct FilterParams {
     pub selection: Option<String>,
+    #[schema(maximum = 4294967295_u32)]
+    #[param(maximum = 4294967295_u32)]
     pub min_priority: Option<u32>,
-    /// Comma-separated states, e.g. `unack_active,shelved`.
+    /// Comma-separated states: normal, unack_active, ack_active, unack_rtn, shelved, suppressed, out_of_service
     pub state: Option<String>,
     pub text: Option<String>,
 }
@@ -90,29 +96,59 @@ impl FilterParams {
     }
 }
 
+/// The alarms that pass a filter.
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct AlarmList {
+    #[schema(value_type = Vec<shapes::Alarm>)]
+    pub alarms: Vec<gridscada_alarms::AlarmView>,
+    pub count: usize,
+}
+
+#[utoipa::path(get, path = "/api/alarms", tag = "alarms", summary = "Alarm summary",
+    params(FilterParams),
+    responses((status = 200, description = "OK", body = inline(AlarmList)), (status = 400), (status = 503)))]
 pub async fn summary(
     State(s): State<WebState>,
     Query(q): Query<FilterParams>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<AlarmList>> {
     let filter = q.to_filter()?;
     let alarms = engine(&s)?.summary(&filter);
-    Ok(Json(json!({ "alarms": alarms, "count": alarms.len() })))
+    Ok(Json(AlarmList {
+        count: alarms.len(),
+        alarms,
+    }))
 }
 
-#[derive(Deserialize)]
+#[derive(Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct AckBody {
+    #[schema(value_type = Option<Vec<u32>>)]
     pub ids: Option<Vec<u32>>,
     pub top: Option<bool>,
     pub all: Option<bool>,
     pub filter: Option<FilterParams>,
 }
 
+/// The alarms an acknowledgement took.
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Acked {
+    #[schema(value_type = Vec<u32>)]
+    pub acknowledged: Vec<AlarmId>,
+    pub count: usize,
+}
+
+#[utoipa::path(post, path = "/api/alarms/ack", tag = "alarms",
+    summary = "Acknowledge alarms: exactly one of ids, top or all",
+    request_body = AckBody,
+    responses((status = 200, description = "OK", body = inline(Acked)),
+        (status = 400), (status = 404), (status = 503)))]
 pub async fn ack(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
     body: Result<Json<AckBody>, axum::extract::rejection::JsonRejection>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<Acked>> {
     let Json(b) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
     let e = engine(&s)?;
     let user = who.audit_name();
@@ -131,31 +167,54 @@ pub async fn ack(
         }
     };
     persist(&s, e, &acked).await?;
-    Ok(Json(json!({ "acknowledged": acked, "count": acked.len() })))
+    Ok(Json(Acked {
+        count: acked.len(),
+        acknowledged: acked,
+    }))
 }
 
-#[derive(Deserialize)]
+#[derive(Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ShelveBody {
     pub minutes: u32,
     pub reason: String,
 }
 
+/// A shelved alarm.
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Shelved {
+    pub id: u32,
+    #[schema(value_type = shapes::Timestamp)]
+    pub shelved_until: Timestamp,
+}
+
+#[utoipa::path(post, path = "/api/alarms/{id}/shelve", tag = "alarms", summary = "Shelve an alarm",
+    params(("id" = u32, Path, description = "Alarm id")),
+    request_body = ShelveBody,
+    responses((status = 200, description = "OK", body = inline(Shelved)),
+        (status = 400), (status = 404), (status = 503)))]
 pub async fn shelve(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
     Path(id): Path<u32>,
     body: Result<Json<ShelveBody>, axum::extract::rejection::JsonRejection>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<Shelved>> {
     let Json(b) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
     let e = engine(&s)?;
     let until = e
         .shelve(AlarmId(id), &who.audit_name(), b.minutes, &b.reason)
         .map_err(alarm_error)?;
     persist(&s, e, &[AlarmId(id)]).await?;
-    Ok(Json(json!({ "id": id, "shelved_until": until })))
+    Ok(Json(Shelved {
+        id,
+        shelved_until: until,
+    }))
 }
 
+#[utoipa::path(delete, path = "/api/alarms/{id}/shelve", tag = "alarms", summary = "Unshelve an alarm",
+    params(("id" = u32, Path, description = "Alarm id")),
+    responses((status = 204, description = "Unshelved"), (status = 400), (status = 404), (status = 503)))]
 pub async fn unshelve(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
@@ -168,10 +227,13 @@ pub async fn unshelve(
     Ok(StatusCode::NO_CONTENT)
 }
 
-#[derive(Deserialize, Default)]
+#[derive(Deserialize, Default, IntoParams)]
+#[into_params(parameter_in = Query)]
 #[serde(deny_unknown_fields)]
 pub struct HistoryQuery {
+    #[param(schema_with = shapes::time, required = false)]
     pub from: Option<String>,
+    #[param(schema_with = shapes::time, required = false)]
     pub to: Option<String>,
     pub key: Option<String>,
     pub tag: Option<String>,
@@ -189,10 +251,22 @@ fn opt_time(field: &str, v: &Option<String>) -> ApiResult<Option<Timestamp>> {
         .transpose()
 }
 
+/// Recorded alarm transitions.
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Transitions {
+    #[schema(value_type = Vec<shapes::AlarmTransition>)]
+    pub transitions: Vec<gridscada_store::AlarmTransitionRecord>,
+    pub count: usize,
+}
+
+#[utoipa::path(get, path = "/api/alarms/history", tag = "alarms", summary = "Alarm transitions",
+    params(HistoryQuery),
+    responses((status = 200, description = "OK", body = inline(Transitions)), (status = 400)))]
 pub async fn history(
     State(s): State<WebState>,
     Query(q): Query<HistoryQuery>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<Transitions>> {
     let filter = AlarmHistoryFilter {
         from: opt_time("from", &q.from)?,
         to: opt_time("to", &q.to)?,
@@ -206,19 +280,29 @@ pub async fn history(
         ..Default::default()
     };
     let rows = s.store.alarm_history(&filter).await?;
-    Ok(Json(json!({ "transitions": rows, "count": rows.len() })))
+    Ok(Json(Transitions {
+        count: rows.len(),
+        transitions: rows,
+    }))
 }
 
-#[derive(Deserialize, Default)]
+#[derive(Deserialize, Default, IntoParams)]
+#[into_params(parameter_in = Query)]
 #[serde(deny_unknown_fields)]
 pub struct MetricsQuery {
+    #[param(schema_with = shapes::time, required = false)]
     pub from: Option<String>,
+    #[param(schema_with = shapes::time, required = false)]
     pub to: Option<String>,
 }
 
 /// The widest range the alarm metrics cover in one request.
 const MAX_METRICS_RANGE_MS: i64 = 366 * 24 * 3_600_000;
 
+#[utoipa::path(get, path = "/api/alarms/metrics", tag = "alarms", summary = "ISA-18.2 alarm metrics",
+    params(MetricsQuery),
+    responses((status = 200, description = "OK", body = inline(shapes::AlarmMetrics)),
+        (status = 400), (status = 503)))]
 pub async fn metrics(
     State(s): State<WebState>,
     Query(q): Query<MetricsQuery>,

@@ -7,12 +7,14 @@
 use axum::extract::State;
 use axum::Json;
 use serde::Serialize;
+use utoipa::ToSchema;
 
 use crate::error::{ApiError, ApiResult};
 use crate::WebState;
 
 /// One device as the devices screen shows it.
-#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
 pub struct DeviceView {
     pub name: String,
     pub description: String,
@@ -25,6 +27,7 @@ pub struct DeviceView {
     /// The fastest scan period configured for its tags.
     pub scan_ms: u64,
     /// Scans completed per second, over the last few seconds.
+    #[schema(minimum = 0)]
     pub achieved_scans_per_s: f64,
     /// Round trip of the last answered request.
     pub response_ms: f64,
@@ -43,7 +46,8 @@ pub struct DeviceView {
 }
 
 /// One connection or serial port.
-#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
 pub struct LinkView {
     pub link: String,
     pub protocol: String,
@@ -59,7 +63,8 @@ pub struct LinkView {
     pub last_error: String,
 }
 
-#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
 pub struct DevicesView {
     pub devices: Vec<DeviceView>,
     pub links: Vec<LinkView>,
@@ -70,6 +75,9 @@ pub trait DeviceSource: Send + Sync {
     fn devices(&self) -> DevicesView;
 }
 
+#[utoipa::path(get, path = "/api/devices", tag = "devices",
+    summary = "Communication state of every field device and link",
+    responses((status = 200, description = "OK", body = inline(DevicesView)), (status = 503)))]
 pub async fn list(State(s): State<WebState>) -> ApiResult<Json<DevicesView>> {
     let source = s
         .devices

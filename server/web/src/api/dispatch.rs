@@ -4,13 +4,16 @@ use axum::extract::{Query, State};
 use axum::Json;
 use gridscada_control::dispatch::DispatchStatus;
 use gridscada_tagdb::Timestamp;
-use serde::Deserialize;
-use serde_json::{json, Value};
+use serde::{Deserialize, Serialize};
+use utoipa::{IntoParams, ToSchema};
 
 use crate::api::parse_time;
 use crate::error::{ApiError, ApiResult};
+use crate::openapi::shapes;
 use crate::WebState;
 
+#[utoipa::path(get, path = "/api/dispatch", tag = "dispatch", summary = "Latest microgrid dispatch",
+    responses((status = 200, description = "OK", body = shapes::DispatchStatus), (status = 503)))]
 pub async fn latest(State(s): State<WebState>) -> ApiResult<Json<DispatchStatus>> {
     let rx = s
         .components
@@ -21,18 +24,33 @@ pub async fn latest(State(s): State<WebState>) -> ApiResult<Json<DispatchStatus>
     Ok(Json(status))
 }
 
-#[derive(Deserialize, Default)]
+#[derive(Deserialize, Default, IntoParams)]
+#[into_params(parameter_in = Query)]
 #[serde(deny_unknown_fields)]
 pub struct HistoryQuery {
+    #[param(schema_with = shapes::time, required = false)]
     pub from: Option<String>,
+    #[param(schema_with = shapes::time, required = false)]
     pub to: Option<String>,
     pub limit: Option<u32>,
 }
 
+/// Recorded dispatches.
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct DispatchHistory {
+    #[schema(value_type = Vec<shapes::DispatchRecord>)]
+    pub dispatches: Vec<gridscada_store::DispatchRecord>,
+    pub count: usize,
+}
+
+#[utoipa::path(get, path = "/api/dispatch/history", tag = "dispatch", summary = "Dispatch history",
+    params(HistoryQuery),
+    responses((status = 200, description = "OK", body = inline(DispatchHistory)), (status = 400)))]
 pub async fn history(
     State(s): State<WebState>,
     Query(q): Query<HistoryQuery>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<DispatchHistory>> {
     let to = match q.to.as_deref().filter(|v| !v.is_empty()) {
         Some(v) => parse_time("to", v)?,
         None => s.clock.now(),
@@ -48,12 +66,27 @@ pub async fn history(
         .store
         .dispatch_history(from, to, q.limit.unwrap_or(500).clamp(1, 10_000))
         .await?;
-    Ok(Json(json!({ "dispatches": rows, "count": rows.len() })))
+    Ok(Json(DispatchHistory {
+        count: rows.len(),
+        dispatches: rows,
+    }))
 }
 
 /// The microgrid's units as configured (names, kinds, ratings), for the
 /// overview and per-unit screens.
-pub async fn units(State(s): State<WebState>) -> ApiResult<Json<Value>> {
+/// The microgrid's units, its demand tag and the prefix of its load tags.
+#[derive(Serialize, ToSchema)]
+pub struct Units {
+    #[schema(value_type = Vec<shapes::MicrogridUnit>)]
+    pub units: Vec<gridscada_config::UnitConfig>,
+    pub demand_tag: String,
+    pub load_prefix: String,
+}
+
+#[utoipa::path(get, path = "/api/microgrid/units", tag = "dispatch",
+    summary = "The microgrid units as configured",
+    responses((status = 200, description = "OK", body = inline(Units)), (status = 503)))]
+pub async fn units(State(s): State<WebState>) -> ApiResult<Json<Units>> {
     let mg = s
         .plant
         .microgrid
@@ -61,9 +94,9 @@ pub async fn units(State(s): State<WebState>) -> ApiResult<Json<Value>> {
         .ok_or_else(|| ApiError::unavailable("this plant has no microgrid"))?;
     let demand = mg.demand_tag.get_ref();
     let load_prefix = demand.rsplit_once('.').map(|(p, _)| p).unwrap_or_default();
-    Ok(Json(json!({
-        "units": mg.units,
-        "demand_tag": demand,
-        "load_prefix": load_prefix,
-    })))
+    Ok(Json(Units {
+        units: mg.units.clone(),
+        demand_tag: demand.clone(),
+        load_prefix: load_prefix.to_string(),
+    }))
 }

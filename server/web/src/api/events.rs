@@ -4,20 +4,25 @@ use axum::extract::{Query, State};
 use axum::Json;
 use gridscada_store::EventFilter;
 use gridscada_tagdb::Timestamp;
-use serde::Deserialize;
-use serde_json::{json, Value};
+use serde::{Deserialize, Serialize};
+use utoipa::{IntoParams, ToSchema};
 
 use crate::api::parse_time;
 use crate::error::{ApiError, ApiResult};
+use crate::openapi::shapes;
 use crate::WebState;
 
-#[derive(Deserialize, Default)]
+#[derive(Deserialize, Default, IntoParams)]
+#[into_params(parameter_in = Query)]
 pub struct EventQuery {
+    #[param(schema_with = shapes::time, required = false)]
     pub from: Option<String>,
+    #[param(schema_with = shapes::time, required = false)]
     pub to: Option<String>,
     /// Today in the caller's time zone (see `tz_offset_min`).
     pub today: Option<bool>,
     /// Minutes east of UTC of the operator's time zone, for "today".
+    #[param(minimum = -840, maximum = 840)]
     pub tz_offset_min: Option<i32>,
     #[serde(rename = "type")]
     pub kind: Option<String>,
@@ -36,10 +41,22 @@ pub fn start_of_day(now: Timestamp, offset_min: i32) -> Timestamp {
     Timestamp::from_millis(local - local.rem_euclid(DAY) - offset)
 }
 
+/// A page of the event log.
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct EventList {
+    #[schema(value_type = Vec<shapes::Event>)]
+    pub events: Vec<gridscada_store::Event>,
+    pub count: usize,
+}
+
+#[utoipa::path(get, path = "/api/events", tag = "events", summary = "The event log",
+    params(EventQuery),
+    responses((status = 200, description = "OK", body = inline(EventList)), (status = 400)))]
 pub async fn list(
     State(s): State<WebState>,
     Query(q): Query<EventQuery>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<EventList>> {
     let mut filter = EventFilter {
         limit: q.limit.unwrap_or(500).clamp(1, 10_000),
         offset: q.offset.unwrap_or(0),
@@ -74,7 +91,10 @@ pub async fn list(
                 .transpose()?;
     }
     let events = s.store.events(&filter).await?;
-    Ok(Json(json!({ "events": events, "count": events.len() })))
+    Ok(Json(EventList {
+        count: events.len(),
+        events,
+    }))
 }
 
 #[cfg(test)]

@@ -27,6 +27,10 @@ use crate::WebState;
 const MAX_MESSAGE: usize = 64 * 1024;
 const FLUSH: Duration = Duration::from_millis(100);
 
+#[utoipa::path(get, path = "/api/live", tag = "live",
+    summary = "WebSocket push of tag changes and the alarm summary",
+    responses((status = 101, description = "Switching to the WebSocket protocol"), (status = 400),
+        (status = 426, description = "Not a WebSocket upgrade")))]
 pub async fn upgrade(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,

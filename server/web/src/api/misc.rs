@@ -4,7 +4,8 @@ use axum::extract::{ConnectInfo, State};
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::IntoResponse;
 use axum::Json;
-use serde_json::json;
+use serde::Serialize;
+use utoipa::ToSchema;
 
 use crate::error::ApiError;
 use crate::WebState;
@@ -56,20 +57,58 @@ fn metrics_allowed(
     }
 }
 
+#[derive(Serialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum HealthStatus {
+    Ok,
+    Degraded,
+}
+
+#[derive(Serialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum DatabaseStatus {
+    Ok,
+    Unreachable,
+}
+
+/// The server at a glance.
+#[derive(Serialize, ToSchema)]
+pub struct Health {
+    #[schema(inline)]
+    pub status: HealthStatus,
+    pub version: &'static str,
+    pub tags: usize,
+    #[schema(inline)]
+    pub database: DatabaseStatus,
+    pub uptime_s: u64,
+}
+
 /// Liveness and a one-line picture of the server.
-pub async fn healthz(State(s): State<WebState>) -> Json<serde_json::Value> {
+#[utoipa::path(get, path = "/healthz", tag = "server", summary = "Liveness",
+    responses((status = 200, description = "OK", body = inline(Health))))]
+pub async fn healthz(State(s): State<WebState>) -> Json<Health> {
     let db_ok = s.store.ping().await.is_ok();
-    Json(json!({
-        "status": if db_ok { "ok" } else { "degraded" },
-        "version": env!("CARGO_PKG_VERSION"),
-        "tags": s.db.len(),
-        "database": if db_ok { "ok" } else { "unreachable" },
-        "uptime_s": s.started.elapsed().as_secs(),
-    }))
+    Json(Health {
+        status: if db_ok {
+            HealthStatus::Ok
+        } else {
+            HealthStatus::Degraded
+        },
+        version: env!("CARGO_PKG_VERSION"),
+        tags: s.db.len(),
+        database: if db_ok {
+            DatabaseStatus::Ok
+        } else {
+            DatabaseStatus::Unreachable
+        },
+        uptime_s: s.started.elapsed().as_secs(),
+    })
 }
 
 /// Prometheus text exposition: server, tag database, HTTP, alarms, and the
 /// application's poller and historian figures.
+#[utoipa::path(get, path = "/metrics", tag = "server", summary = "Prometheus metrics",
+    responses((status = 200, description = "Prometheus text", body = String, content_type = "text/plain")))]
 pub async fn metrics(
     State(s): State<WebState>,
     ConnectInfo(peer): ConnectInfo<std::net::SocketAddr>,
@@ -142,10 +181,12 @@ pub async fn metrics(
     ))
 }
 
-/// The OpenAPI document of the API.
+/// The OpenAPI document of the API, generated (see [`crate::openapi`]).
+#[utoipa::path(get, path = "/api/openapi.json", tag = "server", summary = "This document",
+    responses((status = 200, description = "OK", body = Object)))]
 pub async fn openapi() -> impl IntoResponse {
     (
         [(header::CONTENT_TYPE, "application/json")],
-        include_str!("../../openapi.json"),
+        crate::openapi::document_text(),
     )
 }

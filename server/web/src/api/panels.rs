@@ -6,12 +6,14 @@ use axum::{Extension, Json};
 use gridscada_control::fault_isolation::{
     CommandError, Mode, PanelCommand, PanelCommandKind, PanelStatus,
 };
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 use tokio::sync::{mpsc, oneshot, watch};
+use utoipa::ToSchema;
 
 use crate::auth::Principal;
 use crate::error::{ApiError, ApiResult};
+use crate::openapi::shapes;
 use crate::WebState;
 
 /// One running panel sequence, as the web layer reaches it.
@@ -51,7 +53,22 @@ fn may_view(who: &Principal, id: &str) -> ApiResult<()> {
     }
 }
 
-pub async fn list(State(s): State<WebState>, Extension(who): Extension<Principal>) -> Json<Value> {
+/// The panels the caller may view.
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PanelList {
+    #[schema(value_type = Vec<shapes::PanelStatus>)]
+    pub panels: Vec<Value>,
+}
+
+const PANEL_ID: &str = "Panel id";
+
+#[utoipa::path(get, path = "/api/panels", tag = "panels", summary = "Panels' fault-isolation status",
+    responses((status = 200, description = "OK", body = inline(PanelList))))]
+pub async fn list(
+    State(s): State<WebState>,
+    Extension(who): Extension<Principal>,
+) -> Json<PanelList> {
     let panels: Vec<Value> = s
         .components
         .panels
@@ -59,9 +76,13 @@ pub async fn list(State(s): State<WebState>, Extension(who): Extension<Principal
         .filter(|p| may_view(&who, &p.id).is_ok())
         .map(|p| view(&s, &p.status.borrow()))
         .collect();
-    Json(json!({ "panels": panels }))
+    Json(PanelList { panels })
 }
 
+#[utoipa::path(get, path = "/api/panels/{id}", tag = "panels", summary = "One panel",
+    params(("id" = String, Path, description = PANEL_ID, min_length = 1)),
+    responses((status = 200, description = "OK", body = shapes::PanelStatus),
+        (status = 400), (status = 404)))]
 pub async fn one(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
@@ -105,12 +126,18 @@ fn refusal(e: CommandError) -> ApiError {
 
 type JsonBody<T> = Result<Json<T>, axum::extract::rejection::JsonRejection>;
 
-#[derive(Deserialize)]
+#[derive(Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ModeBody {
+    #[schema(value_type = shapes::PanelMode, inline)]
     pub mode: Mode,
 }
 
+#[utoipa::path(post, path = "/api/panels/{id}/mode", tag = "panels", summary = "Set auto or manual mode",
+    params(("id" = String, Path, description = PANEL_ID, min_length = 1)),
+    request_body = ModeBody,
+    responses((status = 200, description = "OK", body = shapes::PanelStatus),
+        (status = 400), (status = 404), (status = 409), (status = 503)))]
 pub async fn mode(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
@@ -124,6 +151,11 @@ pub async fn mode(
     current(&s, &id).await
 }
 
+#[utoipa::path(post, path = "/api/panels/{id}/reset", tag = "panels",
+    summary = "Reset (acknowledge a lockout)",
+    params(("id" = String, Path, description = PANEL_ID, min_length = 1)),
+    responses((status = 200, description = "OK", body = shapes::PanelStatus),
+        (status = 400), (status = 404), (status = 409), (status = 503)))]
 pub async fn reset(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
@@ -133,12 +165,21 @@ pub async fn reset(
     current(&s, &id).await
 }
 
-#[derive(Deserialize)]
+#[derive(Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct BreakerBody {
     pub closed: bool,
 }
 
+#[utoipa::path(post, path = "/api/panels/{id}/breakers/{breaker}", tag = "panels",
+    summary = "Open or close a breaker (manual mode)",
+    params(
+        ("id" = String, Path, description = PANEL_ID, min_length = 1),
+        ("breaker" = String, Path, description = "elcb, mccb, zone1..zoneN", min_length = 1),
+    ),
+    request_body = BreakerBody,
+    responses((status = 200, description = "OK", body = shapes::PanelStatus),
+        (status = 400), (status = 404), (status = 409), (status = 503)))]
 pub async fn breaker(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,

@@ -10,12 +10,13 @@ use gridscada_config::Role;
 use gridscada_store::StoreError;
 use gridscada_tagdb::ValueKind;
 use serde::Serialize;
-use serde_json::{json, Value};
+use utoipa::ToSchema;
 
 use crate::access::ScreenEntry;
 use crate::api::audit;
 use crate::auth::Principal;
 use crate::error::{ApiError, ApiResult};
+use crate::openapi::shapes;
 use crate::WebState;
 
 #[derive(Serialize)]
@@ -27,10 +28,20 @@ pub struct CatalogEntry {
 
 /// The screens of this plant in toolbar order. Administrators get every
 /// screen (to grant access) with `allowed`; everyone else only theirs.
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Catalog {
+    #[schema(value_type = Vec<shapes::CatalogEntry>, inline)]
+    pub screens: Vec<CatalogEntry>,
+}
+
+#[utoipa::path(get, path = "/api/screens", tag = "screens",
+    summary = "The plant's screens in toolbar order (all, with access, for administrators; the caller's own otherwise)",
+    responses((status = 200, description = "OK", body = inline(Catalog))))]
 pub async fn catalog(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
-) -> Json<Value> {
+) -> Json<Catalog> {
     let admin = who.role >= Role::Administrator;
     let screens: Vec<CatalogEntry> = s
         .catalog()
@@ -41,7 +52,7 @@ pub async fn catalog(
         })
         .filter(|e| admin || e.allowed)
         .collect();
-    Json(json!({ "screens": screens }))
+    Json(Catalog { screens })
 }
 
 /// Whether `who` may edit screens (the editor's permission).
@@ -53,6 +64,12 @@ fn no_such(id: &str) -> ApiError {
     ApiError::not_found(format!("no screen '{}'", id.escape_debug()))
 }
 
+const SCREEN_ID: &str = "The screen's id, without custom:";
+
+#[utoipa::path(get, path = "/api/screens/{id}", tag = "screens", summary = "A screen drawn in the editor",
+    params(("id" = String, Path, description = SCREEN_ID, min_length = 1)),
+    responses((status = 200, description = "OK", body = shapes::UserScreen),
+        (status = 404, description = "No such thing")))]
 pub async fn one(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
@@ -93,6 +110,12 @@ pub fn check(s: &WebState, screen: &Screen) -> Result<(), Vec<String>> {
     }
 }
 
+#[utoipa::path(put, path = "/api/screens/{id}", tag = "screens",
+    summary = "Save a screen (version = the version loaded, 0 for a new one)",
+    params(("id" = String, Path, description = SCREEN_ID, min_length = 1)),
+    request_body = shapes::UserScreen,
+    responses((status = 200, description = "OK", body = shapes::UserScreen), (status = 400),
+        (status = 409, description = "Conflict: someone else changed it first, or the change would lock administrators out")))]
 pub async fn save(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
@@ -153,6 +176,10 @@ pub async fn store_screen(s: &WebState, screen: &Screen, by: &str) -> ApiResult<
     Ok(saved)
 }
 
+#[utoipa::path(delete, path = "/api/screens/{id}", tag = "screens",
+    summary = "Delete a screen (and its access grants)",
+    params(("id" = String, Path, description = SCREEN_ID, min_length = 1)),
+    responses((status = 204, description = "Deleted"), (status = 404, description = "No such thing")))]
 pub async fn remove(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,

@@ -4,15 +4,17 @@ use axum::extract::{ConnectInfo, State};
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
-use serde::Deserialize;
-use serde_json::json;
+use gridscada_config::Role;
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
 
 use crate::api::audit;
 use crate::auth::{self, Principal};
 use crate::error::{ApiError, ApiResult};
+use crate::openapi::shapes;
 use crate::WebState;
 
-#[derive(Deserialize)]
+#[derive(Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Login {
     pub username: String,
@@ -29,6 +31,17 @@ fn refused() -> ApiError {
     )
 }
 
+#[utoipa::path(post, path = "/api/session", tag = "session",
+    summary = "Log in (rotates the session cookie)",
+    request_body = Login,
+    responses(
+        (status = 200, description = "Logged in; sets the session cookie", body = SessionView,
+            headers(("Set-Cookie" = String))),
+        (status = 400),
+        (status = 401, description = "Invalid username or password (the same answer whatever was wrong)"),
+        (status = 403),
+        (status = 429, description = "Too many failed logins"),
+    ))]
 pub async fn login(
     State(s): State<WebState>,
     ConnectInfo(peer): ConnectInfo<std::net::SocketAddr>,
@@ -131,28 +144,59 @@ pub async fn login(
         .into_response())
 }
 
-/// The session as the HMI sees it, with when it idles out (`idle_timeout_s`,
-/// null: never) and how long before that the HMI warns (`warn_s`).
-fn session_body(s: &WebState, p: &Principal) -> serde_json::Value {
-    let expiry = s.auth.sessions.policy().expiry(p.role);
-    json!({
-        "authenticated": p.is_logged_in(),
-        "user": p.user,
-        "role": p.role,
-        "group": p.group,
-        "screens": p.screens,
-        "idle_timeout_s": p.is_logged_in().then_some(expiry.idle.map(|d| d.as_secs())).flatten(),
-        "warn_s": s.auth.sessions.policy().warn.as_secs(),
-    })
+/// Who the caller is, and when the session idles out.
+#[derive(Serialize, ToSchema)]
+#[schema(as = Session)]
+#[serde(deny_unknown_fields)]
+pub struct SessionView {
+    pub authenticated: bool,
+    #[schema(required = true)]
+    pub user: Option<String>,
+    #[schema(value_type = shapes::Role)]
+    pub role: Role,
+    #[schema(required = true)]
+    pub group: Option<String>,
+    pub screens: Vec<String>,
+    /// Seconds without activity before the session ends (the live
+    /// connection counts while its screen is visible); null: never, or not
+    /// logged in.
+    #[schema(required = true)]
+    pub idle_timeout_s: Option<u64>,
+    /// How long before an idle expiry the HMI warns, in seconds.
+    pub warn_s: u64,
 }
 
+fn session_body(s: &WebState, p: &Principal) -> SessionView {
+    let policy = s.auth.sessions.policy();
+    SessionView {
+        authenticated: p.is_logged_in(),
+        user: p.user.clone(),
+        role: p.role,
+        group: p.group.clone(),
+        screens: p.screens.clone(),
+        idle_timeout_s: p
+            .is_logged_in()
+            .then(|| policy.expiry(p.role).idle.map(|d| d.as_secs()))
+            .flatten(),
+        warn_s: policy.warn.as_secs(),
+    }
+}
+
+#[utoipa::path(get, path = "/api/session", tag = "session", summary = "Who am I",
+    responses((status = 200, description = "OK", body = SessionView)))]
 pub async fn current(
     State(s): State<WebState>,
     Extension(p): Extension<Principal>,
-) -> Json<serde_json::Value> {
+) -> Json<SessionView> {
     Json(session_body(&s, &p))
 }
 
+#[utoipa::path(delete, path = "/api/session", tag = "session", summary = "Log out",
+    responses(
+        (status = 204, description = "Logged out; the cookie is cleared",
+            headers(("Set-Cookie" = String))),
+        (status = 403),
+    ))]
 pub async fn logout(
     State(s): State<WebState>,
     Extension(p): Extension<Principal>,

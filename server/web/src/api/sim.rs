@@ -4,8 +4,8 @@
 use axum::extract::{Path, State};
 use axum::http::StatusCode;
 use axum::{Extension, Json};
-use serde::Deserialize;
-use serde_json::{json, Value};
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
 
 use crate::api::audit;
 use crate::auth::Principal;
@@ -14,7 +14,7 @@ use crate::WebState;
 
 /// A zone fault that clears by itself when it trips the ELCB, or one that
 /// stays until repaired.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, ToSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum FaultKind {
     Permanent,
@@ -47,19 +47,25 @@ fn refused(e: String) -> ApiError {
     }
 }
 
-#[derive(Deserialize)]
+#[derive(Deserialize, Serialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FaultBody {
     pub panel: String,
     pub zone: u8,
+    #[schema(inline)]
     pub kind: FaultKind,
 }
 
+#[utoipa::path(post, path = "/api/sim/faults", tag = "simulation",
+    summary = "Inject a zone fault (demo and replay only)",
+    request_body = FaultBody,
+    responses((status = 201, description = "Injected", body = inline(FaultBody)),
+        (status = 400), (status = 404)))]
 pub async fn inject_fault(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
     body: Result<Json<FaultBody>, axum::extract::rejection::JsonRejection>,
-) -> ApiResult<(StatusCode, Json<Value>)> {
+) -> ApiResult<(StatusCode, Json<FaultBody>)> {
     let Json(b) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
     sim(&s)?
         .inject_fault(&b.panel, b.zone, b.kind)
@@ -81,12 +87,13 @@ pub async fn inject_fault(
         ),
     )
     .await;
-    Ok((
-        StatusCode::CREATED,
-        Json(json!({"panel": b.panel, "zone": b.zone, "kind": kind})),
-    ))
+    Ok((StatusCode::CREATED, Json(b)))
 }
 
+#[utoipa::path(delete, path = "/api/sim/faults/{panel}/{zone}", tag = "simulation",
+    summary = "Repair a zone fault",
+    params(("panel" = String, Path, min_length = 1), ("zone" = u8, Path)),
+    responses((status = 204, description = "Repaired"), (status = 400), (status = 404)))]
 pub async fn repair(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
@@ -109,7 +116,7 @@ async fn set_offline(
     who: Principal,
     device: String,
     offline: bool,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<DeviceState>> {
     sim(&s)?.set_offline(&device, offline).map_err(refused)?;
     let what = if offline { "offline" } else { "online" };
     audit(
@@ -120,21 +127,37 @@ async fn set_offline(
         format!("{} took simulated device {device} {what}", who.audit_name()),
     )
     .await;
-    Ok(Json(json!({"device": device, "offline": offline})))
+    Ok(Json(DeviceState { device, offline }))
 }
 
+/// A simulated device and whether it is off line.
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct DeviceState {
+    pub device: String,
+    pub offline: bool,
+}
+
+#[utoipa::path(post, path = "/api/sim/devices/{device}/offline", tag = "simulation",
+    summary = "Take a simulated device offline",
+    params(("device" = String, Path, min_length = 1)),
+    responses((status = 200, description = "OK", body = inline(DeviceState)), (status = 400), (status = 404)))]
 pub async fn offline(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
     Path(device): Path<String>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<DeviceState>> {
     set_offline(s, who, device, true).await
 }
 
+#[utoipa::path(post, path = "/api/sim/devices/{device}/online", tag = "simulation",
+    summary = "Take a simulated device online",
+    params(("device" = String, Path, min_length = 1)),
+    responses((status = 200, description = "OK", body = inline(DeviceState)), (status = 400), (status = 404)))]
 pub async fn online(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
     Path(device): Path<String>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<DeviceState>> {
     set_offline(s, who, device, false).await
 }

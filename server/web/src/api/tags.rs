@@ -6,13 +6,16 @@ use axum::{Extension, Json};
 use gridscada_config::{DataType, Endian, RegisterKind, Role};
 use gridscada_tagdb::{Sample, TagId, TagMeta, Value, WriteError};
 use serde::{Deserialize, Serialize};
+use utoipa::{IntoParams, ToSchema};
 
 use crate::api::audit;
 use crate::auth::Principal;
 use crate::error::{ApiError, ApiResult};
+use crate::openapi::shapes;
 use crate::WebState;
 
-/// A tag as the API shows it.
+/// A tag as the API shows it (its schema: [`shapes::Tag`], which spells out
+/// the flattened sample).
 #[derive(Serialize)]
 pub struct TagView {
     pub name: String,
@@ -32,19 +35,26 @@ pub struct TagView {
 }
 
 /// The field register behind a tag.
-#[derive(Serialize)]
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
 pub struct TagSource {
     pub device: String,
+    #[schema(value_type = shapes::RegisterKind, inline)]
     pub table: RegisterKind,
     pub address: u32,
+    #[schema(required = true)]
     pub bit: Option<u8>,
+    #[schema(value_type = String)]
     pub data_type: DataType,
+    #[schema(value_type = shapes::Endian, inline)]
     pub word_order: Endian,
+    #[schema(value_type = shapes::Endian, inline)]
     pub byte_order: Endian,
     pub scale: f64,
     pub offset: f64,
-    /// The device clock tag that stamps this tag's samples; `None`: the
-    /// time the reply arrived.
+    /// The device clock tag whose reading stamps this tag's samples; null:
+    /// the time the reply arrived
+    #[schema(required = true)]
     pub time_tag: Option<String>,
 }
 
@@ -93,31 +103,44 @@ impl WebState {
 /// Most tags one page may hold.
 const MAX_PAGE: usize = 1000;
 
-#[derive(Deserialize)]
+#[derive(Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
 pub struct ListQuery {
-    /// Only names that start with this.
+    /// Only tags whose name starts with this
     #[serde(default)]
+    #[param(required = false)]
     pub prefix: String,
-    /// Only names or descriptions that contain this, ignoring case.
+    /// Only tags whose name or description contains this, ignoring case
     #[serde(default)]
+    #[param(required = false, max_length = 256)]
     pub search: String,
+    /// Skip this many matches
     #[serde(default)]
+    #[param(required = false)]
     pub offset: usize,
-    /// Page size, at most 1000; every match when absent.
+    /// Page size; every match when absent
+    #[param(minimum = 1, maximum = 1000)]
     pub limit: Option<usize>,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
 pub struct TagList {
+    #[schema(value_type = Vec<shapes::Tag>)]
     pub tags: Vec<TagView>,
     /// Tags that match, before paging.
     pub total: usize,
     pub offset: usize,
+    #[schema(required = true)]
     pub limit: Option<usize>,
 }
 
 /// The tags the caller may read, filtered and paged on the server so a
 /// plant of 100,000 tags stays light in the browser.
+#[utoipa::path(get, path = "/api/tags", tag = "tags",
+    summary = "List the tags the caller may read (filtered and paged)",
+    params(ListQuery),
+    responses((status = 200, description = "OK", body = TagList), (status = 400)))]
 pub async fn list(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
@@ -171,32 +194,50 @@ fn contains_ignoring_case(hay: &str, needle: &str) -> bool {
     hay.to_lowercase().contains(needle)
 }
 
-#[derive(Deserialize)]
+#[derive(Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
 pub struct TreeQuery {
+    /// Empty for the roots, or a branch name followed by a dot
     #[serde(default)]
+    #[param(required = false, max_length = 1024)]
     pub prefix: String,
 }
 
 /// One node under a prefix of the dot-separated tag tree.
-#[derive(Serialize)]
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
 pub struct TreeNode {
     /// The full name of the node (a tag name, a branch, or both).
     pub name: String,
     /// Its last segment.
     pub label: String,
     /// Readable tags at or under it.
+    #[schema(minimum = 1)]
     pub count: usize,
     pub is_tag: bool,
     pub has_children: bool,
 }
 
 /// The children of a node of the tag tree. `prefix` is "" for the roots, or
+/// The children of a tree node.
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TreeLevel {
+    pub prefix: String,
+    #[schema(inline)]
+    pub children: Vec<TreeNode>,
+}
+
 /// a branch's name followed by a dot.
+#[utoipa::path(get, path = "/api/tags/tree", tag = "tags",
+    summary = "Children of a node of the dot-separated tag tree",
+    params(TreeQuery),
+    responses((status = 200, description = "OK", body = inline(TreeLevel)), (status = 400)))]
 pub async fn tree(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
     Query(q): Query<TreeQuery>,
-) -> ApiResult<Json<serde_json::Value>> {
+) -> ApiResult<Json<TreeLevel>> {
     if q.prefix.chars().count() > 1024 {
         return Err(ApiError::bad_request(
             "prefix may have at most 1024 characters",
@@ -228,11 +269,15 @@ pub async fn tree(
         node.has_children |= deeper;
     }
     let children: Vec<TreeNode> = nodes.into_values().collect();
-    Ok(Json(
-        serde_json::json!({ "prefix": q.prefix, "children": children }),
-    ))
+    Ok(Json(TreeLevel {
+        prefix: q.prefix,
+        children,
+    }))
 }
 
+#[utoipa::path(get, path = "/api/tags/{name}", tag = "tags", summary = "One tag",
+    params(("name" = String, Path, description = "Tag name", min_length = 1)),
+    responses((status = 200, description = "OK", body = shapes::Tag), (status = 400), (status = 404)))]
 pub async fn one(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
@@ -250,13 +295,25 @@ pub async fn one(
     s.tag_view(id, meta).map(Json).ok_or_else(not_found)
 }
 
-#[derive(Deserialize)]
+#[derive(Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct WriteBody {
+    #[schema(value_type = shapes::TagValue)]
     pub value: Value,
 }
 
 /// Writes a tag and answers once the device's read-back confirms it.
+#[utoipa::path(post, path = "/api/tags/{name}/write", tag = "tags",
+    summary = "Write a tag; answers once the device confirms",
+    params(("name" = String, Path, description = "Tag name", min_length = 1)),
+    request_body = WriteBody,
+    responses(
+        (status = 200, description = "OK", body = shapes::Tag),
+        (status = 400), (status = 404),
+        (status = 502, description = "The device did not take the write"),
+        (status = 503),
+        (status = 504, description = "The write timed out"),
+    ))]
 pub async fn write(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,

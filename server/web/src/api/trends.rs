@@ -5,21 +5,27 @@ use axum::extract::{Query, State};
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
-use serde::Deserialize;
-use serde_json::{json, Value};
+use gridscada_tagdb::Timestamp;
+use serde::{Deserialize, Serialize};
+use utoipa::{IntoParams, ToSchema};
 
 use crate::api::parse_time;
 use crate::auth::Principal;
 use crate::error::{ApiError, ApiResult};
+use crate::openapi::shapes;
 use crate::WebState;
 
-#[derive(Deserialize)]
+#[derive(Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
 pub struct TrendQuery {
-    /// Comma-separated tag names.
+    /// Comma-separated tag names, at most 16
     pub tags: String,
+    #[param(value_type = shapes::Time, inline)]
     pub from: String,
+    #[param(value_type = shapes::Time, inline)]
     pub to: String,
     /// Points per series (buckets), at most 5000.
+    #[param(minimum = 1, maximum = 5000)]
     pub points: Option<u32>,
 }
 
@@ -51,11 +57,27 @@ fn tag_list<'a>(s: &WebState, who: &Principal, tags: &'a str) -> ApiResult<Vec<&
     Ok(list)
 }
 
+/// Downsampled series of some tags.
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Trend {
+    #[schema(value_type = shapes::Timestamp)]
+    pub from: Timestamp,
+    #[schema(value_type = shapes::Timestamp)]
+    pub to: Timestamp,
+    pub points: u32,
+    #[schema(value_type = Vec<Object>)]
+    pub series: Vec<gridscada_store::TagTrend>,
+}
+
+#[utoipa::path(get, path = "/api/trends", tag = "trends", summary = "Downsampled trend",
+    params(TrendQuery),
+    responses((status = 200, description = "OK", body = inline(Trend)), (status = 400), (status = 404)))]
 pub async fn trend(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
     Query(q): Query<TrendQuery>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<Trend>> {
     let tags = tag_list(&s, &who, &q.tags)?;
     let from = parse_time("from", &q.from)?;
     let to = parse_time("to", &q.to)?;
@@ -64,19 +86,30 @@ pub async fn trend(
         return Err(ApiError::bad_request("points must be 1 to 5000"));
     }
     let series = s.store.trend(&tags, from, to, points).await?;
-    Ok(Json(
-        json!({ "from": from, "to": to, "points": points, "series": series }),
-    ))
+    Ok(Json(Trend {
+        from,
+        to,
+        points,
+        series,
+    }))
 }
 
-#[derive(Deserialize)]
+#[derive(Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
 pub struct CsvQuery {
+    /// Comma-separated tag names, at most 16
     pub tags: String,
+    #[param(value_type = shapes::Time, inline)]
     pub from: String,
+    #[param(value_type = shapes::Time, inline)]
     pub to: String,
 }
 
 /// Raw samples as CSV, streamed so that a long range never sits in memory.
+#[utoipa::path(get, path = "/api/trends.csv", tag = "trends", summary = "Raw samples as CSV",
+    params(CsvQuery),
+    responses((status = 200, description = "CSV", body = String, content_type = "text/csv"),
+        (status = 400), (status = 404)))]
 pub async fn csv(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,

@@ -5,12 +5,13 @@ use axum::http::StatusCode;
 use axum::{Extension, Json};
 use gridscada_config::Role;
 use gridscada_store::{NewUser, UserSummary};
-use serde::Deserialize;
-use serde_json::{json, Value};
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
 
 use crate::api::audit;
 use crate::auth::{self, Principal};
 use crate::error::{ApiError, ApiResult};
+use crate::openapi::shapes;
 use crate::WebState;
 
 type JsonBody<T> = Result<Json<T>, axum::extract::rejection::JsonRejection>;
@@ -20,20 +21,53 @@ fn body<T>(b: JsonBody<T>) -> ApiResult<T> {
         .map_err(|e| ApiError::bad_request(e.body_text()))
 }
 
-pub async fn list(State(s): State<WebState>) -> ApiResult<Json<Value>> {
-    let users: Vec<UserSummary> = s.store.users().await?.iter().map(|u| u.summary()).collect();
-    Ok(Json(json!({ "users": users })))
+/// Every user.
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct UserList {
+    #[schema(value_type = Vec<shapes::User>)]
+    pub users: Vec<UserSummary>,
 }
 
-#[derive(Deserialize)]
+#[utoipa::path(get, path = "/api/users", tag = "users", summary = "List users",
+    responses((status = 200, description = "OK", body = inline(UserList))))]
+pub async fn list(State(s): State<WebState>) -> ApiResult<Json<UserList>> {
+    let users: Vec<UserSummary> = s.store.users().await?.iter().map(|u| u.summary()).collect();
+    Ok(Json(UserList { users }))
+}
+
+#[derive(Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NewUserBody {
+    #[schema(min_length = 1, max_length = 64)]
     pub name: String,
+    #[schema(value_type = shapes::Role)]
     pub role: Role,
     /// Defaults to the role's name.
     pub group: Option<String>,
     /// Generated and returned once when absent.
+    #[schema(min_length = 10)]
     pub password: Option<String>,
+}
+
+/// A user, with the generated password when none was given.
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CreatedUser {
+    #[schema(value_type = shapes::User)]
+    pub user: UserSummary,
+    /// The generated password, when none was given (shown once)
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(value_type = String, required = false)]
+    pub password: Option<String>,
+}
+
+/// A user.
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct OneUser {
+    #[schema(value_type = shapes::User)]
+    pub user: UserSummary,
 }
 
 pub fn check_user_name(name: &str) -> ApiResult<()> {
@@ -63,11 +97,15 @@ fn check_group_name(group: &str) -> ApiResult<()> {
         .map_err(|_| ApiError::bad_request("a group name needs 1 to 64 printable characters"))
 }
 
+#[utoipa::path(post, path = "/api/users", tag = "users", summary = "Create a user",
+    request_body = NewUserBody,
+    responses((status = 201, description = "Created", body = inline(CreatedUser)),
+        (status = 400), (status = 409)))]
 pub async fn create(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
     b: JsonBody<NewUserBody>,
-) -> ApiResult<(StatusCode, Json<Value>)> {
+) -> ApiResult<(StatusCode, Json<CreatedUser>)> {
     let b = body(b)?;
     check_user_name(&b.name)?;
     let group = b.group.unwrap_or_else(|| b.role.label().to_string());
@@ -108,16 +146,17 @@ pub async fn create(
         ),
     )
     .await;
-    let mut out = json!({ "user": user.summary() });
-    if generated {
-        out["password"] = json!(password);
-    }
+    let out = CreatedUser {
+        user: user.summary(),
+        password: generated.then_some(password),
+    };
     Ok((StatusCode::CREATED, Json(out)))
 }
 
-#[derive(Deserialize)]
+#[derive(Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct UpdateBody {
+    #[schema(value_type = Option<shapes::Role>)]
     pub role: Option<Role>,
     pub group: Option<String>,
     pub blocked: Option<bool>,
@@ -172,12 +211,18 @@ fn unchanged(u: &gridscada_store::User) -> After {
     Some((u.role, u.blocked, u.group.clone()))
 }
 
+#[utoipa::path(patch, path = "/api/users/{name}", tag = "users",
+    summary = "Change a user's role, group or blocked state",
+    params(("name" = String, Path, description = "User name", min_length = 1)),
+    request_body = UpdateBody,
+    responses((status = 200, description = "OK", body = inline(OneUser)),
+        (status = 400), (status = 404), (status = 409)))]
 pub async fn update(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
     Path(name): Path<String>,
     b: JsonBody<UpdateBody>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<OneUser>> {
     let b = body(b)?;
     existing_user(&s, &name).await?;
     // Validate everything before changing anything: no partial updates.
@@ -233,16 +278,23 @@ pub async fn update(
     )
     .await;
     let user = existing_user(&s, &name).await?;
-    Ok(Json(json!({ "user": user.summary() })))
+    Ok(Json(OneUser {
+        user: user.summary(),
+    }))
 }
 
-#[derive(Deserialize)]
+#[derive(Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct DeleteBody {
     /// Must repeat the user's name: deleting is explicit.
     pub confirm: String,
 }
 
+#[utoipa::path(delete, path = "/api/users/{name}", tag = "users",
+    summary = "Delete a user (confirm by repeating the name)",
+    params(("name" = String, Path, description = "User name", min_length = 1)),
+    request_body = DeleteBody,
+    responses((status = 204, description = "Deleted"), (status = 400), (status = 404), (status = 409)))]
 pub async fn remove(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
@@ -280,7 +332,7 @@ pub async fn remove(
     Ok(StatusCode::NO_CONTENT)
 }
 
-#[derive(Deserialize)]
+#[derive(Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PasswordBody {
     pub password: String,
@@ -288,6 +340,11 @@ pub struct PasswordBody {
     pub current_password: Option<String>,
 }
 
+#[utoipa::path(post, path = "/api/users/{name}/password", tag = "users",
+    summary = "Change a password (own: with current_password; others': administrators)",
+    params(("name" = String, Path, description = "User name", min_length = 1)),
+    request_body = PasswordBody,
+    responses((status = 204, description = "Changed"), (status = 400), (status = 404)))]
 pub async fn password(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
@@ -348,16 +405,31 @@ pub async fn password(
     Ok(StatusCode::NO_CONTENT)
 }
 
+/// The screens a group may open, and every screen it could.
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct GroupScreens {
+    pub group: String,
+    pub screens: Vec<String>,
+    #[schema(value_type = Vec<shapes::Screen>)]
+    pub available: Vec<String>,
+}
+
+#[utoipa::path(get, path = "/api/groups/{group}/screens", tag = "users", summary = "A group's screens",
+    params(("group" = String, Path, min_length = 1)),
+    responses((status = 200, description = "OK", body = inline(GroupScreens)), (status = 400)))]
 pub async fn group_screens(
     State(s): State<WebState>,
     Path(group): Path<String>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<GroupScreens>> {
     let role = role_named(&group);
     let screens = s.screens_of(&group, role).await;
     let available: Vec<String> = s.catalog().into_iter().map(|e| e.id).collect();
-    Ok(Json(
-        json!({ "group": group, "screens": screens, "available": available }),
-    ))
+    Ok(Json(GroupScreens {
+        group,
+        screens,
+        available,
+    }))
 }
 
 /// The role a group is named after; other groups have a guest's defaults.
@@ -365,18 +437,33 @@ fn role_named(group: &str) -> Role {
     Role::parse(group).unwrap_or(Role::Guest)
 }
 
-#[derive(Deserialize)]
+#[derive(Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ScreensBody {
+    #[schema(value_type = Vec<shapes::Screen>)]
     pub screens: Vec<String>,
 }
 
+/// The screens a group may open.
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct GroupScreensSet {
+    pub group: String,
+    #[schema(value_type = Vec<shapes::Screen>)]
+    pub screens: Vec<String>,
+}
+
+#[utoipa::path(put, path = "/api/groups/{group}/screens", tag = "users", summary = "Set a group's screens",
+    params(("group" = String, Path, min_length = 1)),
+    request_body = ScreensBody,
+    responses((status = 200, description = "OK", body = inline(GroupScreensSet)), (status = 400),
+        (status = 409, description = "Conflict: the change would leave no administrator able to manage users")))]
 pub async fn set_group_screens(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
     Path(group): Path<String>,
     b: JsonBody<ScreensBody>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<GroupScreensSet>> {
     let b = body(b)?;
     check_group_name(&group)?;
     if let Some(bad) = b
@@ -406,5 +493,8 @@ pub async fn set_group_screens(
         ),
     )
     .await;
-    Ok(Json(json!({ "group": group, "screens": b.screens })))
+    Ok(Json(GroupScreensSet {
+        group,
+        screens: b.screens,
+    }))
 }
