@@ -88,11 +88,12 @@ export class AlarmFooter {
       'aria-label': 'Resize the alarm list', 'aria-controls': 'alarm-footer', title: 'Drag to resize the alarm list (or use the up and down arrow keys)' });
     this.wireGrip();
     this.tbody = h('tbody');
-    this.list = h('div', { class: 'footer-list' },
+    // The lists scroll: reachable from the keyboard.
+    this.list = h('div', { class: 'footer-list', tabindex: '0', role: 'group', 'aria-label': 'Alarm rows' },
       h('table', { class: 'data alarms', id: 'footer-alarms' },
         h('thead', {}, h('tr', {}, ALARM_HEADERS.map((t) => h('th', { scope: 'col', text: t })))),
         this.tbody));
-    this.summary = h('div', { class: 'footer-list footer-summary', id: 'footer-summary', hidden: true });
+    this.summary = h('div', { class: 'footer-list footer-summary', id: 'footer-summary', tabindex: '0', role: 'group', 'aria-label': 'Alarms by area', hidden: true });
     this.root.replaceChildren(this.grip,
       h('div', { class: 'footer-bar' },
         h('h2', { class: 'footer-title', text: 'Alarms' }), this.count, this.selSelect, this.prioSelect,
