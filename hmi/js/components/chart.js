@@ -137,10 +137,11 @@ export class TrendChart {
 
   /** Shows a window at once (with the data there is), then asks the screen for it ('pan' or 'zoom'). */
   propose(from, to, kind) {
-    this.showView(from, to);
+    // The window asked for is kept apart: a live update may redraw the old one meanwhile.
+    const view = { ...this.showView(from, to), kind };
     clearTimeout(this.viewTimer);
-    // A burst of wheel steps asks once.
-    this.viewTimer = setTimeout(() => { if (this.onView) this.onView({ from: this.from, to: this.to, kind }); }, 150);
+    // A burst of wheel steps asks once, for the last window.
+    this.viewTimer = setTimeout(() => { if (this.onView) this.onView(view); }, 150);
   }
 
   /** Draws the window [from, to]; it never reaches past now (the screen clamps again). */
@@ -151,6 +152,7 @@ export class TrendChart {
     this.from = from;
     this.to = to;
     this.draw();
+    return { from, to };
   }
 
   bucketMs() {
