@@ -51,7 +51,9 @@ export class Live {
       this.scheduleReconnect();
       return;
     }
-    if (this.connected && document.visibilityState === 'visible' && now - (this.lastVisible || 0) > (this.visibleMs || VISIBLE_MS)) {
+    // Only on an open socket: a send on a closing one is logged as an error.
+    if (this.connected && this.ws.readyState === WebSocket.OPEN && document.visibilityState === 'visible'
+      && now - (this.lastVisible || 0) > (this.visibleMs || VISIBLE_MS)) {
       this.lastVisible = now;
       try {
         this.ws.send(JSON.stringify({ visible: true }));
