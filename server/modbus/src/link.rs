@@ -10,6 +10,16 @@
 //! **Must not touch:** configuration parsing, other links. Scan periods and
 //! back-off are plant time (the [`Clock`]); request timeouts are wall time via
 //! `Clock::to_wall`.
+//!
+//! **Why one file (about 900 lines):** it is one task's state machine. Nearly
+//! all of it is `impl Link`, whose methods (connect, schedule, request, scan,
+//! write, probe, mark a device answered or silent, take the link down,
+//! watch staleness) share and change the same
+//! state: the connection, the per-device back-off and health, the pending
+//! writes and the counters. Split across files, each piece would still need
+//! the whole of that state, and a reader following one request from schedule
+//! to status tags would jump between them. Decoding and planning, which do
+//! not need it, already live in `decode.rs` and `plan.rs`.
 
 use std::borrow::Cow;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};

@@ -1,0 +1,273 @@
+//! What the web layer reads from the running stack: the devices screen's
+//! figures (`StackDevices`, the poller's stats behind `DeviceSource`) and the
+//! `/metrics` source (`StackMetrics`).
+
+use std::sync::Arc;
+
+use gridscada_config::Plant;
+use gridscada_tagdb::TagDb;
+
+/// The poller's figures per device and link, for the devices screen.
+pub(super) struct StackDevices {
+    pub(super) plant: Arc<Plant>,
+    pub(super) db: Arc<TagDb>,
+    pub(super) poll: gridscada_modbus::StatsHandle,
+    /// Per device: when its scans were last counted, the count, and the
+    /// rate measured then, so the achieved rate covers the last seconds.
+    pub(super) rates:
+        std::sync::Mutex<std::collections::HashMap<String, (std::time::Instant, u64, f64)>>,
+}
+
+impl StackDevices {
+    fn achieved_rate(&self, device: &str, scans: u64) -> f64 {
+        let now = std::time::Instant::now();
+        let mut rates = self.rates.lock().unwrap_or_else(|p| p.into_inner());
+        let entry = rates
+            .entry(device.to_string())
+            .or_insert((now, scans, f64::NAN));
+        let secs = now.duration_since(entry.0).as_secs_f64();
+        let rate = scans.saturating_sub(entry.1) as f64 / secs;
+        if secs >= 2.0 {
+            *entry = (now, scans, rate);
+        } else if entry.2.is_nan() && secs >= 0.5 {
+            // No full window yet: what the time since the first look shows.
+            return rate;
+        }
+        entry.2
+    }
+}
+
+impl gridscada_web::api::devices::DeviceSource for StackDevices {
+    fn devices(&self) -> gridscada_web::api::devices::DevicesView {
+        use gridscada_web::api::devices::{DeviceView, DevicesView, LinkView};
+        let poll = self.poll.stats();
+        let last_error = |device: &str| {
+            self.db
+                .id(&format!("{device}.Comm.LastError"))
+                .and_then(|id| self.db.get(id))
+                .map(|s| match s.value {
+                    gridscada_tagdb::Value::Str(e) => e.to_string(),
+                    _ => String::new(),
+                })
+                .unwrap_or_default()
+        };
+        let protocol = |d: &gridscada_config::DeviceConfig| {
+            match d.protocol {
+                gridscada_config::Protocol::Tcp => "tcp",
+                gridscada_config::Protocol::Rtu => "rtu",
+            }
+            .to_string()
+        };
+        let devices: Vec<DeviceView> = poll
+            .devices
+            .iter()
+            .map(|st| {
+                let cfg = self.plant.device(&st.device);
+                let scan_ms = self
+                    .plant
+                    .tags
+                    .iter()
+                    .filter(|t| t.device.get_ref() == &st.device)
+                    .filter_map(|t| cfg.map(|d| t.scan_ms(d)))
+                    .min()
+                    .or(cfg.map(|d| *d.scan_ms.get_ref()))
+                    .unwrap_or_default();
+                DeviceView {
+                    name: st.device.clone(),
+                    description: cfg.map(|d| d.description.clone()).unwrap_or_default(),
+                    link: st.link.clone(),
+                    protocol: cfg.map(protocol).unwrap_or_default(),
+                    address: cfg
+                        .map(|d| match (&d.address, &d.serial) {
+                            (Some(a), _) => a.get_ref().clone(),
+                            (None, Some(s)) => s.port.get_ref().clone(),
+                            (None, None) => String::new(),
+                        })
+                        .unwrap_or_default(),
+                    unit_id: cfg.map(|d| *d.unit_id.get_ref()).unwrap_or_default(),
+                    scan_ms,
+                    achieved_scans_per_s: self.achieved_rate(&st.device, st.scans),
+                    response_ms: st.last_response_ms,
+                    requests: st.requests,
+                    errors: st.errors,
+                    timeouts: st.timeouts,
+                    exceptions: st.exceptions,
+                    writes: st.writes,
+                    late_scans: st.late_scans,
+                    overruns: st.overruns,
+                    connected: st.connected,
+                    backing_off: !st.connected && st.requests > 0,
+                    last_error: last_error(&st.device),
+                }
+            })
+            .collect();
+        let links = poll
+            .links
+            .iter()
+            .map(|l| {
+                let on: Vec<&DeviceView> = devices.iter().filter(|d| d.link == l.link).collect();
+                LinkView {
+                    link: l.link.clone(),
+                    protocol: on.first().map(|d| d.protocol.clone()).unwrap_or_default(),
+                    devices: on.iter().map(|d| d.name.clone()).collect(),
+                    connected: on.iter().all(|d| d.connected),
+                    connects: l.connects,
+                    disconnects: l.disconnects,
+                    late_replies: l.late_replies,
+                    garbage_bytes: l.garbage_bytes,
+                    last_error: l.last_error.clone(),
+                }
+            })
+            .collect();
+        // The rate is NaN until two readings are 2 s apart; JSON has no NaN.
+        let devices = devices
+            .into_iter()
+            .map(|mut d| {
+                if !d.achieved_scans_per_s.is_finite() {
+                    d.achieved_scans_per_s = 0.0;
+                }
+                d
+            })
+            .collect();
+        DevicesView { devices, links }
+    }
+}
+
+/// The poller's and the historian's figures for `/metrics`.
+pub(super) struct StackMetrics {
+    pub(super) poll: gridscada_modbus::StatsHandle,
+    pub(super) historian: gridscada_store::HistorianHandle,
+}
+
+impl gridscada_web::metrics::MetricsSource for StackMetrics {
+    fn render(&self, out: &mut gridscada_web::metrics::Prom) {
+        let poll = self.poll.stats();
+        for d in &poll.devices {
+            let l = [("device", d.device.as_str())];
+            out.gauge(
+                "gridscada_device_connected",
+                "1 while the device answers.",
+                &l,
+                f64::from(u8::from(d.connected)),
+            );
+            out.counter(
+                "gridscada_poll_requests_total",
+                "Modbus requests sent.",
+                &l,
+                d.requests as f64,
+            );
+            out.counter(
+                "gridscada_poll_errors_total",
+                "Modbus requests without a good answer.",
+                &l,
+                d.errors as f64,
+            );
+            out.counter(
+                "gridscada_poll_timeouts_total",
+                "Modbus requests that timed out.",
+                &l,
+                d.timeouts as f64,
+            );
+            out.counter(
+                "gridscada_poll_exceptions_total",
+                "Modbus exception responses.",
+                &l,
+                d.exceptions as f64,
+            );
+            out.counter(
+                "gridscada_poll_writes_total",
+                "Confirmed writes.",
+                &l,
+                d.writes as f64,
+            );
+            out.counter(
+                "gridscada_poll_scans_total",
+                "Scans completed.",
+                &l,
+                d.scans as f64,
+            );
+            out.counter(
+                "gridscada_poll_late_scans_total",
+                "Scans started late.",
+                &l,
+                d.late_scans as f64,
+            );
+            out.counter(
+                "gridscada_poll_overruns_total",
+                "Scan periods skipped by overruns.",
+                &l,
+                d.overruns as f64,
+            );
+            out.gauge(
+                "gridscada_poll_response_seconds",
+                "Round trip of the last answered request.",
+                &l,
+                d.last_response_ms / 1000.0,
+            );
+        }
+        for k in &poll.links {
+            let l = [("link", k.link.as_str())];
+            out.counter(
+                "gridscada_link_connects_total",
+                "Connections made.",
+                &l,
+                k.connects as f64,
+            );
+            out.counter(
+                "gridscada_link_late_replies_total",
+                "Late or stray replies discarded.",
+                &l,
+                k.late_replies as f64,
+            );
+            out.counter(
+                "gridscada_link_garbage_bytes_total",
+                "Bytes discarded as garbage.",
+                &l,
+                k.garbage_bytes as f64,
+            );
+        }
+        let h = self.historian.metrics();
+        out.gauge(
+            "gridscada_historian_buffered",
+            "Samples waiting to be written.",
+            &[],
+            h.buffered as f64,
+        );
+        out.gauge(
+            "gridscada_historian_capacity",
+            "Size of the historian buffer.",
+            &[],
+            h.capacity as f64,
+        );
+        out.counter(
+            "gridscada_historian_dropped_total",
+            "Samples dropped because the buffer was full.",
+            &[],
+            h.dropped as f64,
+        );
+        out.counter(
+            "gridscada_historian_samples_written_total",
+            "Samples written.",
+            &[],
+            h.samples_written as f64,
+        );
+        out.counter(
+            "gridscada_historian_batches_written_total",
+            "Batches written.",
+            &[],
+            h.batches_written as f64,
+        );
+        out.counter(
+            "gridscada_historian_write_errors_total",
+            "Failed batch writes (each retried).",
+            &[],
+            h.write_errors as f64,
+        );
+        out.gauge(
+            "gridscada_historian_last_write_seconds",
+            "Duration of the last batch write.",
+            &[],
+            h.last_write_ms / 1000.0,
+        );
+    }
+}

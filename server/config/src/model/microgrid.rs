@@ -1,0 +1,249 @@
+//! The microgrid (`[microgrid]`): its units and their tags
+//! (`UnitConfig::io`), the dispatch period, reserve, diesel commitment,
+//! forecasts and the look-ahead horizon.
+
+use serde::{Deserialize, Serialize};
+use serde_spanned::Spanned;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum UnitKind {
+    Pv,
+    Wind,
+    Storage,
+    Diesel,
+}
+
+/// The microgrid and its cascade outer loop.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct MicrogridConfig {
+    /// Outer-loop period.
+    #[serde(default = "default_dispatch_period")]
+    pub dispatch_period_s: Spanned<f64>,
+    /// Value of lost load: the price of shedding.
+    #[serde(default = "default_voll")]
+    pub voll_per_kwh: f64,
+    /// Tag of the measured demand, kW.
+    pub demand_tag: Spanned<String>,
+    /// Measurements older than this are stale and force the fallback.
+    #[serde(default = "default_stale")]
+    pub stale_after_s: f64,
+    #[serde(default)]
+    pub commitment: CommitmentConfig,
+    /// Look-ahead of the outer loop (absent: each period on its own).
+    #[serde(default)]
+    pub horizon: Option<HorizonConfig>,
+    #[serde(rename = "unit")]
+    pub units: Vec<UnitConfig>,
+}
+
+/// Points of a daily curve: `[hour, value]` pairs, hour in [0, 24) UTC,
+/// interpolated linearly and wrapping at midnight (see [`crate::daily`]).
+pub type DailyPoints = Spanned<Vec<(f64, f64)>>;
+
+/// The receding horizon: every `resolve_s` the outer loop solves the
+/// multi-period problem over `periods` × `period_s` ahead, from the
+/// measurements now and the forecasts, and prices stored energy in each
+/// period's dispatch with what the horizon says a stored kWh is worth.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct HorizonConfig {
+    /// Number of look-ahead periods.
+    #[serde(default = "default_horizon_periods")]
+    pub periods: Spanned<f64>,
+    /// Length of one look-ahead period, s.
+    #[serde(default = "default_horizon_period_s")]
+    pub period_s: Spanned<f64>,
+    /// How often the horizon is solved again, s (at least the dispatch period).
+    #[serde(default = "default_horizon_resolve_s")]
+    pub resolve_s: Spanned<f64>,
+    /// How fast today's deviation from a daily forecast curve fades towards
+    /// the curve, h (e-folding time of the ratio measured / curve).
+    #[serde(default = "default_blend_h")]
+    pub blend_h: Spanned<f64>,
+    /// Daily demand curve, kW (absent: the demand now persists).
+    #[serde(default)]
+    pub demand_forecast_kw: Option<DailyPoints>,
+    /// Spinning reserve to hold in every look-ahead period.
+    #[serde(default)]
+    pub reserve: Option<ReserveConfig>,
+}
+
+fn default_horizon_periods() -> Spanned<f64> {
+    Spanned::new(0..0, 16.0)
+}
+fn default_horizon_period_s() -> Spanned<f64> {
+    Spanned::new(0..0, 900.0)
+}
+fn default_horizon_resolve_s() -> Spanned<f64> {
+    Spanned::new(0..0, 60.0)
+}
+fn default_blend_h() -> Spanned<f64> {
+    Spanned::new(0..0, 2.0)
+}
+
+/// Spinning reserve: online headroom (running diesels, storage discharge)
+/// must cover these shares of load, PV and wind; a shortfall costs
+/// `shortfall_cost_per_kwh`.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReserveConfig {
+    #[serde(default)]
+    pub load_frac: f64,
+    #[serde(default)]
+    pub pv_frac: f64,
+    #[serde(default)]
+    pub wind_frac: f64,
+    pub shortfall_cost_per_kwh: f64,
+}
+
+fn default_dispatch_period() -> Spanned<f64> {
+    Spanned::new(0..0, 5.0)
+}
+fn default_voll() -> f64 {
+    5.0
+}
+fn default_stale() -> f64 {
+    15.0
+}
+
+/// Diesel on/off rule with hysteresis, decided outside the LP.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct CommitmentConfig {
+    /// Start a diesel when net load (demand - renewables) exceeds what storage
+    /// can cover by this margin, or when SoC falls below `start_soc_frac`.
+    #[serde(default = "default_start_soc")]
+    pub start_soc_frac: f64,
+    /// Stop when SoC is above this and renewables + storage cover the load.
+    #[serde(default = "default_stop_soc")]
+    pub stop_soc_frac: f64,
+    #[serde(default = "default_min_run")]
+    pub min_run_s: f64,
+    #[serde(default = "default_min_stop")]
+    pub min_stop_s: f64,
+}
+
+impl Default for CommitmentConfig {
+    fn default() -> Self {
+        CommitmentConfig {
+            start_soc_frac: default_start_soc(),
+            stop_soc_frac: default_stop_soc(),
+            min_run_s: default_min_run(),
+            min_stop_s: default_min_stop(),
+        }
+    }
+}
+
+fn default_start_soc() -> f64 {
+    0.25
+}
+fn default_stop_soc() -> f64 {
+    0.6
+}
+fn default_min_run() -> f64 {
+    900.0
+}
+fn default_min_stop() -> f64 {
+    300.0
+}
+
+/// One microgrid unit and its controller's tags (under `prefix`, see
+/// [`UnitConfig::io`]).
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct UnitConfig {
+    pub id: Spanned<String>,
+    pub kind: UnitKind,
+    pub name: String,
+    pub prefix: Spanned<String>,
+    /// Nameplate power (PV, wind), kW.
+    #[serde(default)]
+    pub rated_kw: f64,
+    /// Production cost (PV, wind, diesel), per kWh.
+    #[serde(default)]
+    pub cost_per_kwh: f64,
+    /// Diesel: minimum stable load and maximum output, kW.
+    #[serde(default)]
+    pub min_kw: f64,
+    #[serde(default)]
+    pub max_kw: f64,
+    /// Ramp limit of the unit, kW per second (0 = unlimited).
+    #[serde(default)]
+    pub ramp_kw_per_s: f64,
+    /// Storage.
+    #[serde(default)]
+    pub capacity_kwh: f64,
+    #[serde(default)]
+    pub soc_min_kwh: f64,
+    #[serde(default)]
+    pub soc_max_kwh: f64,
+    #[serde(default)]
+    pub max_charge_kw: f64,
+    #[serde(default)]
+    pub max_discharge_kw: f64,
+    #[serde(default = "default_eff")]
+    pub eff_charge: Spanned<f64>,
+    #[serde(default = "default_eff")]
+    pub eff_discharge: Spanned<f64>,
+    #[serde(default)]
+    pub cycle_cost_per_kwh: f64,
+    /// PV, wind: daily curve of the power expected to be available, kW, for
+    /// the horizon's forecast (absent: the availability now persists).
+    #[serde(default)]
+    pub forecast_kw: Option<DailyPoints>,
+}
+
+fn default_eff() -> Spanned<f64> {
+    Spanned::new(0..0, 0.95)
+}
+
+/// Names of a unit controller's tags.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UnitIo {
+    /// Power setpoint written by the outer loop, kW (storage: + discharge).
+    pub setpoint_kw: String,
+    /// Measured active power, kW.
+    pub p_kw: String,
+    pub voltage_v: String,
+    pub current_a: String,
+    /// Power the unit could produce now (PV, wind), kW.
+    pub available_kw: String,
+    /// Stored energy (storage), kWh.
+    pub soc_kwh: String,
+    /// Running state (diesel), and its start/stop command.
+    pub running: String,
+    pub run_cmd: String,
+}
+
+impl UnitConfig {
+    pub fn io(&self) -> UnitIo {
+        let p = self.prefix.get_ref();
+        UnitIo {
+            setpoint_kw: format!("{p}.Setpoint_kW"),
+            p_kw: format!("{p}.P_kW"),
+            voltage_v: format!("{p}.V"),
+            current_a: format!("{p}.I"),
+            available_kw: format!("{p}.Available_kW"),
+            soc_kwh: format!("{p}.SoC_kWh"),
+            running: format!("{p}.Running"),
+            run_cmd: format!("{p}.RunCmd"),
+        }
+    }
+
+    /// The tags this kind of unit must have.
+    pub fn required_tags(&self) -> Vec<String> {
+        let io = self.io();
+        let mut t = vec![io.setpoint_kw, io.p_kw, io.voltage_v, io.current_a];
+        match self.kind {
+            UnitKind::Pv | UnitKind::Wind => t.push(io.available_kw),
+            UnitKind::Storage => t.push(io.soc_kwh),
+            UnitKind::Diesel => {
+                t.push(io.running);
+                t.push(io.run_cmd);
+            }
+        }
+        t
+    }
+}

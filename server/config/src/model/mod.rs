@@ -1,0 +1,64 @@
+//! The configuration schema, as serde types. Documented for engineers in
+//! `docs/CONFIGURATION.md`; keep the two in step.
+//!
+//! Fields that validation must point at are `Spanned`, so an error can name
+//! the file, line and column.
+//!
+//! This file holds the main file and a tag file as a whole, and the small
+//! defaults their parts share; each part has its own file, all re-exported
+//! here: the server, storage, sessions and roles `server.rs`, devices
+//! `devices.rs`, tags `tags.rs`, a tag's alarms and history `alarms.rs`,
+//! panels `panels.rs`, the microgrid `microgrid.rs`.
+
+use serde::Deserialize;
+use serde_spanned::Spanned;
+
+mod alarms;
+mod devices;
+mod microgrid;
+mod panels;
+mod server;
+mod tags;
+
+pub use alarms::*;
+pub use devices::*;
+pub use microgrid::*;
+pub use panels::*;
+pub use server::*;
+pub use tags::*;
+
+/// `gridscada.toml`: the plant's main file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MainFile {
+    /// Tag files, relative to the main file.
+    pub tag_files: Vec<Spanned<String>>,
+    #[serde(default)]
+    pub server: ServerConfig,
+    #[serde(default)]
+    pub storage: StorageConfig,
+    #[serde(default, rename = "panel")]
+    pub panels: Vec<PanelConfig>,
+    pub microgrid: Option<MicrogridConfig>,
+}
+
+/// A tag file: devices and the tags read from them.
+#[derive(Debug, Clone, Default)]
+pub struct TagFile {
+    pub devices: Vec<DeviceConfig>,
+    pub tags: Vec<TagConfig>,
+}
+
+fn one() -> Spanned<f64> {
+    Spanned::new(0..0, 1.0)
+}
+
+fn yes() -> bool {
+    true
+}
+fn zero() -> Spanned<f64> {
+    Spanned::new(0..0, 0.0)
+}
+fn no() -> Spanned<bool> {
+    Spanned::new(0..0, false)
+}

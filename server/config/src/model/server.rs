@@ -1,0 +1,181 @@
+//! The `[server]` section (the HTTP address, the data folder, the session
+//! policy per role in `[server.sessions]`), `[storage]`, and the roles
+//! users and sessions are given.
+
+use serde::{Deserialize, Serialize};
+use serde_spanned::Spanned;
+
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ServerConfig {
+    /// HTTP bind address of the API and HMI.
+    #[serde(default = "default_http")]
+    pub http: Spanned<String>,
+    /// Folder for the SQLite database and other local state, relative to the
+    /// working directory.
+    #[serde(default = "default_data_dir")]
+    pub data_dir: String,
+    /// Host names (without port) the HMI may be reached by, besides IP
+    /// addresses and `localhost`. A request naming another host is refused,
+    /// which defeats DNS rebinding.
+    #[serde(default)]
+    pub allowed_hosts: Vec<String>,
+    /// `/metrics`: a bearer token Prometheus must send. Without one, only
+    /// loopback clients may scrape (`demo`: anyone who reaches it).
+    #[serde(default)]
+    pub metrics_token: Option<String>,
+    /// `/metrics`: client addresses allowed without the token.
+    #[serde(default)]
+    pub metrics_allow: Vec<std::net::IpAddr>,
+    /// When sessions end (`[server.sessions]`).
+    #[serde(default)]
+    pub sessions: SessionsConfig,
+}
+
+/// When a logged-in session ends. The HMI's live connection counts as
+/// activity while its screen is visible, so a screen on a wall stays logged
+/// in; a hidden or closed one idles out.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SessionsConfig {
+    /// Minutes without activity before a session ends, per group (role);
+    /// 0: never. Groups not named keep the default: 30, `display` 0.
+    #[serde(default = "no_idle_overrides")]
+    pub idle_minutes: Spanned<std::collections::BTreeMap<Role, f64>>,
+    /// Hours after login when a session ends whatever its activity; 0:
+    /// never. `display` sessions never end this way.
+    #[serde(default = "default_absolute_hours")]
+    pub absolute_hours: Spanned<f64>,
+    /// Seconds before an idle expiry when the HMI warns.
+    #[serde(default = "default_warn_s")]
+    pub warn_s: Spanned<u64>,
+}
+
+impl Default for SessionsConfig {
+    fn default() -> Self {
+        SessionsConfig {
+            idle_minutes: no_idle_overrides(),
+            absolute_hours: default_absolute_hours(),
+            warn_s: default_warn_s(),
+        }
+    }
+}
+
+impl SessionsConfig {
+    /// The idle timeout of a group; `None`: never.
+    pub fn idle(&self, role: Role) -> Option<std::time::Duration> {
+        let default = if role == Role::Display { 0.0 } else { 30.0 };
+        let minutes = self
+            .idle_minutes
+            .get_ref()
+            .get(&role)
+            .copied()
+            .unwrap_or(default);
+        (minutes > 0.0).then(|| std::time::Duration::from_secs_f64(minutes * 60.0))
+    }
+
+    /// The absolute lifetime of a group's sessions; `None`: never.
+    pub fn absolute(&self, role: Role) -> Option<std::time::Duration> {
+        let hours = *self.absolute_hours.get_ref();
+        (role != Role::Display && hours > 0.0)
+            .then(|| std::time::Duration::from_secs_f64(hours * 3600.0))
+    }
+}
+
+fn no_idle_overrides() -> Spanned<std::collections::BTreeMap<Role, f64>> {
+    Spanned::new(0..0, Default::default())
+}
+fn default_absolute_hours() -> Spanned<f64> {
+    Spanned::new(0..0, 12.0)
+}
+fn default_warn_s() -> Spanned<u64> {
+    Spanned::new(0..0, 60)
+}
+
+impl Default for ServerConfig {
+    fn default() -> Self {
+        ServerConfig {
+            http: default_http(),
+            data_dir: default_data_dir(),
+            allowed_hosts: vec![],
+            metrics_token: None,
+            metrics_allow: vec![],
+            sessions: SessionsConfig::default(),
+        }
+    }
+}
+
+fn default_http() -> Spanned<String> {
+    Spanned::new(0..0, "127.0.0.1:8080".into())
+}
+fn default_data_dir() -> String {
+    "data".into()
+}
+
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct StorageConfig {
+    /// `sqlite://PATH` (relative paths are inside the data folder) or
+    /// `postgres://user:pass@host/db`.
+    #[serde(default = "default_storage_url")]
+    pub url: Spanned<String>,
+    /// Global historian retention, in days; a tag's own setting wins.
+    #[serde(default = "default_retention_days")]
+    pub retention_days: u32,
+}
+
+impl Default for StorageConfig {
+    fn default() -> Self {
+        StorageConfig {
+            url: default_storage_url(),
+            retention_days: default_retention_days(),
+        }
+    }
+}
+
+fn default_storage_url() -> Spanned<String> {
+    Spanned::new(0..0, "sqlite://gridscada.db".into())
+}
+fn default_retention_days() -> u32 {
+    90
+}
+
+/// Who may do what. Ordered: each role may do everything the ones below it may.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Role {
+    /// A wall display: watches the screens its group may open, commands
+    /// nothing, and by default its session never expires.
+    Display,
+    Guest,
+    Operator,
+    Supervisor,
+    Administrator,
+}
+
+impl Role {
+    /// Every role, lowest first.
+    pub const ALL: [Role; 5] = [
+        Role::Display,
+        Role::Guest,
+        Role::Operator,
+        Role::Supervisor,
+        Role::Administrator,
+    ];
+
+    /// The role with this label (`display`, `guest`, `operator`,
+    /// `supervisor`, `administrator`).
+    pub fn parse(label: &str) -> Option<Role> {
+        Role::ALL.into_iter().find(|r| r.label() == label)
+    }
+
+    pub fn label(self) -> &'static str {
+        match self {
+            Role::Display => "display",
+            Role::Guest => "guest",
+            Role::Operator => "operator",
+            Role::Supervisor => "supervisor",
+            Role::Administrator => "administrator",
+        }
+    }
+}

@@ -1,0 +1,236 @@
+//! Semantic checks across the whole configuration.
+//!
+//! This file holds the walk over the whole configuration ([`check`]), the
+//! main file's own settings, and the helpers the checks share (the error
+//! context, a tag a panel or the microgrid needs, a positive duration). Each
+//! kind of item is checked in its own file: devices `devices.rs`, tags
+//! `tags.rs`, their alarms `alarms.rs`, register overlaps `overlaps.rs`,
+//! device clocks `clocks.rs`, panels `panels.rs`, the microgrid
+//! `microgrid.rs`.
+
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::ops::Range;
+
+use gridscada_tagdb::ValueKind;
+use serde_spanned::Spanned;
+
+use crate::diag::{Diagnostic, SourceFile};
+use crate::model::*;
+
+mod alarms;
+mod clocks;
+mod devices;
+mod microgrid;
+mod overlaps;
+mod panels;
+mod tags;
+
+use clocks::check_time_tags;
+use devices::check_device;
+use microgrid::check_microgrid;
+use overlaps::check_overlaps;
+use panels::check_panel;
+use tags::{check_tag, check_tag_name};
+
+struct Ctx<'a> {
+    files: &'a [SourceFile],
+    diags: &'a mut Vec<Diagnostic>,
+}
+
+impl Ctx<'_> {
+    fn err(&mut self, file: usize, span: Range<usize>, msg: impl Into<String>) {
+        let d = self.files[file].error_at(span, msg);
+        self.diags.push(d);
+    }
+    fn place(&self, file: usize, span: Range<usize>) -> String {
+        let f = &self.files[file];
+        let (l, c) = f.line_col(span.start);
+        format!("{}:{l}:{c}", f.path.display())
+    }
+}
+
+/// `files[0]` is the main file; items carry the index of their file.
+pub(crate) fn check(
+    files: &[SourceFile],
+    main: &MainFile,
+    devices: &[(usize, DeviceConfig)],
+    broken_devices: &std::collections::HashSet<String>,
+    tags: &[(usize, TagConfig)],
+    diags: &mut Vec<Diagnostic>,
+) {
+    let mut cx = Ctx { files, diags };
+    check_main(&mut cx, main);
+
+    let mut device_by_name: HashMap<&str, (usize, &DeviceConfig)> = HashMap::new();
+    for (f, d) in devices {
+        check_device(&mut cx, *f, d);
+        let name = d.name.get_ref().as_str();
+        if let Some((pf, prev)) = device_by_name.get(name) {
+            let first = cx.place(*pf, prev.name.span());
+            cx.err(
+                *f,
+                d.name.span(),
+                format!("duplicate device name '{name}' (first defined at {first})"),
+            );
+        } else {
+            device_by_name.insert(name, (*f, d));
+        }
+    }
+
+    let mut tag_by_name: HashMap<&str, (usize, &TagConfig)> = HashMap::new();
+    for (f, t) in tags {
+        let name = t.name.get_ref().as_str();
+        check_tag_name(&mut cx, *f, &t.name);
+        if let Some((pf, prev)) = tag_by_name.get(name) {
+            let first = cx.place(*pf, prev.name.span());
+            cx.err(
+                *f,
+                t.name.span(),
+                format!("duplicate tag name '{name}' (first defined at {first})"),
+            );
+        } else {
+            tag_by_name.insert(name, (*f, t));
+        }
+        match device_by_name.get(t.device.get_ref().as_str()) {
+            Some((_, d)) => check_tag(&mut cx, *f, t, Some(d)),
+            // Its device did not parse: that is reported once, at the device.
+            None if broken_devices.contains(t.device.get_ref()) => check_tag(&mut cx, *f, t, None),
+            None => {
+                cx.err(
+                    *f,
+                    t.device.span(),
+                    format!("tag '{name}': unknown device '{}'", t.device.get_ref()),
+                );
+                check_tag(&mut cx, *f, t, None);
+            }
+        }
+    }
+    check_overlaps(&mut cx, tags);
+    check_time_tags(&mut cx, devices, tags, &device_by_name, &tag_by_name);
+
+    let lookup = |name: &str| tag_by_name.get(name).map(|(_, t)| *t);
+    let device = |name: &str| device_by_name.get(name).map(|(_, d)| *d);
+    let mut panel_ids: HashMap<&str, &Spanned<String>> = HashMap::new();
+    for p in &main.panels {
+        if let Some(prev) = panel_ids.insert(p.id.get_ref(), &p.id) {
+            let first = cx.place(0, prev.span());
+            cx.err(
+                0,
+                p.id.span(),
+                format!(
+                    "duplicate panel id '{}' (first defined at {first})",
+                    p.id.get_ref()
+                ),
+            );
+        }
+        check_panel(&mut cx, p, &lookup, &device);
+    }
+    if let Some(mg) = &main.microgrid {
+        check_microgrid(&mut cx, mg, &lookup);
+    }
+}
+
+fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
+    let http = &main.server.http;
+    if http.get_ref().parse::<SocketAddr>().is_err() {
+        cx.err(
+            0,
+            http.span(),
+            format!(
+                "[server] http: '{}' is not an address like 127.0.0.1:8080",
+                http.get_ref()
+            ),
+        );
+    }
+    let sessions = &main.server.sessions;
+    for (role, minutes) in sessions.idle_minutes.get_ref() {
+        if !(minutes.is_finite() && (0.0..=10_080.0).contains(minutes)) {
+            cx.err(
+                0,
+                sessions.idle_minutes.span(),
+                format!(
+                    "[server.sessions] idle_minutes.{}: {minutes} must be 0 (never) to 10080 (a week)",
+                    role.label()
+                ),
+            );
+        }
+    }
+    let hours = *sessions.absolute_hours.get_ref();
+    if !(hours.is_finite() && (0.0..=720.0).contains(&hours)) {
+        cx.err(
+            0,
+            sessions.absolute_hours.span(),
+            format!("[server.sessions] absolute_hours: {hours} must be 0 (never) to 720"),
+        );
+    }
+    if *sessions.warn_s.get_ref() > 3600 {
+        cx.err(
+            0,
+            sessions.warn_s.span(),
+            "[server.sessions] warn_s: at most 3600 seconds",
+        );
+    }
+    let url = &main.storage.url;
+    let u = url.get_ref();
+    if !(u.starts_with("sqlite:") || u.starts_with("postgres://") || u.starts_with("postgresql://"))
+    {
+        cx.err(
+            0,
+            url.span(),
+            format!("[storage] url: '{u}' must start with sqlite:, postgres:// or postgresql://"),
+        );
+    }
+    if main.tag_files.is_empty() {
+        cx.err(
+            0,
+            0..0,
+            "tag_files is empty: a plant needs at least one tag file",
+        );
+    }
+}
+
+fn need_tag<'t>(
+    cx: &mut Ctx<'_>,
+    at: Range<usize>,
+    owner: &str,
+    tag: &str,
+    lookup: &dyn Fn(&str) -> Option<&'t TagConfig>,
+    want: &[ValueKind],
+    writable: bool,
+) {
+    match lookup(tag) {
+        None => cx.err(
+            0,
+            at,
+            format!("{owner}: needs tag '{tag}', which no tag file defines"),
+        ),
+        Some(t) => {
+            let k = t.value_kind();
+            if !want.contains(&k) {
+                cx.err(
+                    0,
+                    at.clone(),
+                    format!("{owner}: tag '{tag}' must be {want:?}, but it is {k:?}"),
+                );
+            }
+            if writable && !*t.writable.get_ref() {
+                cx.err(
+                    0,
+                    at,
+                    format!("{owner}: tag '{tag}' is a command output and must be writable"),
+                );
+            }
+        }
+    }
+}
+
+fn positive(cx: &mut Ctx<'_>, owner: &str, field: &str, v: &Spanned<f64>) {
+    if !(v.get_ref().is_finite() && *v.get_ref() > 0.0) {
+        cx.err(
+            0,
+            v.span(),
+            format!("{owner}: {field} must be a positive number of seconds"),
+        );
+    }
+}
