@@ -493,6 +493,7 @@ impl FieldIo {
                 name: key.clone(),
                 transport,
                 longest_hold,
+                has_clocks: link_tags[li].iter().any(|t| t.time_from.is_some()),
                 devices,
                 tags: std::mem::take(&mut link_tags[li]),
                 db: Arc::clone(&db),

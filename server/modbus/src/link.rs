@@ -148,6 +148,9 @@ pub(crate) struct Link {
     /// The longest one device's request and its retries hold the link
     /// (timeout × (1 + retries)); see [`Link::stale_after`].
     pub longest_hold: Duration,
+    /// Whether any tag on the link is stamped by a device clock; without
+    /// one, a scan keeps no record of which tag each sample is.
+    pub has_clocks: bool,
     pub devices: Vec<DeviceRt>,
     pub tags: Vec<LinkTag>,
     pub db: Arc<TagDb>,
@@ -535,7 +538,9 @@ impl Link {
                     let ticket = self.db.ticket();
                     self.block_samples(&block, answer, ts, &mut batch);
                     tickets.resize(batch.len(), ticket);
-                    read.extend_from_slice(&block.tags);
+                    if self.has_clocks {
+                        read.extend_from_slice(&block.tags);
+                    }
                 }
                 None => {
                     if self.transport.is_connected() {
@@ -582,7 +587,7 @@ impl Link {
     /// clock read in this scan. Without a usable clock reading the receive
     /// time stays, and a Good value turns Uncertain to say so.
     fn stamp_device_time(&self, read: &[usize], batch: &mut [(TagId, Sample)]) {
-        if !read.iter().any(|&t| self.tags[t].time_from.is_some()) {
+        if !self.has_clocks {
             return;
         }
         let clock_time = |clock: usize, batch: &[(TagId, Sample)]| {

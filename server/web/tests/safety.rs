@@ -148,17 +148,22 @@ async fn login_rotates_and_logout_kills_the_session() {
     assert_eq!(me["authenticated"], false);
 }
 
-#[tokio::test]
-async fn an_idle_session_expires() {
-    let h = Harness::new(Options {
+/// A harness whose sessions idle out after `idle_ms` (absolute: 60 s).
+async fn short_idle_harness(idle_ms: u64) -> Harness {
+    Harness::new(Options {
         policy: SessionPolicy {
-            idle: Duration::from_millis(150),
+            idle: Duration::from_millis(idle_ms),
             absolute: Duration::from_secs(60),
             ..Default::default()
         },
         ..Default::default()
     })
-    .await;
+    .await
+}
+
+#[tokio::test]
+async fn an_idle_session_expires() {
+    let h = short_idle_harness(150).await;
     let c = h.login("guest", PASSWORD).await;
     assert_eq!(
         h.call(Method::GET, "/api/tags", Some(&c), None)
@@ -180,15 +185,7 @@ async fn an_idle_session_expires() {
 /// warning.
 #[tokio::test]
 async fn a_display_session_never_idles_out_and_commands_nothing() {
-    let h = Harness::new(Options {
-        policy: SessionPolicy {
-            idle: Duration::from_millis(150),
-            absolute: Duration::from_secs(60),
-            ..Default::default()
-        },
-        ..Default::default()
-    })
-    .await;
+    let h = short_idle_harness(150).await;
     let display = h.login("display", PASSWORD).await;
     let guest = h.login("guest", PASSWORD).await;
     let session = |c: String| {
@@ -247,15 +244,7 @@ async fn a_display_session_never_idles_out_and_commands_nothing() {
 /// keep the session alive; the same request without the mark does.
 #[tokio::test]
 async fn background_polls_do_not_keep_a_session_alive() {
-    let h = Harness::new(Options {
-        policy: SessionPolicy {
-            idle: Duration::from_millis(300),
-            absolute: Duration::from_secs(60),
-            ..Default::default()
-        },
-        ..Default::default()
-    })
-    .await;
+    let h = short_idle_harness(300).await;
     let poll = |c: String, background: bool| {
         let h = &h;
         async move {
