@@ -1,6 +1,8 @@
 //! Dispatch solve time: `cargo bench -p gridscada-control --bench dispatch`.
 //! Prints p50/p99 for the single-period LP (the live loop's problem) and a
-//! 96-period day-ahead horizon with 5 units, as LP and as QP (smoothing on).
+//! 96-period day-ahead horizon with 5 units, as LP and as QP (smoothing on),
+//! and the live look-ahead (16 periods of 15 minutes) with the diesel's
+//! commitment decided by branch and bound, over every hour of the day.
 //! Figures only; nothing is asserted.
 
 use std::collections::BTreeMap;
@@ -83,6 +85,7 @@ fn horizon(smoothing: f64) -> HorizonProblem {
         ramp_kw_per_s: 0.02,
         initial_kw: Some(40.0),
         relaxed_commitment: false,
+        ..HorizonOil::default()
     };
     HorizonProblem {
         dt_h: 0.25,
@@ -96,6 +99,7 @@ fn horizon(smoothing: f64) -> HorizonProblem {
             ramp_kw_per_s: 0.0,
             initial_kw: Some(0.0),
             terminal_value_per_kwh: 0.25,
+            final_soc_min_kwh: None,
         }],
         reserve: Some(ReserveRule {
             load_frac: 0.1,
@@ -105,7 +109,35 @@ fn horizon(smoothing: f64) -> HorizonProblem {
         }),
         max_renewable_share: None,
         smoothing_cost_per_kw2: smoothing,
+        max_commitment_nodes: None,
     }
+}
+
+/// The live look-ahead's problem: 16 periods of 15 minutes from `start` (a
+/// quarter-hour of the day), the demo's diesel priced by its fuel curve with
+/// its commitment decided, the battery at `soc`.
+fn lookahead(start: usize, soc: f64, running: bool) -> HorizonProblem {
+    let mut p = horizon(0.0);
+    p.periods = (0..16)
+        .map(|t| p.periods[(start + t) % 96].clone())
+        .collect();
+    p.reserve = None;
+    p.oil.truncate(1);
+    let dg = &mut p.oil[0];
+    dg.min_kw = 30.0;
+    dg.max_kw = 150.0;
+    dg.ramp_kw_per_s = 5.0;
+    dg.running = running;
+    dg.initial_kw = running.then_some(60.0);
+    dg.cost_per_kwh = 1.5 * 0.246;
+    dg.no_load_cost_per_h = 1.5 * 12.2175;
+    dg.min_up_h = 0.25;
+    dg.min_down_h = 5.0 / 60.0;
+    dg.optimize_commitment = true;
+    dg.hours_in_state = Some(1.0);
+    p.storage[0].unit.soc_kwh = soc;
+    p.storage[0].ramp_kw_per_s = 0.0;
+    p
 }
 
 fn report(name: &str, mut ms: Vec<f64>) {
@@ -144,6 +176,36 @@ fn main() {
             h.solve().expect("horizon LP");
         }),
     );
+    for n in [20usize, 50, 100, 200, 400, 1000, 4000] {
+        let mut p = lookahead(12, 30.0, false);
+        p.max_commitment_nodes = Some(n);
+        let sol = p.solve().unwrap();
+        let c = sol.commitment.unwrap();
+        eprintln!(
+            "DEBUG2 nodes {n}: obj {:.4} bound {:.4} proven {}",
+            sol.objective, c.lower_bound, c.proven
+        );
+    }
+    let mut plans = Vec::new();
+    let mut nodes = Vec::new();
+    for start in (0..96).step_by(4) {
+        for soc in [30.0, 100.0, 170.0] {
+            for running in [false, true] {
+                let p = lookahead(start, soc, running);
+                let t = Instant::now();
+                let sol = p.solve().expect("look-ahead with commitment");
+                plans.push(t.elapsed().as_secs_f64() * 1e3);
+                if let Some(c) = &sol.commitment {
+                    if c.nodes > 300 {
+                        eprintln!("DEBUG start {start} soc {soc} running {running}: nodes {} proven {} obj {:.4} bound {:.4} sched {:?}", c.nodes, c.proven, sol.objective, c.lower_bound, c.running["dg1"].iter().map(|&b| b as u8).collect::<Vec<_>>());
+                    }
+                }
+                nodes.push(sol.commitment.map_or(0, |c| c.nodes) as f64);
+            }
+        }
+    }
+    report("look-ahead 16 x 15 min, commitment (ms)", plans);
+    report("  relaxations per plan (count, not ms)", nodes);
     let q = horizon(0.001);
     report(
         "96-period horizon, 5 units, QP",

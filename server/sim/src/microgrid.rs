@@ -37,7 +37,10 @@ pub struct MicrogridParams {
     pub wind_cut_out: f64,
     /// Diesel: time from the run command to synchronised.
     pub diesel_start_delay: Duration,
-    /// Diesel fuel line: l/h = f0 × max_kw + f1 × P.
+    /// Diesel fuel line where the unit configures none: l/h = f0 × max_kw +
+    /// f1 × P. A unit's `fuel_no_load_l_per_h` and `fuel_l_per_kwh` replace
+    /// `f0 × max_kw` and `f1`, so the simulated diesel burns what the
+    /// dispatch's cost model says it burns.
     pub diesel_fuel_f0: f64,
     pub diesel_fuel_f1: f64,
     /// Frequency deviation per kW of imbalance (supply − demand), Hz/kW.
@@ -260,8 +263,12 @@ impl Microgrid {
         for i in 0..self.units.len() {
             let avail = self.available(i);
             let start_delay = self.params.diesel_start_delay;
-            let (f0, f1) = (self.params.diesel_fuel_f0, self.params.diesel_fuel_f1);
             let u = &mut self.units[i];
+            let no_load = u
+                .cfg
+                .fuel_no_load_l_per_h
+                .unwrap_or(self.params.diesel_fuel_f0 * u.cfg.max_kw);
+            let per_kwh = u.cfg.fuel_l_per_kwh.unwrap_or(self.params.diesel_fuel_f1);
             u.available_kw = avail;
             if u.state == UnitState::Fault {
                 u.p_kw = 0.0;
@@ -286,7 +293,7 @@ impl Microgrid {
                     u.p_kw = ramp_to(u.p_kw, target, ramp, dt).clamp(-max_ch, max_dis);
                 }
                 UnitKind::Diesel => {
-                    step_diesel(u, t, dt, start_delay, f0, f1);
+                    step_diesel(u, t, dt, start_delay, no_load, per_kwh);
                 }
             }
         }
@@ -393,7 +400,14 @@ impl Microgrid {
     }
 }
 
-fn step_diesel(u: &mut Unit, t: Timestamp, dt: f64, start_delay: Duration, f0: f64, f1: f64) {
+fn step_diesel(
+    u: &mut Unit,
+    t: Timestamp,
+    dt: f64,
+    start_delay: Duration,
+    no_load_lph: f64,
+    l_per_kwh: f64,
+) {
     let c = &u.cfg;
     let ramp = c.ramp_kw_per_s;
     match u.state {
@@ -434,7 +448,7 @@ fn step_diesel(u: &mut Unit, t: Timestamp, dt: f64, start_delay: Duration, f0: f
         UnitState::Fault => {}
     }
     u.fuel_rate_lph = match u.state {
-        UnitState::Running | UnitState::Starting => f0 * c.max_kw + f1 * u.p_kw,
+        UnitState::Running | UnitState::Starting => no_load_lph + l_per_kwh * u.p_kw,
         _ => 0.0,
     };
     u.counters.fuel_l += u.fuel_rate_lph * dt / 3600.0;
@@ -499,6 +513,11 @@ mod tests {
             eff_discharge: Spanned::new(0..0, 0.95),
             cycle_cost_per_kwh: 0.0,
             forecast_kw: None,
+            fuel_no_load_l_per_h: None,
+            fuel_l_per_kwh: None,
+            start_cost: 0.0,
+            min_up_s: None,
+            min_down_s: None,
         }
     }
 
@@ -508,6 +527,7 @@ mod tests {
             voll_per_kwh: 5.0,
             demand_tag: Spanned::new(0..0, "MG.Load.P_kW".into()),
             stale_after_s: 15.0,
+            fuel_price_per_l: None,
             commitment: Default::default(),
             horizon: None,
             units,

@@ -27,6 +27,7 @@ use gridscada_sim::scenario::{self, Scenario};
 use crate::demo_plant;
 
 mod clock;
+mod foresight;
 mod live;
 mod operator;
 mod progress;
@@ -58,10 +59,14 @@ pub fn load(file: &Path) -> anyhow::Result<(Scenario, Plant)> {
         anyhow!("{}\n{} problem(s) found", lines.join("\n"), d.len())
     };
     let scn = scenario::load_path(file).map_err(diags)?;
-    let plant = match &scn.plant {
+    let mut plant = match &scn.plant {
         Some(p) => gridscada_config::load_path(p).map_err(diags)?,
         None => demo_plant::load().map_err(diags)?,
     };
+    // The scenario's cost model: its fuel price is the dispatch's too.
+    if let (Some(price), Some(mg)) = (scn.fuel_price_per_l, plant.microgrid.as_mut()) {
+        mg.set_fuel_price(price);
+    }
     let names: std::collections::HashSet<String> = crate::runtime::all_tags(&plant)
         .into_iter()
         .map(|t| t.name.to_string())
@@ -164,9 +169,13 @@ fn print_summary(r: &Report) {
         r.speedup,
         f("unserved_kwh"),
         f("total_cost"),
-        match r.cost.ratio {
-            Some(x) => format!(" (×{x:.3} of the rule-based dispatch)"),
-            None => String::new(),
+        match (r.figures.get("optimum_ratio"), r.cost.ratio) {
+            (Some(o), Some(x)) => format!(
+                " (×{o:.3} of the perfect-foresight optimum, ×{x:.3} of the rule-based dispatch)"
+            ),
+            (Some(o), None) => format!(" (×{o:.3} of the perfect-foresight optimum)"),
+            (None, Some(x)) => format!(" (×{x:.3} of the rule-based dispatch)"),
+            (None, None) => String::new(),
         }
     );
 }

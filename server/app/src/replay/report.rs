@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-use gridscada_config::{Plant, UnitKind};
+use gridscada_config::{Plant, UnitKind, UnitUsage};
 use gridscada_control::dispatch::DispatchStatus;
 use gridscada_sim::scenario::report::{
     CostBreakdown, CostComparison, FaultRecord, Line, Plot, Report,
@@ -13,6 +13,7 @@ use gridscada_sim::scenario::Scenario;
 use gridscada_sim::SimSnapshot;
 
 use super::clock::Pace;
+use super::foresight::perfect_foresight;
 use super::run::RunOutcome;
 
 /// The report's plots, sampled every `scenario.sample`.
@@ -128,6 +129,8 @@ fn energy_figures(
     let (mut pv, mut wind, mut dkwh, mut fuel, mut starts, mut run_s) =
         (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
     let (mut charged, mut discharged, mut energy_cost, mut cycling) = (0.0, 0.0, 0.0, 0.0);
+    let mut diesel_cost = 0.0;
+    let price = cfg.fuel_price(scn.fuel_price_per_l);
     let mut soc_end = f64::NAN;
     for u1 in &mg1.units {
         let Some(u0) = mg0.units.iter().find(|u| u.id == u1.id) else {
@@ -138,26 +141,34 @@ fn energy_figures(
         };
         let (a, b) = (&u0.counters, &u1.counters);
         let e = b.energy_kwh - a.energy_kwh;
+        let usage = UnitUsage {
+            kwh: e,
+            charged_kwh: b.charged_kwh - a.charged_kwh,
+            run_h: (b.runtime_s - a.runtime_s) / 3600.0,
+            starts: (b.starts - a.starts) as f64,
+        };
+        // The plant's one cost function, the dispatch's objective's.
+        let unit_cost = cfg.unit_cost(c, price, &usage);
         match u1.kind {
             UnitKind::Pv => {
                 pv += e;
-                energy_cost += e * c.cost_per_kwh;
+                energy_cost += unit_cost;
             }
             UnitKind::Wind => {
                 wind += e;
-                energy_cost += e * c.cost_per_kwh;
+                energy_cost += unit_cost;
             }
             UnitKind::Diesel => {
+                diesel_cost += unit_cost;
                 dkwh += e;
                 fuel += b.fuel_l - a.fuel_l;
-                starts += (b.starts - a.starts) as f64;
-                run_s += b.runtime_s - a.runtime_s;
+                starts += usage.starts;
+                run_s += usage.run_h * 3600.0;
             }
             UnitKind::Storage => {
-                let ch = b.charged_kwh - a.charged_kwh;
                 discharged += e;
-                charged += ch;
-                cycling += (ch + e) * c.cycle_cost_per_kwh / 2.0;
+                charged += usage.charged_kwh;
+                cycling += unit_cost;
                 soc_end = u1.soc_pct.unwrap_or(f64::NAN);
             }
         }
@@ -178,7 +189,7 @@ fn energy_figures(
         f.insert("soc_end_pct".into(), soc_end);
     }
     cost = CostBreakdown::new(
-        fuel * scn.fuel_price_per_l,
+        diesel_cost,
         energy_cost,
         cycling,
         unserved * cfg.voll_per_kwh,
@@ -211,6 +222,23 @@ pub(super) fn build_report(
     }
     if let Some(x) = ratio {
         figures.insert("cost_ratio".into(), x);
+    }
+    let fuel_price = plant
+        .microgrid
+        .as_ref()
+        .and_then(|m| m.fuel_price(scn.fuel_price_per_l));
+    let optimum = perfect_foresight(
+        plant,
+        fuel_price,
+        &main.foresight,
+        &main.baseline,
+        &main.end,
+    );
+    if let Some(cost) = optimum.as_ref().and_then(|o| o.cost) {
+        figures.insert("optimum_cost".into(), cost);
+        if cost > 0.0 {
+            figures.insert("optimum_ratio".into(), optimal.total / cost);
+        }
     }
     let a = &main.alarms;
     figures.insert("alarm_activations".into(), f64::from(a.activations));
@@ -320,7 +348,7 @@ pub(super) fn build_report(
         passed,
         figures,
         cost: CostComparison {
-            fuel_price_per_l: scn.fuel_price_per_l,
+            fuel_price_per_l: fuel_price.unwrap_or(0.0),
             voll_per_kwh: plant
                 .microgrid
                 .as_ref()
@@ -328,6 +356,7 @@ pub(super) fn build_report(
                 .unwrap_or(0.0),
             optimal,
             rule: rule_cost,
+            optimum,
             ratio,
         },
         alarms: main.alarms,

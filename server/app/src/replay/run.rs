@@ -21,6 +21,7 @@ use crate::runtime::{Stack, StackOptions};
 use crate::sinks;
 
 use super::clock::{FlooredClock, Pace, VirtualClock};
+use super::foresight::ForesightRecorder;
 use super::operator::{Inputs, Operator};
 use super::progress::Progress;
 use super::report::Sampler;
@@ -41,6 +42,8 @@ pub(super) struct RunOutcome {
     pub(super) panel_end: Vec<PanelStatus>,
     pub(super) poll_timeouts: u64,
     pub(super) historian_dropped: u64,
+    /// What the day was, period by period, for the perfect-foresight optimum.
+    pub(super) foresight: ForesightRecorder,
 }
 
 pub(super) fn run_once(
@@ -143,6 +146,7 @@ struct Driven {
     plots: Vec<Plot>,
     faults: Arc<Mutex<Vec<FaultRecord>>>,
     dispatch: Arc<Mutex<DispatchTally>>,
+    foresight: ForesightRecorder,
 }
 
 #[derive(Default)]
@@ -242,6 +246,7 @@ async fn drive(stack: &Stack, scn: &Scenario, mut progress: Progress) -> anyhow:
     let mut actions = Vec::new();
     let mut results = Vec::new();
     let mut sampler = Sampler::new(&baseline, stack.dispatch.is_some());
+    let mut foresight = ForesightRecorder::new(&stack.plant);
     let mut soc_min = f64::INFINITY;
     let mut next_event = 0usize;
     let mut expects: Vec<usize> = (0..scn.expectations.len())
@@ -295,6 +300,7 @@ async fn drive(stack: &Stack, scn: &Scenario, mut progress: Progress) -> anyhow:
             }
         }
         let snap = sim.snapshot();
+        foresight.push(now, &snap);
         if let Some(mg) = &snap.microgrid {
             for u in &mg.units {
                 if let Some(p) = u.soc_pct {
@@ -338,6 +344,7 @@ async fn drive(stack: &Stack, scn: &Scenario, mut progress: Progress) -> anyhow:
         plots: sampler.plots(),
         faults,
         dispatch,
+        foresight,
     })
 }
 
@@ -472,5 +479,6 @@ async fn finish(
             .collect(),
         poll_timeouts: poll.timeouts,
         historian_dropped: stack.historian_metrics().dropped,
+        foresight: d.foresight,
     })
 }

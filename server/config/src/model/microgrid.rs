@@ -29,6 +29,11 @@ pub struct MicrogridConfig {
     /// Measurements older than this are stale and force the fallback.
     #[serde(default = "default_stale")]
     pub stale_after_s: f64,
+    /// Price of diesel fuel, per litre: with each diesel's fuel curve, the
+    /// cost the dispatch minimises and the replay report counts
+    /// ([`DieselCost`]). A scenario may set its own (`fuel_price_per_l`).
+    #[serde(default)]
+    pub fuel_price_per_l: Option<Spanned<f64>>,
     #[serde(default)]
     pub commitment: CommitmentConfig,
     /// Look-ahead of the outer loop (absent: each period on its own).
@@ -193,6 +198,120 @@ pub struct UnitConfig {
     /// the horizon's forecast (absent: the availability now persists).
     #[serde(default)]
     pub forecast_kw: Option<DailyPoints>,
+    /// Diesel fuel curve: litres per hour while running, whatever the load
+    /// (no-load consumption), plus litres per kWh produced. With
+    /// `[microgrid] fuel_price_per_l` they replace `cost_per_kwh`.
+    #[serde(default)]
+    pub fuel_no_load_l_per_h: Option<f64>,
+    #[serde(default)]
+    pub fuel_l_per_kwh: Option<f64>,
+    /// Diesel: cost of one start (wear, start-up fuel), currency.
+    #[serde(default)]
+    pub start_cost: f64,
+    /// Diesel: minimum up and down times, s (absent: `[microgrid.commitment]`
+    /// `min_run_s` and `min_stop_s`).
+    #[serde(default)]
+    pub min_up_s: Option<f64>,
+    #[serde(default)]
+    pub min_down_s: Option<f64>,
+}
+
+/// What running a diesel costs: one function for the dispatch's objective
+/// and the replay report, so "optimal" means optimal for the cost reported.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct DieselCost {
+    /// Cost of each kWh produced (fuel per kWh × fuel price).
+    pub marginal_per_kwh: f64,
+    /// Cost of each hour running, at any load (no-load fuel × price).
+    pub no_load_per_h: f64,
+    /// Cost of each start.
+    pub start_cost: f64,
+    /// Minimum up and down times, h.
+    pub min_up_h: f64,
+    pub min_down_h: f64,
+}
+
+impl DieselCost {
+    /// Cost of running `run_h` hours, producing `kwh`, with `starts` starts.
+    pub fn cost(&self, run_h: f64, kwh: f64, starts: f64) -> f64 {
+        self.no_load_per_h * run_h + self.marginal_per_kwh * kwh + self.start_cost * starts
+    }
+
+    /// Average cost per kWh when running at `kw`: what a kWh of diesel
+    /// energy costs at that load.
+    pub fn average_per_kwh(&self, kw: f64) -> f64 {
+        if kw > 0.0 {
+            self.marginal_per_kwh + self.no_load_per_h / kw
+        } else {
+            f64::INFINITY
+        }
+    }
+}
+
+/// What a unit did over a run or a plan: the quantities its cost is
+/// computed from ([`MicrogridConfig::unit_cost`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct UnitUsage {
+    /// Energy produced (storage: discharged), kWh.
+    pub kwh: f64,
+    /// Storage: energy taken in, kWh.
+    pub charged_kwh: f64,
+    /// Diesel: hours running, and starts.
+    pub run_h: f64,
+    pub starts: f64,
+}
+
+impl MicrogridConfig {
+    /// What `usage` of `unit` costs at fuel price `price`: the one cost
+    /// function of the plant. The dispatch's objective prices each kWh, hour
+    /// and start with the same coefficients (`cost_per_kwh`, [`DieselCost`],
+    /// `cycle_cost_per_kwh` on each kWh charged and each kWh discharged), and
+    /// the replay report adds up this function over the run.
+    pub fn unit_cost(&self, unit: &UnitConfig, price: Option<f64>, usage: &UnitUsage) -> f64 {
+        match unit.kind {
+            UnitKind::Pv | UnitKind::Wind => unit.cost_per_kwh * usage.kwh,
+            UnitKind::Diesel => {
+                self.diesel_cost(unit, price)
+                    .cost(usage.run_h, usage.kwh, usage.starts)
+            }
+            UnitKind::Storage => unit.cycle_cost_per_kwh * (usage.kwh + usage.charged_kwh),
+        }
+    }
+
+    /// The fuel price in force: `override_price` (a scenario's), else the
+    /// configured one, else none (costs then come from `cost_per_kwh`).
+    pub fn fuel_price(&self, override_price: Option<f64>) -> Option<f64> {
+        override_price.or(self.fuel_price_per_l.as_ref().map(|p| *p.get_ref()))
+    }
+
+    /// Sets the fuel price (a scenario's cost model replacing the plant's).
+    pub fn set_fuel_price(&mut self, price: f64) {
+        self.fuel_price_per_l = Some(Spanned::new(0..0, price));
+    }
+
+    /// The cost model of diesel `unit` at fuel price `price` (see
+    /// [`MicrogridConfig::fuel_price`]). Without a fuel curve or a price, a
+    /// kWh costs `cost_per_kwh` and running costs nothing more.
+    pub fn diesel_cost(&self, unit: &UnitConfig, price: Option<f64>) -> DieselCost {
+        let (marginal, no_load) = match (price, unit.fuel_l_per_kwh) {
+            (Some(price), Some(l_per_kwh)) => (
+                price * l_per_kwh,
+                price * unit.fuel_no_load_l_per_h.unwrap_or(0.0),
+            ),
+            _ => (unit.cost_per_kwh, 0.0),
+        };
+        DieselCost {
+            marginal_per_kwh: marginal,
+            no_load_per_h: no_load,
+            start_cost: unit.start_cost,
+            min_up_h: unit.min_up_s.unwrap_or(self.commitment.min_run_s).max(0.0) / 3600.0,
+            min_down_h: unit
+                .min_down_s
+                .unwrap_or(self.commitment.min_stop_s)
+                .max(0.0)
+                / 3600.0,
+        }
+    }
 }
 
 fn default_eff() -> Spanned<f64> {

@@ -131,6 +131,15 @@ pub(super) fn check_microgrid<'t>(
     if let Some(h) = &mg.horizon {
         check_horizon(cx, mg, h);
     }
+    if let Some(price) = &mg.fuel_price_per_l {
+        if !(price.get_ref().is_finite() && *price.get_ref() >= 0.0) {
+            cx.err(
+                0,
+                price.span(),
+                format!("{owner}: fuel_price_per_l must be 0 or more"),
+            );
+        }
+    }
     let mut ids: HashMap<&str, &Spanned<String>> = HashMap::new();
     for u in &mg.units {
         let id = u.id.get_ref();
@@ -205,6 +214,7 @@ pub(super) fn check_microgrid<'t>(
                         format!("{owner}: diesel needs 0 <= min_kw <= max_kw, max_kw > 0"),
                     );
                 }
+                check_diesel_costs(cx, mg, u, &owner);
             }
             UnitKind::Pv | UnitKind::Wind => {
                 if u.rated_kw <= 0.0 {
@@ -216,6 +226,24 @@ pub(super) fn check_microgrid<'t>(
                 }
             }
         }
+        if u.kind != UnitKind::Diesel {
+            let diesel_only = [
+                ("fuel_no_load_l_per_h", u.fuel_no_load_l_per_h.is_some()),
+                ("fuel_l_per_kwh", u.fuel_l_per_kwh.is_some()),
+                ("start_cost", u.start_cost != 0.0),
+                ("min_up_s", u.min_up_s.is_some()),
+                ("min_down_s", u.min_down_s.is_some()),
+            ];
+            for (field, set) in diesel_only {
+                if set {
+                    cx.err(
+                        0,
+                        u.id.span(),
+                        format!("{owner}: {field} is for diesel units only"),
+                    );
+                }
+            }
+        }
         if u.cost_per_kwh < 0.0 || u.cycle_cost_per_kwh < 0.0 {
             cx.err(
                 0,
@@ -223,5 +251,42 @@ pub(super) fn check_microgrid<'t>(
                 format!("{owner}: costs must not be negative"),
             );
         }
+    }
+}
+
+/// A diesel's fuel curve, start cost and minimum up/down times: each finite
+/// and not negative, and a fuel curve only together with a fuel price.
+fn check_diesel_costs(cx: &mut Ctx<'_>, mg: &MicrogridConfig, u: &UnitConfig, owner: &str) {
+    let fields = [
+        ("fuel_no_load_l_per_h", u.fuel_no_load_l_per_h),
+        ("fuel_l_per_kwh", u.fuel_l_per_kwh),
+        ("start_cost", Some(u.start_cost)),
+        ("min_up_s", u.min_up_s),
+        ("min_down_s", u.min_down_s),
+    ];
+    for (field, v) in fields {
+        if let Some(v) = v {
+            if !(v.is_finite() && v >= 0.0) {
+                cx.err(
+                    0,
+                    u.id.span(),
+                    format!("{owner}: {field} must be a number of 0 or more, not {v}"),
+                );
+            }
+        }
+    }
+    if u.fuel_no_load_l_per_h.is_some() && u.fuel_l_per_kwh.is_none() {
+        cx.err(
+            0,
+            u.id.span(),
+            format!("{owner}: fuel_no_load_l_per_h needs fuel_l_per_kwh (the fuel curve's slope)"),
+        );
+    }
+    if u.fuel_l_per_kwh.is_some() && mg.fuel_price_per_l.is_none() {
+        cx.err(
+            0,
+            u.id.span(),
+            format!("{owner}: a fuel curve needs [microgrid] fuel_price_per_l to become a cost"),
+        );
     }
 }

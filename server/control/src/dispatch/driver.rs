@@ -25,7 +25,7 @@ use gridscada_config::{MicrogridConfig, UnitConfig, UnitIo, UnitKind};
 use gridscada_tagdb::{TagDb, TagWriter, Timestamp, Value};
 
 use super::lookahead::{horizon_problem, plan, HorizonPlan};
-use super::rules::{commit_diesels, fallback_dispatch, DieselState};
+use super::rules::{commit_diesels, fallback_dispatch, CommitmentDecision, DieselState};
 use super::single::{DispatchProblem, OilUnit, RenewableUnit, StorageUnit};
 use super::{DispatchError, Setpoints};
 
@@ -67,7 +67,10 @@ fn stored_energy_value(mg: &MicrogridConfig, unit: &UnitConfig) -> f64 {
         .units
         .iter()
         .filter(|u| u.kind == UnitKind::Diesel)
-        .map(|u| u.cost_per_kwh)
+        .map(|u| {
+            mg.diesel_cost(u, mg.fuel_price(None))
+                .average_per_kwh(u.max_kw)
+        })
         .fold(f64::INFINITY, f64::min);
     let displaced = if displaced.is_finite() {
         displaced
@@ -127,7 +130,9 @@ impl Dispatcher {
             .map(|u| DieselState {
                 id: u.cfg.id.get_ref().clone(),
                 max_kw: u.cfg.max_kw,
-                cost_per_kwh: u.cfg.cost_per_kwh,
+                cost_per_kwh: cfg
+                    .diesel_cost(&u.cfg, cfg.fuel_price(None))
+                    .marginal_per_kwh,
                 // Set from the measured running state in the first period.
                 run: false,
                 since: eligible,
@@ -300,7 +305,13 @@ impl Dispatcher {
                         running: running.unwrap_or(false),
                         min_kw: cfg.min_kw,
                         max_kw: cfg.max_kw,
-                        cost_per_kwh: cfg.cost_per_kwh,
+                        // The fuel curve's slope: the no-load part is paid
+                        // whatever the setpoint, so it is the look-ahead's
+                        // commitment that weighs it.
+                        cost_per_kwh: self
+                            .cfg
+                            .diesel_cost(&cfg, self.cfg.fuel_price(None))
+                            .marginal_per_kwh,
                     });
                 }
             }
@@ -321,21 +332,66 @@ impl Dispatcher {
             .chain(&problem.wind)
             .map(|u| u.available_kw)
             .sum();
+        // The plan sees each diesel as commanded now (one starting counts as
+        // running: it will be within seconds).
+        for o in &mut problem.oil {
+            o.running = self.diesels.iter().any(|d| d.id == o.id && d.run);
+        }
+        // Look ahead when a plan is due, and price stored energy with it.
+        if self.policy == DispatchPolicy::Optimal && problems.is_empty() {
+            self.look_ahead(&problem, now, &mut notices);
+        }
+        // Commitment: the plan's first period while the plan is fresh, else
+        // the rule (an alarm says so where a look-ahead is configured).
+        let mut commitment_fallback: Option<String> = None;
+        let planned: Vec<Option<bool>> = self
+            .diesels
+            .iter()
+            .map(|d| self.planned_run(&d.id, now))
+            .collect();
         let soc_frac = (soc_known && cap_sum > 0.0).then(|| soc_sum / cap_sum);
-        let mut commitment_changed = false;
-        if let Some(dec) = commit_diesels(
-            &self.cfg.commitment,
-            now,
-            problem.demand_kw - renewables,
-            storage_cover,
-            soc_frac,
-            &self.diesels,
-        ) {
+        let mut decision = None;
+        if planned.iter().any(Option::is_some) {
+            for (d, want) in self.diesels.iter().zip(&planned) {
+                if let Some(want) = *want {
+                    if want != d.run {
+                        decision = Some(CommitmentDecision {
+                            id: d.id.clone(),
+                            run: want,
+                            reason: "the look-ahead plan's optimal commitment".into(),
+                        });
+                        break;
+                    }
+                }
+            }
+        } else {
+            if self.cfg.horizon.is_some()
+                && self.policy == DispatchPolicy::Optimal
+                && !self.diesels.is_empty()
+            {
+                commitment_fallback = Some(match self.plan.as_ref() {
+                    Some(p) if !p.is_optimal() => format!(
+                        "diesel commitment by rule: the look-ahead plan failed ({})",
+                        p.reason.clone().unwrap_or_default()
+                    ),
+                    Some(_) => "diesel commitment by rule: the look-ahead plan is stale".into(),
+                    None => "diesel commitment by rule: no look-ahead plan".into(),
+                });
+            }
+            decision = commit_diesels(
+                &self.cfg.commitment,
+                now,
+                problem.demand_kw - renewables,
+                storage_cover,
+                soc_frac,
+                &self.diesels,
+            );
+        }
+        if let Some(dec) = decision {
             if let Some(d) = self.diesels.iter_mut().find(|d| d.id == dec.id) {
                 d.run = dec.run;
                 d.since = now;
             }
-            commitment_changed = true;
             notices.push(DispatchNotice::Event {
                 at: now,
                 message: format!(
@@ -357,10 +413,6 @@ impl Dispatcher {
             o.running = cmd && meas.unwrap_or(cmd);
         }
 
-        // Look ahead when a plan is due, and price stored energy with it.
-        if self.policy == DispatchPolicy::Optimal && problems.is_empty() {
-            self.look_ahead(&problem, now, commitment_changed, &mut notices);
-        }
         // A running diesel stops only once the battery is charged (the
         // commitment rule, which the plan relaxes away), so while one runs a
         // stored kWh is worth at least the fixed estimate: storing surplus
@@ -456,8 +508,10 @@ impl Dispatcher {
         // Alarm and events on transitions (none when the rule is the policy).
         let mode = match self.policy {
             DispatchPolicy::Rule => DispatchMode::Optimal,
+            DispatchPolicy::Optimal if commitment_fallback.is_some() => DispatchMode::Fallback,
             DispatchPolicy::Optimal => st.mode,
         };
+        let reason = reason.or(commitment_fallback);
         match (mode, self.alarm_active) {
             (DispatchMode::Fallback, false) => {
                 let r = reason.unwrap_or_default();
@@ -500,7 +554,6 @@ impl Dispatcher {
         &mut self,
         measured: &DispatchProblem,
         now: Timestamp,
-        commitment_changed: bool,
         notices: &mut Vec<DispatchNotice>,
     ) {
         let Some(h) = self.cfg.horizon.clone() else {
@@ -510,8 +563,7 @@ impl Dispatcher {
         let due = match &self.plan {
             None => true,
             Some(p) => {
-                commitment_changed
-                    || running != self.plan_running
+                running != self.plan_running
                     || now < p.at
                     || now.since(p.at).as_secs_f64() >= *h.resolve_s.get_ref()
             }
@@ -526,7 +578,22 @@ impl Dispatcher {
                 .find(|u| u.id.get_ref() == id)
                 .map_or(0.0, |u| stored_energy_value(cfg, u))
         };
-        let problem = horizon_problem(cfg, &h, now, measured, &self.last_setpoints, &terminal);
+        let diesels = &self.diesels;
+        let in_state = |id: &str| {
+            diesels
+                .iter()
+                .find(|d| d.id == id)
+                .map(|d| now.since(d.since).as_secs_f64().max(0.0) / 3600.0)
+        };
+        let problem = horizon_problem(
+            cfg,
+            &h,
+            now,
+            measured,
+            &self.last_setpoints,
+            &terminal,
+            &in_state,
+        );
         let new = plan(&problem, now);
         let was_ok = self.plan.as_ref().is_none_or(HorizonPlan::is_optimal);
         match (was_ok, new.is_optimal()) {
@@ -569,6 +636,15 @@ impl Dispatcher {
             .then(|| p.stored_energy_value_per_kwh.get(id))
             .flatten()
             .map(|v| v.min(cap))
+    }
+
+    /// Whether the plan runs diesel `id` now, while the plan is optimal and
+    /// no older than three re-plan intervals.
+    fn planned_run(&self, id: &str, now: Timestamp) -> Option<bool> {
+        let h = self.cfg.horizon.as_ref()?;
+        let p = self.plan.as_ref().filter(|p| p.is_optimal())?;
+        let fresh = now >= p.at && now.since(p.at).as_secs_f64() <= 3.0 * *h.resolve_s.get_ref();
+        fresh.then(|| p.runs_now(id)).flatten()
     }
 
     fn apply_fallback(&self, problem: &DispatchProblem, st: &mut DispatchStatus) {

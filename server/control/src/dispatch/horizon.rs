@@ -54,6 +54,18 @@
 //! - `max_renewable_share` (optional): `Σp_pv + Σp_wind ≤ share·demand`.
 //! - `terminal_value_per_kwh` (optional, storage): worth of energy left at the
 //!   end of the horizon, subtracted from the cost.
+//! - `final_soc_min_kwh` (optional, storage): the horizon ends with at least
+//!   this state of charge.
+//! - `optimize_commitment` (optional, oil, default false): the problem decides
+//!   in which periods the unit runs (branch and bound over on/off variables,
+//!   each relaxation solved by clarabel), with `no_load_cost_per_h` (paid per
+//!   hour running), `start_cost`, `min_up_h`, `min_down_h` and
+//!   `hours_in_state` (how long it has been in its present state `running`;
+//!   absent: long enough). The answer then has `commitment`: per unit its
+//!   on/off per period, its starts, the relaxations solved (`nodes`), and
+//!   whether the schedule is `proven` within 0.01 % of the optimum, with the
+//!   `lower_bound` no schedule beats. `max_commitment_nodes` (optional,
+//!   default 4000, at most 200,000) caps the relaxations.
 //! - `smoothing_cost_per_kw2` (optional, > 0 makes it a QP): adds
 //!   `w·Σ (setpoint_t − setpoint_{t−1})²` over units and periods.
 //!
@@ -75,6 +87,7 @@ use super::lp::FEAS_TOL;
 use super::single::{rebalance, StorageUnit};
 use super::{DispatchError, Setpoints};
 
+mod commitment;
 mod model;
 #[cfg(test)]
 mod tests;
@@ -104,7 +117,7 @@ pub struct HorizonRenewable {
     pub initial_kw: Option<f64>,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct HorizonOil {
     pub id: String,
     pub running: bool,
@@ -120,6 +133,43 @@ pub struct HorizonOil {
     /// outside the problem decides later.
     #[serde(default)]
     pub relaxed_commitment: bool,
+    /// The problem decides when the unit runs, in every period (optimal
+    /// commitment, by branch and bound): `running` is its state now.
+    #[serde(default)]
+    pub optimize_commitment: bool,
+    /// Cost of each hour running, whatever the load (no-load fuel).
+    #[serde(default)]
+    pub no_load_cost_per_h: f64,
+    /// Cost of each start.
+    #[serde(default)]
+    pub start_cost: f64,
+    /// Minimum up and down times, h.
+    #[serde(default)]
+    pub min_up_h: f64,
+    #[serde(default)]
+    pub min_down_h: f64,
+    /// How long the unit has been in its present state (`running`), h;
+    /// absent: long enough for any minimum up or down time.
+    #[serde(default)]
+    pub hours_in_state: Option<f64>,
+}
+
+impl HorizonOil {
+    /// The first periods whose state is forced by the minimum up or down
+    /// time still running now: how many, and the state.
+    pub(crate) fn forced_periods(&self, dt_h: f64) -> usize {
+        let Some(in_state) = self.hours_in_state else {
+            return 0;
+        };
+        let min = if self.running {
+            self.min_up_h
+        } else {
+            self.min_down_h
+        };
+        let left = (min - in_state).max(0.0);
+        // A remainder within a millisecond of a period boundary ends there.
+        ((left / dt_h) - 1e-9 / dt_h.max(1e-9)).ceil().max(0.0) as usize
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -132,6 +182,10 @@ pub struct HorizonStorage {
     pub initial_kw: Option<f64>,
     #[serde(default)]
     pub terminal_value_per_kwh: f64,
+    /// State of charge the horizon must end with at least, kWh (a perfect
+    /// foresight run ends where the realized run ended, for a fair cost).
+    #[serde(default)]
+    pub final_soc_min_kwh: Option<f64>,
 }
 
 /// Spinning reserve requirement: the same rule as `[microgrid.horizon]
@@ -157,6 +211,9 @@ pub struct HorizonProblem {
     pub max_renewable_share: Option<f64>,
     #[serde(default)]
     pub smoothing_cost_per_kw2: f64,
+    /// Relaxations the commitment search may solve (default 4000).
+    #[serde(default)]
+    pub max_commitment_nodes: Option<usize>,
 }
 
 /// One period of a horizon solution.
@@ -183,7 +240,26 @@ pub struct HorizonSolution {
     /// loop prices stored energy with it in the single-period LP.
     pub stored_energy_value_per_kwh: Setpoints,
     pub periods: Vec<PeriodResult>,
+    /// Per oil unit whose commitment the problem decided: whether it runs in
+    /// each period, and the search's figures.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub commitment: Option<CommitmentResult>,
     pub solve_ms: f64,
+}
+
+/// The on/off schedule a horizon chose, and how sure it is.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CommitmentResult {
+    /// Per oil unit id: runs in period t.
+    pub running: BTreeMap<String, Vec<bool>>,
+    /// Starts in the schedule (including one in period 0).
+    pub starts: BTreeMap<String, u32>,
+    /// Relaxations solved by the branch and bound.
+    pub nodes: usize,
+    /// The schedule is proven within the gap of the optimum.
+    pub proven: bool,
+    /// No schedule costs less than this.
+    pub lower_bound: f64,
 }
 
 impl HorizonProblem {
@@ -200,7 +276,7 @@ impl HorizonProblem {
     /// online (reserve headroom, ramps).
     fn oil_band(&self, t: usize, k: usize) -> (f64, f64, bool) {
         let u = &self.oil[k];
-        if u.relaxed_commitment && t > 0 {
+        if u.optimize_commitment || (u.relaxed_commitment && t > 0) {
             (0.0, u.max_kw, true)
         } else if self.running(t, k) {
             (u.min_kw, u.max_kw, true)
@@ -214,7 +290,21 @@ impl HorizonProblem {
     pub fn precheck(&self) -> Option<String> {
         let absorb: f64 = self.storage.iter().map(|s| s.unit.max_charge_kw).sum();
         for (t, p) in self.periods.iter().enumerate() {
-            let forced: f64 = (0..self.oil.len()).map(|k| self.oil_band(t, k).0).sum();
+            let forced: f64 = (0..self.oil.len())
+                .map(|k| {
+                    let u = &self.oil[k];
+                    if u.optimize_commitment {
+                        let on = u.running && t < u.forced_periods(self.dt_h);
+                        if on {
+                            u.min_kw
+                        } else {
+                            0.0
+                        }
+                    } else {
+                        self.oil_band(t, k).0
+                    }
+                })
+                .sum();
             if forced > p.demand_kw + absorb + FEAS_TOL {
                 return Some(format!(
                     "period {t}: running oil units must produce at least {forced} kW (minimum \
@@ -232,6 +322,23 @@ impl HorizonProblem {
         if let Some(reason) = self.precheck() {
             return Err(DispatchError::Infeasible(reason));
         }
+        if !self.oil.iter().any(|o| o.optimize_commitment) {
+            return self.solve_fixed(started);
+        }
+        // Decide the schedule, then solve the dispatch of that schedule at
+        // full precision (its prices give the worth of stored energy) and
+        // add what running and starting cost.
+        let commit = commitment::decide(self)?;
+        let fixed = commitment::with_schedule(self, &commit.running);
+        let mut sol = fixed.solve_fixed(started)?;
+        sol.objective += commitment::fixed_costs(self, &commit.running);
+        sol.commitment = Some(commit);
+        sol.solve_ms = started.elapsed().as_secs_f64() * 1e3;
+        Ok(sol)
+    }
+
+    /// The dispatch with every oil unit's commitment given.
+    fn solve_fixed(&self, started: Instant) -> Result<HorizonSolution, DispatchError> {
         let (model, v) = self.build();
         let (mut x, prices) = model.solve_with_prices()?;
         // Repair: state of charge exactly from the (clipped) flows, then the
@@ -291,6 +398,7 @@ impl HorizonProblem {
             objective: model.objective(&x),
             stored_energy_value_per_kwh,
             periods,
+            commitment: None,
             solve_ms: started.elapsed().as_secs_f64() * 1e3,
         })
     }

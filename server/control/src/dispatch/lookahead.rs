@@ -63,6 +63,9 @@ pub fn forecast(
     (expected * (1.0 + (ratio - 1.0) * fade)).max(0.0)
 }
 
+/// Relaxations the live plan's commitment search may solve.
+pub const LIVE_COMMITMENT_NODES: usize = 300;
+
 /// The plan the driver last made, for the HMI and the dispatch record.
 #[derive(Debug, Clone, Serialize)]
 pub struct HorizonPlan {
@@ -83,6 +86,13 @@ pub struct HorizonPlan {
     pub soc_kwh: BTreeMap<String, Vec<f64>>,
     /// Planned diesel output per period, per diesel id.
     pub diesel_kw: BTreeMap<String, Vec<f64>>,
+    /// Whether each diesel runs, per period: the plan's commitment, which the
+    /// driver follows while the plan is fresh.
+    pub diesel_run: BTreeMap<String, Vec<bool>>,
+    /// Relaxations the commitment search solved, and whether its schedule
+    /// is proven optimal (within 0.01 %).
+    pub commitment_nodes: Option<usize>,
+    pub commitment_proven: Option<bool>,
     /// The worth of a stored kWh now, per storage id: what the dispatch
     /// prices stored energy at until the next plan.
     pub stored_energy_value_per_kwh: Setpoints,
@@ -93,17 +103,21 @@ impl HorizonPlan {
     pub fn is_optimal(&self) -> bool {
         self.status == "optimal"
     }
+
+    /// Whether the plan runs diesel `id` now (its first period).
+    pub fn runs_now(&self, id: &str) -> Option<bool> {
+        self.diesel_run.get(id).and_then(|r| r.first().copied())
+    }
 }
 
 /// The horizon problem from the single-period problem measured now.
 ///
 /// - Period 0 is the measurement; later periods are [`forecast`]s at their
 ///   midpoints.
-/// - Diesels keep their present commitment in period 0; later they may run
-///   anywhere from 0 to full output (`relaxed_commitment`): the commitment
-///   rule decides starts and stops outside the LP, and will start a diesel
-///   before load goes unserved, so the plan must not price stored energy as
-///   if shedding were the only alternative.
+/// - The plan decides when each diesel runs, from period 0 on
+///   (`optimize_commitment`), priced by its fuel curve, start cost and
+///   minimum up and down times ([`MicrogridConfig::diesel_cost`]);
+///   `hours_in_state` says how long each has been in its present state.
 /// - Stored energy left at the end is worth `terminal_value` per kWh.
 /// - `initial_kw` are the setpoints in force, the start of every ramp.
 pub fn horizon_problem(
@@ -113,6 +127,7 @@ pub fn horizon_problem(
     measured: &DispatchProblem,
     initial_kw: &Setpoints,
     terminal_value: &dyn Fn(&str) -> f64,
+    hours_in_state: &dyn Fn(&str) -> Option<f64>,
 ) -> HorizonProblem {
     let n = (*h.periods.get_ref()).max(1.0) as usize;
     let period_h = *h.period_s.get_ref() / 3600.0;
@@ -178,17 +193,28 @@ pub fn horizon_problem(
         oil: measured
             .oil
             .iter()
-            .map(|o| HorizonOil {
-                id: o.id.clone(),
-                running: o.running,
-                min_kw: o.min_kw,
-                max_kw: o.max_kw,
-                cost_per_kwh: o.cost_per_kwh,
-                ramp_kw_per_s: ramp_of(&o.id),
-                // A diesel just started or stopped may sit outside its band.
-                initial_kw: initial(&o.id, 0.0, o.max_kw).filter(|v| !o.running || *v >= o.min_kw),
-                // The commitment rule, not the plan, starts and stops it later.
-                relaxed_commitment: true,
+            .map(|o| {
+                let cost = unit(&o.id)
+                    .map(|u| mg.diesel_cost(u, mg.fuel_price(None)))
+                    .unwrap_or_default();
+                HorizonOil {
+                    id: o.id.clone(),
+                    running: o.running,
+                    min_kw: o.min_kw,
+                    max_kw: o.max_kw,
+                    cost_per_kwh: o.cost_per_kwh,
+                    ramp_kw_per_s: ramp_of(&o.id),
+                    // A diesel just started or stopped may sit outside its band.
+                    initial_kw: initial(&o.id, 0.0, o.max_kw)
+                        .filter(|v| !o.running || *v >= o.min_kw),
+                    relaxed_commitment: false,
+                    optimize_commitment: true,
+                    no_load_cost_per_h: cost.no_load_per_h,
+                    start_cost: cost.start_cost,
+                    min_up_h: cost.min_up_h,
+                    min_down_h: cost.min_down_h,
+                    hours_in_state: hours_in_state(&o.id),
+                }
             })
             .collect(),
         storage: measured
@@ -202,11 +228,16 @@ pub fn horizon_problem(
                 ramp_kw_per_s: ramp_of(&s.id),
                 initial_kw: initial(&s.id, -s.max_charge_kw, s.max_discharge_kw),
                 terminal_value_per_kwh: terminal_value(&s.id).max(0.0),
+                final_soc_min_kwh: None,
             })
             .collect(),
         reserve: h.reserve.clone(),
         max_renewable_share: None,
         smoothing_cost_per_kw2: 0.0,
+        // A budget that keeps a plan well under a second on a loaded
+        // 2-core machine (docs/BENCHMARKS.md); the best schedule found by
+        // then is used, and the plan says whether it is proven.
+        max_commitment_nodes: Some(LIVE_COMMITMENT_NODES),
     }
 }
 
@@ -228,6 +259,9 @@ pub fn plan(p: &HorizonProblem, now: Timestamp) -> HorizonPlan {
             .collect(),
         soc_kwh: BTreeMap::new(),
         diesel_kw: BTreeMap::new(),
+        diesel_run: BTreeMap::new(),
+        commitment_nodes: None,
+        commitment_proven: None,
         stored_energy_value_per_kwh: Setpoints::default(),
     };
     match p.solve() {
@@ -250,6 +284,11 @@ pub fn plan(p: &HorizonProblem, now: Timestamp) -> HorizonPlan {
                     .map(|r| r.setpoints_kw.get(&o.id).unwrap_or(0.0))
                     .collect();
                 plan.diesel_kw.insert(o.id.clone(), kw);
+            }
+            if let Some(c) = &sol.commitment {
+                plan.diesel_run = c.running.clone();
+                plan.commitment_nodes = Some(c.nodes);
+                plan.commitment_proven = Some(c.proven);
             }
             // Never negative: a kWh stored can always be left unused.
             plan.stored_energy_value_per_kwh = Setpoints(
@@ -277,6 +316,137 @@ mod tests {
     use super::*;
 
     const PV: &[(f64, f64)] = &[(6.0, 0.0), (12.0, 100.0), (18.0, 0.0)];
+
+    /// A plant with the demo's fuel curve and a look-ahead.
+    const PLANT: &str = r#"
+dispatch_period_s = 5.0
+voll_per_kwh = 5.0
+demand_tag = "MG.Load.P_kW"
+fuel_price_per_l = 1.5
+
+[horizon]
+periods = 12
+period_s = 900.0
+demand_forecast_kw = [[0, 60], [6, 80], [12, 70], [18, 100]]
+
+[[unit]]
+id = "pv1"
+kind = "pv"
+name = "PV"
+prefix = "MG.PV1"
+rated_kw = 100.0
+cost_per_kwh = 0.01
+forecast_kw = [[6, 0], [12, 95], [18, 0]]
+
+[[unit]]
+id = "bess1"
+kind = "storage"
+name = "Battery"
+prefix = "MG.BESS1"
+capacity_kwh = 200.0
+soc_min_kwh = 20.0
+soc_max_kwh = 190.0
+max_charge_kw = 50.0
+max_discharge_kw = 60.0
+cycle_cost_per_kwh = 0.02
+
+[[unit]]
+id = "dg1"
+kind = "diesel"
+name = "Diesel"
+prefix = "MG.DG1"
+min_kw = 30.0
+max_kw = 150.0
+fuel_no_load_l_per_h = 12.2175
+fuel_l_per_kwh = 0.246
+start_cost = 3.0
+min_up_s = 1800.0
+min_down_s = 900.0
+"#;
+
+    /// The plan's objective is the plant's cost function (`unit_cost`, the
+    /// replay report's) summed over what the plan does, plus shedding.
+    #[test]
+    fn the_plans_objective_is_the_reports_cost_function() {
+        use gridscada_config::{UnitKind, UnitUsage};
+        let mg: MicrogridConfig = toml::from_str(PLANT).unwrap();
+        let h = mg.horizon.clone().unwrap();
+        for (hour, soc) in [(5.0, 30.0), (9.0, 120.0), (17.0, 60.0)] {
+            let now = Timestamp::from_millis((hour * 3600.0 * 1000.0) as i64);
+            let measured = DispatchProblem {
+                dt_h: 5.0 / 3600.0,
+                demand_kw: 70.0,
+                voll_per_kwh: 5.0,
+                pv: vec![super::super::single::RenewableUnit {
+                    id: "pv1".into(),
+                    available_kw: if hour > 6.0 && hour < 18.0 { 60.0 } else { 0.0 },
+                    cost_per_kwh: 0.01,
+                }],
+                wind: vec![],
+                oil: vec![super::super::single::OilUnit {
+                    id: "dg1".into(),
+                    running: false,
+                    min_kw: 30.0,
+                    max_kw: 150.0,
+                    cost_per_kwh: 1.5 * 0.246,
+                }],
+                storage: vec![StorageUnit {
+                    id: "bess1".into(),
+                    soc_kwh: soc,
+                    soc_min_kwh: 20.0,
+                    soc_max_kwh: 190.0,
+                    max_charge_kw: 50.0,
+                    max_discharge_kw: 60.0,
+                    eff_charge: 0.95,
+                    eff_discharge: 0.95,
+                    cycle_cost_per_kwh: 0.02,
+                    stored_value_per_kwh: 0.0,
+                }],
+            };
+            let p = horizon_problem(
+                &mg,
+                &h,
+                now,
+                &measured,
+                &Setpoints::default(),
+                &|_| 0.0,
+                &|_| None,
+            );
+            let sol = p.solve().unwrap();
+            let dt = p.dt_h;
+            let sched = &sol.commitment.as_ref().unwrap().running["dg1"];
+            let mut cost = 0.0;
+            for u in &mg.units {
+                let id = u.id.get_ref();
+                let kw = |m: &Setpoints| m.get(id).unwrap_or(0.0);
+                let mut usage = UnitUsage::default();
+                for r in &sol.periods {
+                    match u.kind {
+                        UnitKind::Storage => {
+                            usage.kwh += kw(&r.discharge_kw) * dt;
+                            usage.charged_kwh += kw(&r.charge_kw) * dt;
+                        }
+                        _ => usage.kwh += kw(&r.setpoints_kw) * dt,
+                    }
+                }
+                if u.kind == UnitKind::Diesel {
+                    usage.run_h = sched.iter().filter(|&&on| on).count() as f64 * dt;
+                    let mut prev = false;
+                    for &on in sched {
+                        usage.starts += f64::from(u8::from(on && !prev));
+                        prev = on;
+                    }
+                }
+                cost += mg.unit_cost(u, mg.fuel_price(None), &usage);
+            }
+            cost += sol.periods.iter().map(|r| r.shed_kw * dt).sum::<f64>() * 5.0;
+            assert!(
+                (cost - sol.objective).abs() < 1e-4 * sol.objective.abs().max(1.0),
+                "at {hour} h: cost function {cost} vs objective {}",
+                sol.objective
+            );
+        }
+    }
 
     #[test]
     fn forecast_persists_without_a_curve_and_fades_to_the_curve_with_one() {

@@ -180,6 +180,17 @@ impl Model {
     /// (`−∂objective/∂rhs`, the negated Lagrange multiplier), in `self.rows`
     /// order. The horizon reads the worth of stored energy off it.
     pub fn solve_with_prices(&self) -> Result<(Vec<f64>, Vec<f64>), SolveFailure> {
+        self.solve_to(1e-10)
+    }
+
+    /// A relaxation inside branch and bound: looser tolerances, since its
+    /// answer only bounds and guides the search (the chosen commitment is
+    /// solved again at full precision).
+    pub fn solve_relaxation(&self) -> Result<Vec<f64>, SolveFailure> {
+        self.solve_to(1e-8).map(|(x, _)| x)
+    }
+
+    fn solve_to(&self, tol: f64) -> Result<(Vec<f64>, Vec<f64>), SolveFailure> {
         let n = self.n();
         // Where each of `self.rows` lands in clarabel's cone order.
         let mut slot = vec![0usize; self.rows.len()];
@@ -246,10 +257,10 @@ impl Model {
         let settings = DefaultSettingsBuilder::default()
             .verbose(false)
             .max_iter(200)
-            .tol_gap_abs(1e-10)
-            .tol_gap_rel(1e-10)
-            .tol_feas(1e-10)
-            .tol_ktratio(1e-8)
+            .tol_gap_abs(tol)
+            .tol_gap_rel(tol)
+            .tol_feas(tol)
+            .tol_ktratio(tol * 100.0)
             .presolve_enable(true)
             .build()
             .map_err(|e| SolveFailure::Solver(format!("solver settings: {e:?}")))?;

@@ -19,6 +19,7 @@ pub mod horizon;
 mod input;
 pub mod lookahead;
 mod lp;
+mod mip;
 pub mod rules;
 pub mod single;
 pub mod tags;
@@ -30,8 +31,8 @@ pub use driver::{
     run_dispatch, run_dispatch_with, DispatchMode, DispatchNotice, DispatchPolicy, DispatchStatus,
 };
 pub use horizon::{
-    HorizonOil, HorizonProblem, HorizonRenewable, HorizonSolution, HorizonStorage, PeriodForecast,
-    PeriodResult, ReserveRule,
+    CommitmentResult, HorizonOil, HorizonProblem, HorizonRenewable, HorizonSolution,
+    HorizonStorage, PeriodForecast, PeriodResult, ReserveRule,
 };
 pub use input::InputError;
 pub use rules::{

@@ -131,15 +131,40 @@ Clock: {clock}; wall time {wall:.1} s, speed-up ×{speed:.0}.</p>
         cost_row("rule-based dispatch", rule);
     }
     h.push_str("</table>\n");
+    let optimum = r.cost.optimum.as_ref();
+    let optimum_text = match optimum {
+        Some(o) => match o.cost {
+            Some(c) if c > 0.0 => format!(
+                " Perfect-foresight optimum {} ({} periods of {} s, diesel {} h, {} start(s), {}): realized / optimum {:.3}.",
+                num(c),
+                o.periods,
+                num(o.period_s),
+                num(o.diesel_runtime_h),
+                o.diesel_starts,
+                if o.proven {
+                    "proven".to_string()
+                } else {
+                    format!("not proven, lower bound {}", num(o.lower_bound.unwrap_or(f64::NAN)))
+                },
+                r.cost.optimal.total / c
+            ),
+            _ => format!(
+                " No perfect-foresight optimum: {}.",
+                esc(o.reason.as_deref().unwrap_or("none"))
+            ),
+        },
+        None => String::new(),
+    };
     let _ = writeln!(
         h,
-        "<p class=muted>Fuel price {} per litre; value of lost load {} per kWh.{}</p>",
+        "<p class=muted>Fuel price {} per litre; value of lost load {} per kWh.{}{}</p>",
         num(r.cost.fuel_price_per_l),
         num(r.cost.voll_per_kwh),
         match r.cost.ratio {
             Some(x) => format!(" Cost ratio (configured / rule): {x:.3}."),
             None => String::new(),
-        }
+        },
+        optimum_text
     );
 
     if !r.faults.is_empty() {

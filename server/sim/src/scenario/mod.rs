@@ -51,8 +51,9 @@ pub struct Scenario {
     /// The plant configuration (main file or folder), relative paths
     /// resolved against the scenario's folder; `None` = the demo plant.
     pub plant: Option<PathBuf>,
-    /// Price of diesel fuel per litre, for the fuel cost.
-    pub fuel_price_per_l: f64,
+    /// Price of diesel fuel per litre, for the dispatch and the report
+    /// (absent: the plant's `[microgrid] fuel_price_per_l`).
+    pub fuel_price_per_l: Option<f64>,
     /// Replay a second time with the rule-based dispatch for the cost comparison.
     pub compare_rule: bool,
     /// How often the report's plots are sampled.

@@ -47,7 +47,8 @@ pub struct Report {
 /// Costs of one run, in the plant's currency.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct CostBreakdown {
-    /// Diesel fuel litres × the scenario's fuel price.
+    /// Diesel cost by the dispatch's cost model (`DieselCost`: fuel curve
+    /// at the fuel price, starts).
     pub fuel: f64,
     /// Energy of non-diesel units × their cost_per_kwh.
     pub energy: f64,
@@ -70,6 +71,31 @@ impl CostBreakdown {
     }
 }
 
+/// The perfect-foresight optimum of the replayed day: the same cost model,
+/// every period's demand and availability known in advance, the diesels'
+/// commitment decided over the whole day.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Foresight {
+    /// "optimal", or "failed" with the reason.
+    pub status: String,
+    pub reason: Option<String>,
+    /// Cost of the best schedule found.
+    pub cost: Option<f64>,
+    /// No schedule costs less than this (equal to `cost` when proven).
+    pub lower_bound: Option<f64>,
+    /// The schedule is proven within 0.01 % of the optimum.
+    pub proven: bool,
+    /// Relaxations the commitment search solved.
+    pub nodes: usize,
+    pub periods: usize,
+    pub period_s: f64,
+    /// Hours of the run the optimum covers (whole periods).
+    pub covered_h: f64,
+    pub diesel_runtime_h: f64,
+    pub diesel_starts: u32,
+    pub solve_ms: f64,
+}
+
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct CostComparison {
     pub fuel_price_per_l: f64,
@@ -78,6 +104,8 @@ pub struct CostComparison {
     pub optimal: CostBreakdown,
     /// The same scenario replayed with the rule-based dispatch only.
     pub rule: Option<CostBreakdown>,
+    /// The day's optimum with perfect foresight (see `optimum_ratio`).
+    pub optimum: Option<Foresight>,
     /// optimal.total / rule.total (below 1: the LP saved money).
     pub ratio: Option<f64>,
 }

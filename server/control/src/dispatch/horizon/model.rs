@@ -6,6 +6,131 @@ use crate::dispatch::lp::{Model, Sense};
 use super::{HorizonProblem, HorizonRenewable};
 
 impl HorizonProblem {
+    /// The on/off, start and stop variables of oil unit `k` in period `t`,
+    /// whose output is `p`, with the rows that tie them together (the
+    /// three-variable unit-commitment formulation, tight in its relaxation):
+    /// - `min_kw·on ≤ p ≤ max_kw·on`;
+    /// - `on_t − on_{t−1} = start_t − stop_t` (`on_{−1}` is `running`);
+    /// - minimum up time: `Σ start` over the last `U` periods `≤ on_t`;
+    /// - minimum down time: `Σ stop` over the last `D` periods `≤ 1 − on_t`;
+    /// - the first periods are forced while the present state's minimum
+    ///   time runs;
+    /// - ramps between periods, lifted by `max_kw` on a start or stop.
+    ///
+    /// Costs: `dt·no_load` per period on, `start_cost` per start.
+    fn commitment_vars(&self, m: &mut Model, v: &mut HVars, t: usize, k: usize, p: usize) -> usize {
+        let u = &self.oil[k];
+        let dt = self.dt_h;
+        if v.commit.len() <= k {
+            v.commit.resize(self.oil.len(), Vec::new());
+        }
+        let forced = (t < u.forced_periods(dt)).then_some(if u.running { 1.0 } else { 0.0 });
+        let (lo, hi) = forced.map_or((0.0, 1.0), |f| (f, f));
+        let on = m.var(
+            format!("{} runs in period {t}", u.id),
+            lo,
+            hi,
+            dt * u.no_load_cost_per_h,
+        );
+        let start = m.var(
+            format!("{} starts in period {t}", u.id),
+            0.0,
+            1.0,
+            u.start_cost,
+        );
+        let stop = m.var(format!("{} stops in period {t}", u.id), 0.0, 1.0, 0.0);
+        m.row(
+            format!("{} output within its rating in period {t}", u.id),
+            vec![(p, 1.0), (on, -u.max_kw)],
+            Sense::Le,
+            0.0,
+        );
+        m.row(
+            format!("{} minimum stable load in period {t}", u.id),
+            vec![(p, -1.0), (on, u.min_kw)],
+            Sense::Le,
+            0.0,
+        );
+        let mut transition = vec![(on, 1.0), (start, -1.0), (stop, 1.0)];
+        let mut rhs = 0.0;
+        match v.commit[k].last() {
+            Some(prev) => transition.push((prev.on, -1.0)),
+            None => rhs = if u.running { 1.0 } else { 0.0 },
+        }
+        m.row(
+            format!("{} start and stop in period {t}", u.id),
+            transition,
+            Sense::Eq,
+            rhs,
+        );
+        v.commit[k].push(CommitVars { on, start, stop });
+        let periods = |h: f64| ((h / dt) - 1e-9).ceil().max(1.0) as usize;
+        let window = |n: usize| t + 1 - n.min(t + 1);
+        let hist = &v.commit[k];
+        if u.min_up_h > 0.0 {
+            let mut row: Vec<(usize, f64)> = hist[window(periods(u.min_up_h))..]
+                .iter()
+                .map(|c| (c.start, 1.0))
+                .collect();
+            row.push((on, -1.0));
+            m.row(
+                format!("{} minimum up time in period {t}", u.id),
+                row,
+                Sense::Le,
+                0.0,
+            );
+        }
+        if u.min_down_h > 0.0 {
+            let mut row: Vec<(usize, f64)> = hist[window(periods(u.min_down_h))..]
+                .iter()
+                .map(|c| (c.stop, 1.0))
+                .collect();
+            row.push((on, 1.0));
+            m.row(
+                format!("{} minimum down time in period {t}", u.id),
+                row,
+                Sense::Le,
+                1.0,
+            );
+        }
+        if u.ramp_kw_per_s > 0.0 {
+            let r = u.ramp_kw_per_s * 3600.0 * dt;
+            let prev_p = if t == 0 {
+                None
+            } else {
+                // The output variable of the previous period is the one
+                // named so; found through the unit list of that period.
+                v.units[t - 1]
+                    .iter()
+                    .find(|(id, _)| *id == u.id)
+                    .map(|(_, j)| *j)
+            };
+            let (up, down, rhs0): (Vec<(usize, f64)>, Vec<(usize, f64)>, f64) = match prev_p {
+                Some(pp) => (vec![(p, 1.0), (pp, -1.0)], vec![(p, -1.0), (pp, 1.0)], 0.0),
+                None => (vec![(p, 1.0)], vec![(p, -1.0)], u.initial_kw.unwrap_or(0.0)),
+            };
+            let mut up = up;
+            up.push((start, -u.max_kw));
+            let mut down = down;
+            down.push((stop, -u.max_kw));
+            m.row(
+                format!("{} ramp-up limit in period {t}", u.id),
+                up,
+                Sense::Le,
+                rhs0 + r,
+            );
+            m.row(
+                format!("{} ramp-down limit in period {t}", u.id),
+                down,
+                Sense::Le,
+                r - rhs0,
+            );
+        }
+        on
+    }
+}
+
+impl HorizonProblem {
     pub(super) fn build(&self) -> (Model, HVars) {
         let dt = self.dt_h;
         let nt = self.periods.len();
@@ -66,7 +191,8 @@ impl HorizonProblem {
                 }
                 prev_ren[i] = Some(j);
             }
-            let mut oil_running: Vec<(usize, f64)> = Vec::new();
+            // (output, its on/off variable when decided here, max_kw)
+            let mut oil_running: Vec<(usize, Option<usize>, f64)> = Vec::new();
             for (k, u) in self.oil.iter().enumerate() {
                 let (lo, hi, run) = self.oil_band(t, k);
                 let j = m.var(
@@ -77,9 +203,15 @@ impl HorizonProblem {
                 );
                 units.push((u.id.clone(), j));
                 bal.push((j, 1.0));
+                if u.optimize_commitment {
+                    let on = self.commitment_vars(&mut m, &mut v, t, k, j);
+                    oil_running.push((j, Some(on), u.max_kw));
+                    prev_oil[k] = Some(j);
+                    continue;
+                }
                 if run {
                     adjust.push((j, 1.0));
-                    oil_running.push((j, u.max_kw));
+                    oil_running.push((j, None, u.max_kw));
                 }
                 let was_running = if t == 0 {
                     u.initial_kw.is_some()
@@ -136,9 +268,13 @@ impl HorizonProblem {
                 } else {
                     0.0
                 };
+                let floor = match s.final_soc_min_kwh {
+                    Some(f) if t + 1 == nt => f.clamp(u.soc_min_kwh, u.soc_max_kwh),
+                    _ => u.soc_min_kwh,
+                };
                 let soc = m.var(
                     format!("{} state of charge at the end of period {t}", u.id),
-                    u.soc_min_kwh,
+                    floor,
                     u.soc_max_kwh,
                     end_value,
                 );
@@ -249,6 +385,48 @@ impl HorizonProblem {
                 Sense::Eq,
                 per.demand_kw,
             );
+            // Cuts for the commitment search, valid for every on/off
+            // schedule and tightening its relaxation, which would otherwise
+            // buy a fraction of a running hour for a fraction of the no-load
+            // cost: (1) a unit that is off leaves the whole demand to the
+            // rest (renewables, storage discharge, other oil units,
+            // shedding); (2) a unit that is on produces no more than demand
+            // plus what storage can take.
+            let absorb: f64 = self.storage.iter().map(|s| s.unit.max_charge_kw).sum();
+            for (k, u) in self.oil.iter().enumerate() {
+                let Some(c) = v.commit.get(k).and_then(|c| c.get(t)) else {
+                    continue;
+                };
+                let mut row: Vec<(usize, f64)> = ren_vars.iter().map(|&(j, _)| (j, -1.0)).collect();
+                row.extend(sto_vars.iter().map(|&(_, dis, _)| (dis, -1.0)));
+                row.extend(
+                    oil_running
+                        .iter()
+                        .filter(|(j, _, _)| units.iter().all(|(id, uj)| uj != j || *id != u.id))
+                        .map(|&(j, _, _)| (j, -1.0)),
+                );
+                row.push((shed, -1.0));
+                row.push((c.on, -per.demand_kw));
+                m.row(
+                    format!("{} off leaves the demand to the rest in period {t}", u.id),
+                    row,
+                    Sense::Le,
+                    -per.demand_kw,
+                );
+                let p = units.iter().find(|(id, _)| *id == u.id).map(|(_, j)| *j);
+                let cap = u.max_kw.min(per.demand_kw + absorb);
+                if let Some(p) = p {
+                    m.row(
+                        format!(
+                            "{} on produces at most demand plus storage in period {t}",
+                            u.id
+                        ),
+                        vec![(p, 1.0), (c.on, -cap)],
+                        Sense::Le,
+                        0.0,
+                    );
+                }
+            }
             let mut shortfall = None;
             if let Some(r) = &self.reserve {
                 let need_max = r.load_frac * per.demand_kw
@@ -263,8 +441,14 @@ impl HorizonProblem {
                     dt * r.shortfall_cost_per_kwh,
                 );
                 // Σ(max − p_oil) + Σh + sf ≥ load_frac·D + pv_frac·Σp_pv + wind_frac·Σp_wind
-                let mut row: Vec<(usize, f64)> =
-                    oil_running.iter().map(|&(j, _)| (j, 1.0)).collect();
+                let mut row: Vec<(usize, f64)> = oil_running
+                    .iter()
+                    .flat_map(|&(j, on, mx)| {
+                        // A unit decided here offers max_kw only when on.
+                        let on = on.map(|u| (u, -mx));
+                        std::iter::once((j, 1.0)).chain(on)
+                    })
+                    .collect();
                 row.extend(headroom.iter().map(|&h| (h, -1.0)));
                 row.push((sf, -1.0));
                 row.extend(
@@ -272,7 +456,11 @@ impl HorizonProblem {
                         .iter()
                         .map(|&(j, is_pv)| (j, if is_pv { r.pv_frac } else { r.wind_frac })),
                 );
-                let rhs = oil_running.iter().map(|&(_, mx)| mx).sum::<f64>()
+                let rhs = oil_running
+                    .iter()
+                    .filter(|(_, on, _)| on.is_none())
+                    .map(|&(_, _, mx)| mx)
+                    .sum::<f64>()
                     - r.load_frac * per.demand_kw;
                 m.row(
                     format!("spinning reserve in period {t}"),
@@ -312,4 +500,14 @@ pub(super) struct HVars {
     /// Per storage: the model row of its first-period state-of-charge
     /// dynamics, whose right-hand side is the starting state of charge.
     pub(super) first_soc_row: Vec<usize>,
+    /// Per oil unit whose commitment is decided here, per period: its
+    /// on/off (binary), start and stop variables.
+    pub(super) commit: Vec<Vec<CommitVars>>,
+}
+
+#[derive(Debug, Clone, Copy)]
+pub(super) struct CommitVars {
+    pub(super) on: usize,
+    pub(super) start: usize,
+    pub(super) stop: usize,
 }

@@ -45,6 +45,7 @@ pub(crate) fn day(nt: usize) -> HorizonProblem {
             ramp_kw_per_s: 0.01,
             initial_kw: Some(60.0),
             relaxed_commitment: false,
+            ..HorizonOil::default()
         }],
         storage: vec![HorizonStorage {
             unit: StorageUnit {
@@ -62,6 +63,7 @@ pub(crate) fn day(nt: usize) -> HorizonProblem {
             ramp_kw_per_s: 0.0,
             initial_kw: Some(0.0),
             terminal_value_per_kwh: 0.2,
+            final_soc_min_kwh: None,
         }],
         reserve: Some(ReserveRule {
             load_frac: 0.1,
@@ -71,6 +73,7 @@ pub(crate) fn day(nt: usize) -> HorizonProblem {
         }),
         max_renewable_share: None,
         smoothing_cost_per_kw2: 0.0,
+        max_commitment_nodes: None,
     }
 }
 
@@ -205,4 +208,132 @@ fn diesel_ramp_down_that_nothing_absorbs_is_infeasible() {
         per.demand_kw = 40.0;
     }
     assert!(matches!(p.solve(), Err(DispatchError::Infeasible(_))));
+}
+
+/// A night and morning with the demo's diesel priced by its fuel curve
+/// (12.2 l/h no load, 0.246 l/kWh, 1.5 per litre) and the commitment decided.
+fn committed(nt: usize, dt_h: f64, soc: f64) -> HorizonProblem {
+    let mut p = day(nt);
+    p.dt_h = dt_h;
+    for (t, per) in p.periods.iter_mut().enumerate() {
+        let h = t as f64 * dt_h;
+        per.demand_kw = 60.0 + 25.0 * (h / 3.0).sin().abs();
+        per.available_kw
+            .insert("pv1".into(), (20.0 * (h - 2.0)).clamp(0.0, 80.0));
+        per.available_kw.insert("wt1".into(), 5.0);
+    }
+    p.reserve = None;
+    let dg = &mut p.oil[0];
+    dg.running = false;
+    dg.initial_kw = None;
+    dg.ramp_kw_per_s = 0.0;
+    dg.cost_per_kwh = 1.5 * 0.246;
+    dg.no_load_cost_per_h = 1.5 * 12.2175;
+    dg.start_cost = 2.0;
+    dg.min_up_h = 0.5;
+    dg.min_down_h = 0.25;
+    dg.optimize_commitment = true;
+    dg.hours_in_state = Some(10.0);
+    p.storage[0].unit.soc_kwh = soc;
+    p.storage[0].terminal_value_per_kwh = 0.3;
+    p
+}
+
+/// Every on/off schedule that honours the minimum up and down times, each
+/// solved as an LP: the exact optimum by enumeration.
+fn enumerate_schedules(p: &HorizonProblem) -> f64 {
+    let nt = p.periods.len();
+    let u = &p.oil[0];
+    let mut best = f64::INFINITY;
+    for mask in 0..(1u32 << nt) {
+        let sched: Vec<bool> = (0..nt).map(|t| (mask >> t) & 1 == 1).collect();
+        // Minimum up and down times, as runs of periods.
+        let up = ((u.min_up_h / p.dt_h) - 1e-9).ceil() as usize;
+        let down = ((u.min_down_h / p.dt_h) - 1e-9).ceil() as usize;
+        let mut ok = true;
+        let mut prev = u.running;
+        let mut run_start = 0usize;
+        for t in 0..=nt {
+            let on = sched.get(t).copied();
+            if on == Some(prev) {
+                continue;
+            }
+            // A run of `prev` ended before t (or at the end of the horizon).
+            let len = t - run_start;
+            let min = if prev { up } else { down };
+            let ended_inside = on.is_some();
+            let started_inside = run_start > 0 || prev != u.running;
+            if ended_inside && started_inside && len < min {
+                ok = false;
+            }
+            if let Some(on) = on {
+                prev = on;
+                run_start = t;
+            }
+        }
+        if !ok {
+            continue;
+        }
+        let mut map = BTreeMap::new();
+        map.insert(u.id.clone(), sched.clone());
+        let fixed = commitment::with_schedule(p, &map);
+        if let Ok(s) = fixed.solve() {
+            best = best.min(s.objective + commitment::fixed_costs(p, &map));
+        }
+    }
+    best
+}
+
+#[test]
+fn optimal_commitment_matches_every_schedule_enumerated() {
+    for soc in [25.0, 60.0, 150.0] {
+        let p = committed(8, 0.5, soc);
+        let s = p.solve().unwrap();
+        let c = s.commitment.as_ref().unwrap();
+        assert!(c.proven, "soc {soc}: {c:?}");
+        let exact = enumerate_schedules(&p);
+        assert!(
+            (s.objective - exact).abs() <= 1e-3 + 2e-4 * exact.abs(),
+            "soc {soc}: branch and bound {} vs enumeration {exact}",
+            s.objective
+        );
+        assert!(c.lower_bound <= s.objective + 1e-6);
+        // The diesel runs exactly when the schedule says, within its band.
+        let sched = &c.running["dg1"];
+        for (t, r) in s.periods.iter().enumerate() {
+            let kw = r.setpoints_kw.get("dg1").unwrap();
+            if sched[t] {
+                assert!(kw >= 30.0 - 1e-6, "period {t}: {kw}");
+            } else {
+                assert!(kw.abs() < 1e-6, "period {t}: {kw}");
+            }
+        }
+    }
+}
+
+#[test]
+fn a_running_diesel_is_held_on_for_its_minimum_up_time() {
+    let mut p = committed(8, 0.25, 180.0);
+    // Plenty of sun and a full battery: stopping at once would be cheapest.
+    for per in &mut p.periods {
+        per.available_kw.insert("pv1".into(), 100.0);
+    }
+    let dg = &mut p.oil[0];
+    dg.running = true;
+    dg.hours_in_state = Some(0.1);
+    dg.min_up_h = 0.75;
+    let s = p.solve().unwrap();
+    let sched = &s.commitment.unwrap().running["dg1"];
+    // 0.65 h left: periods 0, 1 and 2 (0.75 h) run, then it stops.
+    assert_eq!(&sched[..4], &[true, true, true, false], "{sched:?}");
+}
+
+#[test]
+fn a_four_hour_horizon_at_15_minutes_plans_quickly() {
+    // The live loop's shape: 16 periods, a low battery at night.
+    let p = committed(16, 0.25, 30.0);
+    let s = p.solve().unwrap();
+    let c = s.commitment.unwrap();
+    assert!(c.proven, "{} nodes", c.nodes);
+    assert!(c.nodes < 4000, "{} nodes", c.nodes);
 }

@@ -13,6 +13,9 @@ use super::{
     MAX_PERIODS,
 };
 
+/// Most relaxations a problem may ask the commitment search for.
+pub const MAX_COMMITMENT_NODES: usize = 200_000;
+
 fn opt_nonneg(o: &mut Obj<'_>, key: &'static str) -> Result<f64, InputError> {
     Ok(o.opt_num(key)?.unwrap_or(0.0))
 }
@@ -51,6 +54,12 @@ impl HorizonOil {
             ramp_kw_per_s: opt_nonneg(&mut o, "ramp_kw_per_s")?,
             initial_kw: o.opt_num("initial_kw")?,
             relaxed_commitment: o.opt_bool("relaxed_commitment")?.unwrap_or(false),
+            optimize_commitment: o.opt_bool("optimize_commitment")?.unwrap_or(false),
+            no_load_cost_per_h: opt_nonneg(&mut o, "no_load_cost_per_h")?,
+            start_cost: opt_nonneg(&mut o, "start_cost")?,
+            min_up_h: opt_nonneg(&mut o, "min_up_h")?,
+            min_down_h: opt_nonneg(&mut o, "min_down_h")?,
+            hours_in_state: o.opt_num("hours_in_state")?,
         };
         o.finish()?;
         Ok(u)
@@ -60,6 +69,22 @@ impl HorizonOil {
         nonneg(format!("{path}.max_kw"), self.max_kw)?;
         nonneg(format!("{path}.cost_per_kwh"), self.cost_per_kwh)?;
         nonneg(format!("{path}.ramp_kw_per_s"), self.ramp_kw_per_s)?;
+        nonneg(
+            format!("{path}.no_load_cost_per_h"),
+            self.no_load_cost_per_h,
+        )?;
+        nonneg(format!("{path}.start_cost"), self.start_cost)?;
+        nonneg(format!("{path}.min_up_h"), self.min_up_h)?;
+        nonneg(format!("{path}.min_down_h"), self.min_down_h)?;
+        if let Some(h) = self.hours_in_state {
+            nonneg(format!("{path}.hours_in_state"), h)?;
+        }
+        if self.optimize_commitment && self.relaxed_commitment {
+            return Err(bad(
+                format!("{path}.optimize_commitment"),
+                "cannot be combined with relaxed_commitment",
+            ));
+        }
         if self.max_kw < self.min_kw {
             return Err(bad(
                 format!("{path}.max_kw"),
@@ -82,6 +107,7 @@ impl HorizonStorage {
             ramp_kw_per_s: opt_nonneg(&mut o, "ramp_kw_per_s")?,
             initial_kw: o.opt_num("initial_kw")?,
             terminal_value_per_kwh: opt_nonneg(&mut o, "terminal_value_per_kwh")?,
+            final_soc_min_kwh: o.opt_num("final_soc_min_kwh")?,
         };
         o.finish()?;
         Ok(u)
@@ -93,6 +119,14 @@ impl HorizonStorage {
             format!("{path}.terminal_value_per_kwh"),
             self.terminal_value_per_kwh,
         )?;
+        if let Some(f) = self.final_soc_min_kwh {
+            if !(f.is_finite() && f <= self.unit.soc_max_kwh) {
+                return Err(bad(
+                    format!("{path}.final_soc_min_kwh"),
+                    format!("{f} is above soc_max_kwh {}", self.unit.soc_max_kwh),
+                ));
+            }
+        }
         if let Some(i) = self.initial_kw {
             if !(i.is_finite() && i >= -self.unit.max_charge_kw && i <= self.unit.max_discharge_kw)
             {
@@ -189,6 +223,18 @@ impl HorizonProblem {
         };
         let max_renewable_share = o.opt_num("max_renewable_share")?;
         let smoothing_cost_per_kw2 = opt_nonneg(&mut o, "smoothing_cost_per_kw2")?;
+        let max_commitment_nodes = match o.opt_num("max_commitment_nodes")? {
+            None => None,
+            Some(n) if n.fract() == 0.0 && (1.0..=MAX_COMMITMENT_NODES as f64).contains(&n) => {
+                Some(n as usize)
+            }
+            Some(n) => {
+                return Err(bad(
+                    join(path, "max_commitment_nodes"),
+                    format!("{n} is not a whole number from 1 to {MAX_COMMITMENT_NODES}"),
+                ))
+            }
+        };
         o.finish()?;
         Ok(HorizonProblem {
             dt_h,
@@ -201,6 +247,7 @@ impl HorizonProblem {
             reserve,
             max_renewable_share,
             smoothing_cost_per_kw2,
+            max_commitment_nodes,
         })
     }
 

@@ -178,8 +178,8 @@ pub fn parse(
             });
         }
     }
-    let fuel_price = header.fuel_price.unwrap_or(1.5);
-    if !(fuel_price.is_finite() && fuel_price >= 0.0) {
+    let fuel_price = header.fuel_price;
+    if fuel_price.is_some_and(|f| !(f.is_finite() && f >= 0.0)) {
         p.err(0..0, "fuel_price_per_l must be a number >= 0");
     }
     // Pick up profile CSV problems etc. before returning.

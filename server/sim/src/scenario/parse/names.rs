@@ -29,6 +29,8 @@ pub const FIGURE_NAMES: &[&str] = &[
     "total_cost",
     "rule_total_cost",
     "cost_ratio",
+    "optimum_cost",
+    "optimum_ratio",
     "dispatch_shed_kwh",
     "dispatch_fallback_periods",
     "alarm_activations",
