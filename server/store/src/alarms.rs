@@ -145,6 +145,7 @@ fn ts(v: Option<i64>) -> Option<Timestamp> {
 /// The value at activation as stored: its type and its exact text
 /// (`b:true`, `i:-5`, `u:18446744073709551615`, `f:230.5`, `s:text`), so it
 /// reads back as the same value, a wide integer exactly.
+///
 /// `None` for a text too long to keep (or with a NUL, which PostgreSQL's
 /// TEXT refuses): it is only shown, and must not stop the state being saved.
 fn encode_value(v: &Value) -> Option<String> {
