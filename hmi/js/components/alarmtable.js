@@ -13,6 +13,40 @@ export const STATE_LABELS = {
   out_of_service: 'Out of service',
 };
 
+/** The overlay states: an alarm in them is not annunciated. */
+const HIDDEN_WORDS = { suppressed: 'suppressed', shelved: 'shelved', out_of_service: 'out of service' };
+
+/**
+ * Why a history row happened, in words, from its cause and the state it went
+ * to: an activation or a return while suppressed (or shelved, or out of
+ * service) leaves the state as it was, and only the cause tells them apart.
+ * Rows recorded before causes were kept have none: ''.
+ */
+export function causeLabel(t) {
+  const hidden = HIDDEN_WORDS[t.to_state];
+  switch (t.cause) {
+    case 'activate': return hidden ? `Activated while ${hidden}` : 'Activated';
+    case 'return': return hidden ? `Returned to normal while ${hidden}` : 'Returned to normal';
+    case 'ack': return 'Acknowledged';
+    case 'shelve': return 'Shelved';
+    case 'unshelve': return 'Unshelved';
+    case 'shelve_expired': return 'Shelving expired';
+    case 'suppress': return 'Suppressed by design';
+    case 'unsuppress': return 'Suppression lifted';
+    case 'out_of_service': return 'Taken out of service';
+    case 'in_service': return 'Returned to service';
+    case null: case undefined: case '': return '';
+    default: return String(t.cause);
+  }
+}
+
+/** A history row's states: "A → B" when it changed, else the one state. */
+export function stateChange(t) {
+  const from = STATE_LABELS[t.from_state] || t.from_state;
+  const to = STATE_LABELS[t.to_state] || t.to_state;
+  return t.from_state === t.to_state ? to : `${from} → ${to}`;
+}
+
 export const KIND_LABELS = { hi: 'Hi', lo: 'Lo', hihi: 'HiHi', lolo: 'LoLo', discrete: 'Discrete', comm: 'Comm failure', comm_fail: 'Comm failure', system: 'System' };
 
 /** Sort: unacknowledged first, then active, then priority (high first), then newest. */
@@ -105,12 +139,45 @@ export function summaryTable(list, { id, onPick, current } = {}) {
     rows.length > 1 ? h('tfoot', {}, line(all, true)) : null);
 }
 
+/** A number as the server writes it into a message: at most two decimals. */
+function messageNumber(v) {
+  if (typeof v !== 'number' || !Number.isFinite(v)) return fmtValue(v);
+  const s = v.toFixed(2).replace(/\.?0+$/, '');
+  return s === '-0' ? '0' : s;
+}
+
 function valueText(a) {
   if (a.value === null || a.value === undefined) return '';
   // The tag's own word for the value (TRIPPED), else the number.
   const v = a.value_text || fmtValue(a.value);
   const l = a.limit !== null && a.limit !== undefined && typeof a.limit !== 'boolean' ? ` (limit ${fmtValue(a.limit)})` : '';
   return `${v}${a.units ? ` ${a.units}` : ''}${l}`;
+}
+
+/**
+ * The value at the latest activation, written as the message writes it (the
+ * message's value is substituted at activation), or '' when unknown or no
+ * different from the value now.
+ */
+function activationText(a) {
+  const at = a.activation_value;
+  if (at === null || at === undefined) return '';
+  const word = (v, text) => text || messageNumber(v);
+  const then = word(at, a.activation_value_text);
+  if (a.value !== null && a.value !== undefined && word(a.value, a.value_text) === then) return '';
+  return `${then}${a.units ? ` ${a.units}` : ''}`;
+}
+
+/**
+ * The "Value now" cell: the tag's value now (and the limit); below it, when
+ * it differs, the value at activation, which is the one the message shows,
+ * so "0 V" in the message beside 231 here is never left unexplained.
+ */
+function valueCell(a) {
+  const at = activationText(a);
+  return h('td', { class: 'nowrap alarm-value' },
+    h('span', { class: 'alarm-value-now', text: valueText(a) }),
+    at ? h('span', { class: 'alarm-value-activation', title: 'The value when the alarm activated, as its message shows it', text: `at activation: ${at}` }) : null);
 }
 
 /**
@@ -138,7 +205,7 @@ export function drawAlarmRows(tbody, alarms, { extra, selectable, selected } = {
       h('td', { text: a.selection }),
       h('td', { text: KIND_LABELS[a.kind] || a.kind }),
       h('td', { class: 'alarm-message', text: a.message }),
-      h('td', { class: 'nowrap alarm-value', text: valueText(a) }));
+      valueCell(a));
     if (extra) row.append(h('td', { class: 'actions' }, extra(a)));
     return row;
   }));
@@ -147,4 +214,5 @@ export function drawAlarmRows(tbody, alarms, { extra, selectable, selected } = {
   }
 }
 
-export const ALARM_HEADERS = ['Since', 'Cleared', 'State', 'Prio', 'Selection', 'Type', 'Message', 'Value'];
+// "Value now": the message keeps the value at activation; the value cell shows both, labelled.
+export const ALARM_HEADERS = ['Since', 'Cleared', 'State', 'Prio', 'Selection', 'Type', 'Message', 'Value now'];

@@ -1,14 +1,16 @@
 // Alarm screen: Online (the alarms active now, live, with acknowledge and
 // shelve with a reason, and the summary per area: counts by priority for
 // each selection) and History (transitions from the database), each with
-// filters.
+// filters. A history row says what happened (its cause: "Activated while
+// suppressed", "Acknowledged"...) and the state it left the alarm in; the
+// state change only when there was one, never "Suppressed → Suppressed".
 
 import { get, post, del, qs } from '../api.js';
 import { h, replace, select, field } from '../dom.js';
 import { fmtTime, fmtValue, roleAtLeast } from '../format.js';
 import { live } from '../live.js';
 import { attempt, formDialog, toast } from '../ui.js';
-import { ALARM_HEADERS, KIND_LABELS, STATE_LABELS, drawAlarmRows, filterAlarms, priorityChip, sortAlarms, summarize, summaryTable } from '../components/alarmtable.js';
+import { ALARM_HEADERS, KIND_LABELS, STATE_LABELS, causeLabel, drawAlarmRows, stateChange, filterAlarms, priorityChip, sortAlarms, summarize, summaryTable } from '../components/alarmtable.js';
 import { PRIORITY_LEVELS } from '../components/alarmfooter.js';
 
 const STATES = [['', 'Any state'], ...Object.entries(STATE_LABELS).filter(([k]) => k !== 'normal')];
@@ -143,18 +145,20 @@ export default {
           const rows = r.transitions || [];
           replace(out, h('p', { class: 'hint', role: 'status', text: `${rows.length} transitions${rows.length >= Number(limit.value) ? ' (limit reached: narrow the filter)' : ''}` }),
             h('table', { class: 'data', id: 'alarms-history' },
-              h('thead', {}, h('tr', {}, ['Time', 'Alarm', 'Type', 'Transition', 'Value', 'Limit', 'Prio', 'Selection', 'User', 'Message'].map((t) => h('th', { scope: 'col', text: t })))),
-              h('tbody', {}, rows.map((t) => h('tr', {},
+              h('thead', {}, h('tr', {}, ['Time', 'Alarm', 'Type', 'Event', 'State', 'Value', 'Limit', 'Prio', 'Selection', 'User', 'Message'].map((t) => h('th', { scope: 'col', text: t })))),
+              h('tbody', {}, rows.map((t) => h('tr', { dataset: { cause: t.cause ?? '' } },
                 h('td', { class: 'nowrap', text: fmtTime(t.ts) }),
                 h('td', { text: t.tag || t.alarm_key }),
                 h('td', { text: KIND_LABELS[t.kind] || t.kind }),
-                h('td', { class: 'nowrap', text: `${STATE_LABELS[t.from_state] || t.from_state} → ${STATE_LABELS[t.to_state] || t.to_state}` }),
-                h('td', { class: 'num', text: fmtValue(t.value) }),
+                // Rows recorded before causes were kept: the change, or that it is not known.
+                h('td', { class: ['hist-cause', t.cause ? null : 'hint'], text: causeLabel(t) || (t.from_state === t.to_state ? 'Not recorded' : '') }),
+                h('td', { class: 'hist-state', text: stateChange(t) }),
+                h('td', { class: 'num', title: 'The value at this transition', text: fmtValue(t.value) }),
                 h('td', { class: 'num', text: fmtValue(t.limit) }),
                 h('td', { class: 'num' }, t.priority === null || t.priority === undefined ? '' : priorityChip(t.priority)),
                 h('td', { text: t.selection ?? '' }),
                 h('td', { text: t.user ?? '' }),
-                h('td', { text: t.message ?? '' }))))));
+                h('td', { class: 'hist-message', text: t.message ?? '' }))))));
         } catch (e) {
           replace(out, h('p', { class: 'error', text: `Cannot load the alarm history: ${e.detail}` }));
         }

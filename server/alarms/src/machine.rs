@@ -98,6 +98,9 @@ pub struct Alarm {
     cleared_at: Option<Timestamp>,
     last_change: Timestamp,
     value: Option<Value>,
+    /// The value at the latest activation (what the message shows), kept
+    /// after the alarm clears.
+    activation_value: Option<Value>,
     message: String,
     /// Comm alarms: the device's last error text.
     detail: Option<String>,
@@ -120,6 +123,7 @@ impl Alarm {
             cleared_at: None,
             last_change: Timestamp::from_millis(0),
             value: None,
+            activation_value: None,
             message,
             detail: None,
             shelved: None,
@@ -306,6 +310,7 @@ impl Alarm {
                 a.active_since = Some(now);
                 a.activated_at = Some(now);
                 a.cleared_at = None;
+                a.activation_value = a.value.clone();
                 a.message = render(&a.def, a.value.as_ref(), a.detail.as_deref());
                 if !a.is_hidden() {
                     a.acked = false;
@@ -503,6 +508,11 @@ impl Alarm {
             message: self.message.clone(),
             value_text: self.value.as_ref().and_then(|v| value_text(&self.def, v)),
             value: self.value.clone(),
+            activation_value_text: self
+                .activation_value
+                .as_ref()
+                .and_then(|v| value_text(&self.def, v)),
+            activation_value: self.activation_value.clone(),
             limit: self.def.condition.limit(),
             units: self.def.units.clone(),
             active_since: self.active_since,
@@ -537,6 +547,7 @@ impl Alarm {
             out_of_service_by: self.out_of_service.as_ref().map(|s| s.by.clone()),
             out_of_service_since: self.out_of_service.as_ref().map(|s| s.since),
             out_of_service_reason: self.out_of_service.as_ref().map(|s| s.reason.clone()),
+            activation_value: self.activation_value.clone(),
         }
     }
 
@@ -553,6 +564,7 @@ impl Alarm {
         // A return not yet acknowledged was the last change.
         self.cleared_at = (!r.active && r.active_since.is_some()).then_some(r.last_change);
         self.last_change = r.last_change;
+        self.activation_value = r.activation_value.clone();
         self.pending = None;
         if !r.message.is_empty() {
             self.message = r.message.clone();

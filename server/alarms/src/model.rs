@@ -174,7 +174,10 @@ impl FromStr for AlarmState {
     }
 }
 
-/// Why a transition happened.
+/// Why a transition happened. Recorded with each history row, because the
+/// states alone do not tell: an activation or a return while the alarm is
+/// suppressed (or shelved, or out of service) leaves the displayed state as
+/// it was ("Suppressed → Suppressed"); the cause says which it was.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum TransitionCause {
@@ -194,6 +197,19 @@ pub enum TransitionCause {
 }
 
 impl TransitionCause {
+    pub const ALL: [TransitionCause; 10] = [
+        TransitionCause::Activate,
+        TransitionCause::Return,
+        TransitionCause::Ack,
+        TransitionCause::Shelve,
+        TransitionCause::Unshelve,
+        TransitionCause::ShelveExpired,
+        TransitionCause::Suppress,
+        TransitionCause::Unsuppress,
+        TransitionCause::OutOfService,
+        TransitionCause::InService,
+    ];
+
     pub fn as_str(self) -> &'static str {
         match self {
             TransitionCause::Activate => "activate",
@@ -213,6 +229,20 @@ impl TransitionCause {
 impl fmt::Display for TransitionCause {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.as_str())
+    }
+}
+
+impl FromStr for TransitionCause {
+    type Err = AlarmError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        TransitionCause::ALL
+            .iter()
+            .copied()
+            .find(|k| k.as_str() == s)
+            .ok_or_else(|| AlarmError::UnknownName {
+                what: "transition cause",
+                name: s.to_owned(),
+            })
     }
 }
 
@@ -278,6 +308,11 @@ pub struct AlarmStateRecord {
     pub out_of_service_by: Option<String>,
     pub out_of_service_since: Option<Timestamp>,
     pub out_of_service_reason: Option<String>,
+    /// The tag's value at the latest activation (what the message's `{value}`
+    /// shows), kept after the alarm clears, so the alarm list can label it
+    /// beside the value now also after a restart.
+    #[serde(default)]
+    pub activation_value: Option<Value>,
 }
 
 /// Who shelved an alarm, why, and until when.
@@ -312,10 +347,16 @@ pub struct AlarmView {
     pub priority: u32,
     pub selection: String,
     pub message: String,
-    /// The tag's latest value.
+    /// The tag's latest value (the value now).
     pub value: Option<Value>,
     /// The value in the tag's words (`states`), e.g. `TRIPPED`.
     pub value_text: Option<String>,
+    /// The tag's value at the latest activation: the value the message
+    /// shows (its `{value}` is substituted at activation), kept after the
+    /// alarm clears. `None` if it never activated since it was recorded.
+    pub activation_value: Option<Value>,
+    /// [`AlarmView::activation_value`] in the tag's words.
+    pub activation_value_text: Option<String>,
     pub limit: Option<Value>,
     pub units: String,
     pub active_since: Option<Timestamp>,

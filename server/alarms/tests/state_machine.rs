@@ -540,6 +540,99 @@ fn a_standing_consequence_is_annunciated_when_suppression_ends() {
     );
 }
 
+/// An activation or a return while suppressed leaves the displayed state as
+/// it was (Suppressed → Suppressed): the transition's cause is what tells
+/// them apart in history, and neither is annunciated.
+#[test]
+fn activation_and_return_while_suppressed_carry_their_cause() {
+    let mut r = elcb_rig(10.0);
+    let lo = "SS1.PA.V_L1:lo";
+    r.feed("SS1.ELCB.Closed", true, 0.0);
+    r.feed(V, 230.0, 0.0);
+    r.feed("SS1.ELCB.Closed", false, 1.0);
+    r.out.clear();
+    r.feed(V, 0.0, 2.0);
+    r.feed(V, 230.0, 3.0);
+    let of_lo: Vec<_> = r.out.transitions.iter().filter(|t| t.key == lo).collect();
+    let seen: Vec<_> = of_lo
+        .iter()
+        .map(|t| (t.cause, t.from, t.to, t.active, t.annunciated))
+        .collect();
+    assert_eq!(
+        seen,
+        vec![
+            (C::Activate, Suppressed, Suppressed, true, false),
+            (C::Return, Suppressed, Suppressed, false, false),
+        ]
+    );
+    let ret = of_lo[1];
+    assert_eq!(
+        ret.cause.as_str(),
+        "return",
+        "the cause as history keeps it"
+    );
+    assert_eq!(
+        ret.cause.as_str().parse::<TransitionCause>().unwrap(),
+        C::Return
+    );
+    assert_eq!(
+        ret.value,
+        Some(Value::Float(230.0)),
+        "the value at the return"
+    );
+    assert!(!ret.is_annunciated_activation());
+    assert!(!of_lo[0].is_annunciated_activation());
+}
+
+/// Every cause has a name that reads back as itself (the store keeps names).
+#[test]
+fn transition_causes_round_trip_by_name() {
+    for c in TransitionCause::ALL {
+        assert_eq!(c.as_str().parse::<TransitionCause>().unwrap(), c);
+        assert_eq!(serde_json::to_value(c).unwrap(), c.as_str());
+    }
+    assert!("activated".parse::<TransitionCause>().is_err());
+}
+
+/// The message shows the value at activation; the view keeps that value
+/// (labelled, beside the value now) after the value moves on and the alarm
+/// clears, and across a restart.
+#[test]
+fn the_value_at_activation_is_kept_beside_the_value_now() {
+    let lo = "SS1.PA.V_L1:lo";
+    let mut r = Rig::new(vec![limit(V, AlarmKind::Lo, 207.0, 2.0, 0.0, 0.0)]);
+    r.feed(V, 230.0, 0.0);
+    assert_eq!(r.set.view(r.id(lo)).unwrap().activation_value, None);
+    r.feed(V, 0.0, 1.0);
+    r.feed(V, 100.0, 2.0);
+    let v = r.set.view(r.id(lo)).unwrap();
+    assert_eq!(v.message, "SS1.PA.V_L1 0 V (limit 207 V)");
+    assert_eq!(v.activation_value, Some(Value::Float(0.0)));
+    assert_eq!(v.value, Some(Value::Float(100.0)));
+    r.feed(V, 231.0, 3.0);
+    let v = r.set.view(r.id(lo)).unwrap();
+    assert_eq!(v.state, UnackRtn);
+    assert_eq!(
+        v.activation_value,
+        Some(Value::Float(0.0)),
+        "kept once cleared"
+    );
+    assert_eq!(v.value, Some(Value::Float(231.0)));
+    let records = r.set.records();
+    assert_eq!(records[0].activation_value, Some(Value::Float(0.0)));
+    let json = serde_json::to_string(&records).unwrap();
+    let mut r2 = Rig::new(vec![limit(V, AlarmKind::Lo, 207.0, 2.0, 0.0, 0.0)]);
+    r2.set
+        .restore(&serde_json::from_str::<Vec<_>>(&json).unwrap());
+    let v2 = r2.set.view(r2.id(lo)).unwrap();
+    assert_eq!(v2.activation_value, Some(Value::Float(0.0)));
+    // A record written before the field existed still reads.
+    let old = json.replace(",\"activation_value\":0.0", "");
+    assert_ne!(old, json);
+    let old: Vec<gridscada_alarms::AlarmStateRecord> = serde_json::from_str(&old).unwrap();
+    assert_eq!(old[0].activation_value, None);
+}
+
 #[test]
 fn trigger_in_the_same_batch_suppresses_before_consequences_annunciate() {
     let mut r = elcb_rig(10.0);

@@ -68,6 +68,8 @@ fn zone_fault_alarms_are_raised_acknowledged_shelved_and_cleared_and_every_actio
     );
     // The value in the tag's words, not FALSE.
     assert_eq!(trip["value_text"], "TRIPPED", "{trip}");
+    // The value at activation, the one the message was written with.
+    assert_eq!(trip["activation_value_text"], "TRIPPED", "{trip}");
     let trip_id = trip["id"].as_u64().unwrap();
 
     // Dead zones and zero voltage are consequences: the under-voltage alarms
@@ -82,6 +84,10 @@ fn zone_fault_alarms_are_raised_acknowledged_shelved_and_cleared_and_every_actio
     );
     assert_eq!(lolo["state"], "suppressed", "{lolo}");
     assert_eq!(lolo["suppressed"], true);
+    assert!(
+        lolo["activation_value"].as_f64().is_some_and(|v| v < 50.0),
+        "the dead voltage at activation: {lolo}"
+    );
     let listed = default_list(&mut op);
     let leaked: Vec<&Value> = listed
         .iter()
@@ -200,6 +206,37 @@ fn zone_fault_alarms_are_raised_acknowledged_shelved_and_cleared_and_every_actio
             (p["step"] == "idle" && all_closed).then_some(())
         },
     );
+
+    // History says why each row happened: the very-low-voltage alarm
+    // activated and returned while suppressed (its state stayed
+    // "suppressed" both times), the trip alarm was acknowledged, shelved...
+    let causes = wait_for(
+        "the return while suppressed in the alarm history",
+        Duration::from_secs(20),
+        || {
+            let h = op.get_ok(&format!("/api/alarms/history?from={started}&limit=10000"));
+            let rows = h["transitions"].as_array().cloned().unwrap_or_default();
+            let of = |key: &str| -> Vec<(String, String, String)> {
+                rows.iter()
+                    .filter(|t| t["alarm_key"] == key)
+                    .map(|t| {
+                        let f = |n: &str| t[n].as_str().unwrap_or("").to_string();
+                        (f("cause"), f("from_state"), f("to_state"))
+                    })
+                    .collect()
+            };
+            let (lolo, elcb) = (of(LOLO), of(ELCB));
+            let ret = ("return".into(), "suppressed".into(), "suppressed".into());
+            lolo.contains(&ret).then_some((lolo, elcb))
+        },
+    );
+    let (lolo_rows, elcb_rows) = causes;
+    let act = ("activate".into(), "suppressed".into(), "suppressed".into());
+    assert!(lolo_rows.contains(&act), "{lolo_rows:?}");
+    let elcb_causes: Vec<&str> = elcb_rows.iter().map(|r| r.0.as_str()).collect();
+    for c in ["activate", "ack", "shelve", "unshelve", "return"] {
+        assert!(elcb_causes.contains(&c), "{c} missing: {elcb_rows:?}");
+    }
 
     // A confirmed write, then Reset.
     let (s, b) = op.post("/api/tags/SS1.Zone4.Cmd/write", json!({"value": true}));

@@ -6,7 +6,7 @@
 //! the ISA-18.2 state machine and its metrics (server/alarms); states are opaque
 //! strings here, and which transitions are activations is the caller's call.
 
-use gridscada_tagdb::Timestamp;
+use gridscada_tagdb::{Timestamp, Value};
 use serde::Serialize;
 
 use crate::error::db;
@@ -26,6 +26,12 @@ pub struct AlarmTransition {
     pub kind: String,
     pub from_state: String,
     pub to_state: String,
+    /// Why it happened: the alarm engine's `TransitionCause` by name
+    /// (`activate`, `return`, `ack`, `shelve`, `unshelve`, `shelve_expired`,
+    /// `suppress`, `unsuppress`, `out_of_service`, `in_service`). It tells an
+    /// activation from a return where the state stays the same (both
+    /// "suppressed → suppressed"). `None` on rows recorded before it was kept.
+    pub cause: Option<String>,
     /// Whether this transition is an annunciated activation (counts towards
     /// the alarm rate).
     pub activation: bool,
@@ -50,6 +56,7 @@ impl From<&gridscada_alarms::AlarmTransition> for AlarmTransition {
             kind: t.kind.as_str().to_string(),
             from_state: t.from.as_str().to_string(),
             to_state: t.to.as_str().to_string(),
+            cause: Some(t.cause.as_str().to_string()),
             activation: t.is_annunciated_activation(),
             value: t.value.as_ref().and_then(|v| v.as_f64()),
             limit: t.limit.as_ref().and_then(|v| v.as_f64()),
@@ -105,6 +112,7 @@ type TransitionRow = (
     String,
     String,
     String,
+    Option<String>,
     bool,
     Option<f64>,
     Option<f64>,
@@ -127,10 +135,42 @@ type StateRow = (
     String,
     (Option<String>, Option<i64>, Option<i64>, Option<String>),
     (bool, Option<String>, Option<i64>, Option<String>),
+    Option<String>,
 );
 
 fn ts(v: Option<i64>) -> Option<Timestamp> {
     v.map(Timestamp::from_millis)
+}
+
+/// The value at activation as stored: its type and its exact text
+/// (`b:true`, `i:-5`, `u:18446744073709551615`, `f:230.5`, `s:text`), so it
+/// reads back as the same value, a wide integer exactly.
+///
+/// `None` for a text too long to keep (or with a NUL, which PostgreSQL's
+/// TEXT refuses): it is only shown, and must not stop the state being saved.
+fn encode_value(v: &Value) -> Option<String> {
+    let text = match v {
+        Value::Bool(b) => format!("b:{b}"),
+        Value::Int(i) => format!("i:{i}"),
+        Value::UInt(u) => format!("u:{u}"),
+        // `{}` of an f64 is its shortest exact form (and NaN, inf).
+        Value::Float(f) => format!("f:{f}"),
+        Value::Str(t) => format!("s:{t}"),
+    };
+    (text.len() <= 4096 && !text.contains('\0')).then_some(text)
+}
+
+/// Reads [`encode_value`]'s text back; `None` if it is not one.
+fn decode_value(text: &str) -> Option<Value> {
+    let (kind, rest) = text.split_once(':')?;
+    Some(match kind {
+        "b" => Value::Bool(rest.parse().ok()?),
+        "i" => Value::Int(rest.parse().ok()?),
+        "u" => Value::UInt(rest.parse().ok()?),
+        "f" => Value::Float(rest.parse().ok()?),
+        "s" => Value::Str(rest.into()),
+        _ => return None,
+    })
 }
 
 impl Store {
@@ -159,9 +199,10 @@ impl Store {
                     "INSERT INTO alarm_states (alarm_key, kind, state, active, acked, \
                        active_since, last_change, message, priority, selection, shelved_by, \
                        shelved_at, shelved_until, shelve_reason, out_of_service, \
-                       out_of_service_by, out_of_service_since, out_of_service_reason) \
+                       out_of_service_by, out_of_service_since, out_of_service_reason, \
+                       activation_value) \
                      VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, \
-                       $16, $17, $18) \
+                       $16, $17, $18, $19) \
                      ON CONFLICT (alarm_key) DO UPDATE SET kind = excluded.kind, \
                        state = excluded.state, active = excluded.active, acked = excluded.acked, \
                        active_since = excluded.active_since, last_change = excluded.last_change, \
@@ -172,7 +213,8 @@ impl Store {
                        out_of_service = excluded.out_of_service, \
                        out_of_service_by = excluded.out_of_service_by, \
                        out_of_service_since = excluded.out_of_service_since, \
-                       out_of_service_reason = excluded.out_of_service_reason \
+                       out_of_service_reason = excluded.out_of_service_reason, \
+                       activation_value = excluded.activation_value \
                      WHERE excluded.last_change >= alarm_states.last_change",
                 )
                 .bind(&s.key)
@@ -193,6 +235,7 @@ impl Store {
                 .bind(s.out_of_service_by.as_deref())
                 .bind(s.out_of_service_since.map(Timestamp::as_millis))
                 .bind(s.out_of_service_reason.as_deref())
+                .bind(s.activation_value.as_ref().and_then(encode_value))
                 .execute(&mut *tx)
                 .await
                 .map_err(db("saving alarm states"))?;
@@ -224,7 +267,7 @@ impl Store {
                 "SELECT alarm_key, kind, state, active, acked, active_since, last_change, \
                    message, priority, selection, shelved_by, shelved_at, shelved_until, \
                    shelve_reason, out_of_service, out_of_service_by, out_of_service_since, \
-                   out_of_service_reason \
+                   out_of_service_reason, activation_value \
                  FROM alarm_states ORDER BY alarm_key",
             )
             .fetch_all(p)
@@ -255,6 +298,7 @@ impl Store {
                             r.try_get(16)?,
                             r.try_get(17)?,
                         ),
+                        r.try_get(18)?,
                     ))
                 })
                 .collect::<std::result::Result<Vec<_>, _>>()
@@ -286,6 +330,9 @@ impl Store {
                     out_of_service_by: r.11 .1,
                     out_of_service_since: ts(r.11 .2),
                     out_of_service_reason: r.11 .3,
+                    // Only shown beside the value now: an unreadable one is
+                    // dropped rather than failing the restore of every alarm.
+                    activation_value: r.12.as_deref().and_then(decode_value),
                 })
             })
             .collect()
@@ -299,6 +346,11 @@ impl Store {
         for t in transitions {
             check_text("alarm key", &t.alarm_key, 512)?;
             check_text("alarm message", &t.message, 4096)?;
+            check_text(
+                "alarm transition cause",
+                t.cause.as_deref().unwrap_or(""),
+                64,
+            )?;
         }
         Ok(on_backend!(self, writer, |p| {
             let mut tx = p.begin().await.map_err(db("recording alarm transitions"))?;
@@ -306,8 +358,10 @@ impl Store {
             for t in transitions {
                 let id: i64 = sqlx::query_scalar(
                     "INSERT INTO alarm_history (ts, alarm_key, tag, kind, from_state, to_state, \
-                       activation, value, limit_value, user_name, message, priority, selection) \
-                     VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13) RETURNING id",
+                       cause, activation, value, limit_value, user_name, message, priority, \
+                       selection) \
+                     VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14) \
+                     RETURNING id",
                 )
                 .bind(t.ts.as_millis())
                 .bind(&t.alarm_key)
@@ -315,6 +369,7 @@ impl Store {
                 .bind(&t.kind)
                 .bind(&t.from_state)
                 .bind(&t.to_state)
+                .bind(t.cause.as_deref())
                 .bind(t.activation)
                 .bind(t.value.filter(|v| v.is_finite()))
                 .bind(t.limit.filter(|v| v.is_finite()))
@@ -342,7 +397,7 @@ impl Store {
         let text = f.text.as_deref().map(like_pattern);
         let order = if f.oldest_first { "ASC" } else { "DESC" };
         let sql = format!(
-            "SELECT id, ts, alarm_key, tag, kind, from_state, to_state, activation, value, \
+            "SELECT id, ts, alarm_key, tag, kind, from_state, to_state, cause, activation, value, \
                limit_value, user_name, message, priority, selection FROM alarm_history \
              WHERE ($1 IS NULL OR ts >= $1) AND ($2 IS NULL OR ts < $2) \
                AND ($3 IS NULL OR alarm_key = $3) AND ($4 IS NULL OR tag = $4) \
@@ -381,7 +436,7 @@ impl Store {
     ) -> Result<Vec<AlarmTransitionRecord>> {
         let rows: Vec<TransitionRow> = on_backend!(self, reader, |p| {
             sqlx::query_as(
-                "SELECT id, ts, alarm_key, tag, kind, from_state, to_state, activation, value, \
+                "SELECT id, ts, alarm_key, tag, kind, from_state, to_state, cause, activation, value, \
                    limit_value, user_name, message, priority, selection FROM alarm_history \
                  WHERE activation = TRUE AND ts >= $1 AND ts < $2 ORDER BY ts, id",
             )
@@ -432,13 +487,45 @@ fn transition(r: TransitionRow) -> AlarmTransitionRecord {
             kind: r.4,
             from_state: r.5,
             to_state: r.6,
-            activation: r.7,
-            value: r.8,
-            limit: r.9,
-            user: r.10,
-            message: r.11,
-            priority: r.12,
-            selection: r.13,
+            cause: r.7,
+            activation: r.8,
+            value: r.9,
+            limit: r.10,
+            user: r.11,
+            message: r.12,
+            priority: r.13,
+            selection: r.14,
         },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn activation_values_read_back_as_the_same_value() {
+        for v in [
+            Value::Bool(false),
+            Value::Int(-5),
+            Value::Int(i64::MIN),
+            Value::UInt(u64::MAX),
+            Value::Float(230.5),
+            Value::Float(0.1 + 0.2),
+            Value::Float(-0.0),
+            Value::Float(f64::INFINITY),
+            Value::Str("a:b".into()),
+            Value::Str("".into()),
+        ] {
+            let text = encode_value(&v).unwrap();
+            assert_eq!(decode_value(&text), Some(v.clone()), "{text}");
+        }
+        let nan = decode_value(&encode_value(&Value::Float(f64::NAN)).unwrap());
+        assert!(matches!(nan, Some(Value::Float(f)) if f.is_nan()));
+        assert_eq!(encode_value(&Value::Str("x".repeat(5000).into())), None);
+        assert_eq!(encode_value(&Value::Str("a\0b".into())), None);
+        assert_eq!(decode_value("x:1"), None);
+        assert_eq!(decode_value("i:1.5"), None);
+        assert_eq!(decode_value("230"), None);
     }
 }

@@ -132,6 +132,11 @@ const SQLITE_MIGRATIONS: &[(i64, &str, &str)] = &[
         "exact integers",
         include_str!("../migrations/sqlite/0004_exact_integers.sql"),
     ),
+    (
+        5,
+        "alarm causes",
+        include_str!("../migrations/sqlite/0005_alarm_cause.sql"),
+    ),
 ];
 const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
     (
@@ -153,6 +158,11 @@ const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
         4,
         "exact integers",
         include_str!("../migrations/postgres/0004_exact_integers.sql"),
+    ),
+    (
+        5,
+        "alarm causes",
+        include_str!("../migrations/postgres/0005_alarm_cause.sql"),
     ),
 ];
 

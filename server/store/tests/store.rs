@@ -483,6 +483,7 @@ fn alarm_state(key: &str) -> AlarmStateRecord {
         out_of_service_by: None,
         out_of_service_since: None,
         out_of_service_reason: None,
+        activation_value: Some(gridscada_tagdb::Value::Float(412.5)),
     }
 }
 
@@ -508,8 +509,12 @@ async fn alarm_states_survive_restart(mut db: TestDb) {
     b2.out_of_service_by = Some("sup".into());
     b2.out_of_service_since = Some(ts(2500));
     b2.out_of_service_reason = Some("under repair".into());
+    // The value at activation keeps its type, an integer beyond 2^53 exactly.
+    b2.activation_value = Some(gridscada_tagdb::Value::Int(9_007_199_254_740_993));
+    let mut c = alarm_state("SS1.Zone3.I:hi");
+    c.activation_value = None;
     db.store
-        .upsert_alarm_states(&[a2.clone(), b2.clone()])
+        .upsert_alarm_states(&[a2.clone(), b2.clone(), c.clone()])
         .await
         .unwrap();
     // A late writer with an older record never rolls the state back.
@@ -518,10 +523,13 @@ async fn alarm_states_survive_restart(mut db: TestDb) {
         .await
         .unwrap();
     db.reopen().await;
-    assert_eq!(db.store.alarm_states().await.unwrap(), vec![a2.clone(), b2]);
+    assert_eq!(
+        db.store.alarm_states().await.unwrap(),
+        vec![a2.clone(), b2, c.clone()]
+    );
     assert!(db.store.delete_alarm_state("SS1.Zone2.I:hi").await.unwrap());
     assert!(!db.store.delete_alarm_state("SS1.Zone2.I:hi").await.unwrap());
-    assert_eq!(db.store.alarm_states().await.unwrap(), vec![a2]);
+    assert_eq!(db.store.alarm_states().await.unwrap(), vec![a2, c]);
     db.cleanup().await;
 }
 both_backends!(alarm_states, alarm_states_survive_restart);
@@ -542,6 +550,7 @@ fn tr(
         kind: key.split(':').nth(1).unwrap().into(),
         from_state: from.into(),
         to_state: to.into(),
+        cause: Some(if activation { "activate" } else { "ack" }.into()),
         activation,
         value: Some(ms as f64),
         limit: Some(400.0),
@@ -707,6 +716,115 @@ async fn alarm_history_queries(db: TestDb) {
     db.cleanup().await;
 }
 both_backends!(alarm_history, alarm_history_queries);
+
+/// Each history row keeps why it happened: an activation and a return while
+/// suppressed both read "suppressed → suppressed", and only the cause tells
+/// them apart. A row without a cause (recorded before causes were kept)
+/// reads back without one.
+async fn alarm_history_keeps_the_cause(db: TestDb) {
+    use gridscada_alarms::{AlarmId, AlarmKind, AlarmState, TransitionCause};
+    use gridscada_tagdb::Value;
+    let engine = |ms: i64, cause: TransitionCause, active: bool, v: f64| {
+        let t = gridscada_alarms::AlarmTransition {
+            time: ts(ms),
+            id: AlarmId(3),
+            key: "P1.PA.V_L1:lo".into(),
+            tag: Some("P1.PA.V_L1".into()),
+            kind: AlarmKind::Lo,
+            cause,
+            from: AlarmState::Suppressed,
+            to: AlarmState::Suppressed,
+            active,
+            annunciated: false,
+            value: Some(Value::Float(v)),
+            limit: Some(Value::Float(207.0)),
+            user: None,
+            priority: 500,
+            selection: "P1".into(),
+            message: "P1.PA.V_L1 low: 0 V".into(),
+        };
+        AlarmTransition::from(&t)
+    };
+    let activated = engine(1000, TransitionCause::Activate, true, 0.0);
+    let returned = engine(2000, TransitionCause::Return, false, 231.0);
+    assert_eq!(returned.cause.as_deref(), Some("return"));
+    assert!(
+        !activated.activation,
+        "a suppressed activation is not annunciated"
+    );
+    let mut legacy = tr(
+        500,
+        "P1.PA.V_L1:lo",
+        "suppressed",
+        "suppressed",
+        false,
+        500,
+        "P1",
+    );
+    legacy.cause = None;
+    let s = &db.store;
+    s.insert_alarm_transitions(&[legacy.clone(), activated.clone(), returned.clone()])
+        .await
+        .unwrap();
+    let rows = s
+        .alarm_history(&AlarmHistoryFilter {
+            limit: 10,
+            oldest_first: true,
+            ..Default::default()
+        })
+        .await
+        .unwrap();
+    let got: Vec<_> = rows.iter().map(|r| r.transition.clone()).collect();
+    assert_eq!(got, vec![legacy, activated, returned]);
+    let causes: Vec<_> = rows
+        .iter()
+        .map(|r| {
+            (
+                r.transition.to_state.as_str(),
+                r.transition.cause.as_deref(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        causes,
+        vec![
+            ("suppressed", None),
+            ("suppressed", Some("activate")),
+            ("suppressed", Some("return")),
+        ]
+    );
+    // The API's JSON carries it beside the states.
+    let json = serde_json::to_value(&rows[2]).unwrap();
+    assert_eq!(json["cause"], "return");
+    assert_eq!(json["from_state"], "suppressed");
+    assert_eq!(
+        serde_json::to_value(&rows[0]).unwrap()["cause"],
+        serde_json::Value::Null
+    );
+    // Every cause the engine has fits the column.
+    for c in TransitionCause::ALL {
+        let mut t = engine(3000, c, false, 1.0);
+        t.alarm_key = format!("cause:{c}");
+        s.insert_alarm_transitions(&[t]).await.unwrap();
+    }
+    let all = s
+        .alarm_history(&AlarmHistoryFilter {
+            from: Some(ts(3000)),
+            limit: 100,
+            oldest_first: true,
+            ..Default::default()
+        })
+        .await
+        .unwrap();
+    let names: Vec<_> = all
+        .iter()
+        .map(|r| r.transition.cause.clone().unwrap())
+        .collect();
+    let want: Vec<_> = TransitionCause::ALL.iter().map(|c| c.to_string()).collect();
+    assert_eq!(names, want);
+    db.cleanup().await;
+}
+both_backends!(alarm_history_cause, alarm_history_keeps_the_cause);
 
 async fn users_crud(db: TestDb) {
     let s = &db.store;

@@ -193,4 +193,21 @@ fn hand_kept_shapes_follow_their_types() {
         .map(|r| r.label())
         .collect();
     assert_eq!(roles, want);
+    // A history row's cause is every `TransitionCause`, by its stored name.
+    let cause = &doc["components"]["schemas"]["AlarmTransition"]["properties"]["cause"];
+    let cause = cause["oneOf"]
+        .as_array()
+        .and_then(|v| v.iter().find(|s| s["$ref"].is_string()))
+        .unwrap_or(cause);
+    let causes: Vec<&str> = resolve(&doc, cause)["enum"]
+        .as_array()
+        .unwrap_or_else(|| panic!("the cause is an enum: {cause}"))
+        .iter()
+        .filter_map(|v| v.as_str())
+        .collect();
+    let want: Vec<&str> = gridscada_alarms::TransitionCause::ALL
+        .iter()
+        .map(|c| c.as_str())
+        .collect();
+    assert_eq!(causes, want);
 }

@@ -223,7 +223,7 @@ pub enum AlarmState {
     OutOfService,
 }
 
-/// An alarm as the alarm list shows it (more fields: tag, kind, value, value_text (the value in the tag's words, e.g. TRIPPED), limit, units, active_since (while active), activated_at (the latest activation, kept after it clears), cleared_at (when it cleared, null while active), shelved, out_of_service, suppressed).
+/// An alarm as the alarm list shows it (more fields: tag, kind, value (the value now), value_text (the value in the tag's words, e.g. TRIPPED), activation_value (the value at the latest activation, which the message shows; kept after it clears, null if unknown), activation_value_text (it in the tag's words), limit, units, active_since (while active), activated_at (the latest activation, kept after it clears), cleared_at (when it cleared, null while active), shelved, out_of_service, suppressed).
 #[derive(ToSchema)]
 #[schema(as = Alarm)]
 pub struct Alarm {
@@ -252,11 +252,30 @@ pub struct AlarmMetrics {
     pub total_activations: u32,
 }
 
-/// One recorded alarm transition.
+/// One recorded alarm transition (more fields: ts, alarm_key, tag, kind, from_state, to_state, activation (an annunciated activation), value (at the transition), limit, user, message, priority, selection).
 #[derive(ToSchema)]
 #[schema(as = AlarmTransition)]
 pub struct AlarmTransition {
     pub id: i64,
+    /// Why it happened. An activation or a return while the alarm is suppressed, shelved or out of service leaves from_state equal to to_state: the cause tells which. Null on rows recorded before causes were kept
+    #[schema(required = true)]
+    pub cause: Option<TransitionCause>,
+}
+
+/// `gridscada_alarms::TransitionCause`: why an alarm transition happened.
+#[derive(ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum TransitionCause {
+    Activate,
+    Return,
+    Ack,
+    Shelve,
+    Unshelve,
+    ShelveExpired,
+    Suppress,
+    Unsuppress,
+    OutOfService,
+    InService,
 }
 
 #[derive(ToSchema)]
