@@ -8,6 +8,8 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
+use gridscada_control::dispatch::lookahead::LIVE_COMMITMENT_NODES;
+
 use gridscada_control::dispatch::{
     DispatchProblem, HorizonOil, HorizonProblem, HorizonRenewable, HorizonStorage, OilUnit,
     PeriodForecast, RenewableUnit, ReserveRule, StorageUnit,
@@ -176,36 +178,26 @@ fn main() {
             h.solve().expect("horizon LP");
         }),
     );
-    for n in [20usize, 50, 100, 200, 400, 1000, 4000] {
-        let mut p = lookahead(12, 30.0, false);
-        p.max_commitment_nodes = Some(n);
-        let sol = p.solve().unwrap();
-        let c = sol.commitment.unwrap();
-        eprintln!(
-            "DEBUG2 nodes {n}: obj {:.4} bound {:.4} proven {}",
-            sol.objective, c.lower_bound, c.proven
-        );
-    }
     let mut plans = Vec::new();
     let mut nodes = Vec::new();
+    let mut proven = 0usize;
     for start in (0..96).step_by(4) {
         for soc in [30.0, 100.0, 170.0] {
             for running in [false, true] {
-                let p = lookahead(start, soc, running);
+                let mut p = lookahead(start, soc, running);
+                p.max_commitment_nodes = Some(LIVE_COMMITMENT_NODES);
                 let t = Instant::now();
                 let sol = p.solve().expect("look-ahead with commitment");
                 plans.push(t.elapsed().as_secs_f64() * 1e3);
-                if let Some(c) = &sol.commitment {
-                    if c.nodes > 300 {
-                        eprintln!("DEBUG start {start} soc {soc} running {running}: nodes {} proven {} obj {:.4} bound {:.4} sched {:?}", c.nodes, c.proven, sol.objective, c.lower_bound, c.running["dg1"].iter().map(|&b| b as u8).collect::<Vec<_>>());
-                    }
-                }
+                proven += usize::from(sol.commitment.as_ref().is_some_and(|c| c.proven));
                 nodes.push(sol.commitment.map_or(0, |c| c.nodes) as f64);
             }
         }
     }
     report("look-ahead 16 x 15 min, commitment (ms)", plans);
+    let n = nodes.len();
     report("  relaxations per plan (count, not ms)", nodes);
+    println!("  schedules proven optimal within 0.1 %: {proven} of {n}");
     let q = horizon(0.001);
     report(
         "96-period horizon, 5 units, QP",

@@ -240,6 +240,14 @@ pub(super) fn build_report(
             figures.insert("optimum_ratio".into(), optimal.total / cost);
         }
     }
+    // Against the proven lower bound: never flattering, whether or not the
+    // search proved its schedule optimal.
+    if let Some(bound) = optimum.as_ref().and_then(|o| o.lower_bound) {
+        figures.insert("optimum_lower_bound".into(), bound);
+        if bound > 0.0 {
+            figures.insert("optimum_bound_ratio".into(), optimal.total / bound);
+        }
+    }
     let a = &main.alarms;
     figures.insert("alarm_activations".into(), f64::from(a.activations));
     figures.insert("alarm_active_end".into(), a.active_end as f64);

@@ -24,7 +24,7 @@ use serde::Serialize;
 use gridscada_config::{MicrogridConfig, UnitConfig, UnitIo, UnitKind};
 use gridscada_tagdb::{TagDb, TagWriter, Timestamp, Value};
 
-use super::lookahead::{horizon_problem, plan, HorizonPlan};
+use super::lookahead::{horizon_problem, horizon_problem_over, plan, value_periods, HorizonPlan};
 use super::rules::{commit_diesels, fallback_dispatch, CommitmentDecision, DieselState};
 use super::single::{DispatchProblem, OilUnit, RenewableUnit, StorageUnit};
 use super::{DispatchError, Setpoints};
@@ -437,7 +437,7 @@ impl Dispatcher {
         if self.policy == DispatchPolicy::Rule {
             st.status = "rule".into();
         } else if problems.is_empty() {
-            match problem.solve() {
+            match self.solve_following_plan(&problem, now) {
                 Ok(sol) => {
                     st.mode = DispatchMode::Optimal;
                     st.status = "optimal".into();
@@ -572,7 +572,7 @@ impl Dispatcher {
             return;
         }
         let cfg = &self.cfg;
-        let terminal = |id: &str| {
+        let fixed = |id: &str| {
             cfg.units
                 .iter()
                 .find(|u| u.id.get_ref() == id)
@@ -584,6 +584,29 @@ impl Dispatcher {
                 .iter()
                 .find(|d| d.id == id)
                 .map(|d| now.since(d.since).as_secs_f64().max(0.0) / 3600.0)
+        };
+        // What the plan leaves in storage is worth what the day ahead says:
+        // the day's LP relaxation (commitment in fractions of a period)
+        // prices a kWh at the plan's end; the fixed estimate where it fails.
+        let n = (*h.periods.get_ref()).max(1.0) as usize;
+        let day = horizon_problem_over(
+            cfg,
+            &h,
+            value_periods(&h),
+            now,
+            measured,
+            &self.last_setpoints,
+            &fixed,
+            &in_state,
+        );
+        let values = day.relaxed_stored_energy_values().ok();
+        let terminal = |id: &str| {
+            values
+                .as_ref()
+                .and_then(|v| v.get(n))
+                .and_then(|s| s.get(id))
+                .filter(|v| v.is_finite())
+                .map_or_else(|| fixed(id), |v| v.max(0.0))
         };
         let problem = horizon_problem(
             cfg,
@@ -636,6 +659,46 @@ impl Dispatcher {
             .then(|| p.stored_energy_value_per_kwh.get(id))
             .flatten()
             .map(|v| v.min(cap))
+    }
+
+    /// The single-period LP with each running diesel held at the plan's
+    /// output for this period, so storage follows the plan's schedule
+    /// (charging from a diesel run hard, then covering while it is off)
+    /// rather than only its price, which leaves the battery idle wherever
+    /// the price sits between charging and discharging. Storage and
+    /// renewables take up what the forecast got wrong; where they cannot
+    /// (the held output would shed load or has no feasible answer), the
+    /// diesel is freed within its band again.
+    fn solve_following_plan(
+        &self,
+        problem: &DispatchProblem,
+        now: Timestamp,
+    ) -> Result<super::single::DispatchSolution, DispatchError> {
+        let fresh_plan = self.plan.as_ref().filter(|_| {
+            self.diesels
+                .iter()
+                .any(|d| self.planned_run(&d.id, now).is_some())
+        });
+        if let Some(plan) = fresh_plan {
+            let mut held = problem.clone();
+            let mut any = false;
+            for o in held.oil.iter_mut().filter(|o| o.running) {
+                if let Some(kw) = plan.diesel_kw.get(&o.id).and_then(|v| v.first()) {
+                    let kw = kw.clamp(o.min_kw, o.max_kw);
+                    o.min_kw = kw;
+                    o.max_kw = kw;
+                    any = true;
+                }
+            }
+            if any {
+                if let Ok(sol) = held.solve() {
+                    if sol.shed_kw <= 1e-6 {
+                        return Ok(sol);
+                    }
+                }
+            }
+        }
+        problem.solve()
     }
 
     /// Whether the plan runs diesel `id` now, while the plan is optimal and

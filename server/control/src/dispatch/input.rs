@@ -22,6 +22,8 @@ pub struct InputError {
     /// 1-based line and column in the JSON text, when known.
     pub line: Option<usize>,
     pub column: Option<usize>,
+    /// Further problems found beside this one (validation reports them all).
+    pub more: Vec<InputError>,
 }
 
 impl InputError {
@@ -31,7 +33,13 @@ impl InputError {
             message: message.into(),
             line: None,
             column: None,
+            more: Vec::new(),
         }
+    }
+
+    /// Every problem, this one first.
+    pub fn all(&self) -> impl Iterator<Item = &InputError> {
+        std::iter::once(self).chain(self.more.iter())
     }
 
     /// Adds the line and column of the path, found in `text`.
@@ -42,6 +50,10 @@ impl InputError {
                 self.column = Some(c);
             }
         }
+        self.more = std::mem::take(&mut self.more)
+            .into_iter()
+            .map(|e| e.locate_in(text))
+            .collect();
         self
     }
 }
@@ -56,7 +68,38 @@ impl fmt::Display for InputError {
         if let (Some(l), Some(c)) = (self.line, self.column) {
             write!(f, " (line {l}, column {c})")?;
         }
+        // Further problems, one per line, each as `error: ...` like the first
+        // (the CLI prefixes the first).
+        for e in &self.more {
+            write!(f, "\nerror: {e}")?;
+        }
         Ok(())
+    }
+}
+
+/// Collects every problem of a validation instead of stopping at the first.
+#[derive(Default)]
+pub(crate) struct Problems(Vec<InputError>);
+
+impl Problems {
+    pub(crate) fn check(&mut self, r: Result<(), InputError>) {
+        if let Err(e) = r {
+            self.0.extend(e.all().map(|x| InputError {
+                more: Vec::new(),
+                ..x.clone()
+            }));
+        }
+    }
+
+    pub(crate) fn finish(self) -> Result<(), InputError> {
+        let mut it = self.0.into_iter();
+        match it.next() {
+            None => Ok(()),
+            Some(mut first) => {
+                first.more = it.collect();
+                Err(first)
+            }
+        }
     }
 }
 
@@ -70,6 +113,7 @@ pub(crate) fn parse(text: &str) -> Result<Value, InputError> {
         message: format!("invalid JSON: {e}"),
         line: Some(e.line()),
         column: Some(e.column()),
+        more: Vec::new(),
     })
 }
 

@@ -90,7 +90,7 @@ pub struct HorizonPlan {
     /// driver follows while the plan is fresh.
     pub diesel_run: BTreeMap<String, Vec<bool>>,
     /// Relaxations the commitment search solved, and whether its schedule
-    /// is proven optimal (within 0.01 %).
+    /// is proven optimal (within 0.1 %).
     pub commitment_nodes: Option<usize>,
     pub commitment_proven: Option<bool>,
     /// The worth of a stored kWh now, per storage id: what the dispatch
@@ -130,6 +130,38 @@ pub fn horizon_problem(
     hours_in_state: &dyn Fn(&str) -> Option<f64>,
 ) -> HorizonProblem {
     let n = (*h.periods.get_ref()).max(1.0) as usize;
+    horizon_problem_over(
+        mg,
+        h,
+        n,
+        now,
+        measured,
+        initial_kw,
+        terminal_value,
+        hours_in_state,
+    )
+}
+
+/// Periods of the day-long relaxation that values what a plan leaves in
+/// storage: a day ahead, and always past the plan's own end.
+pub fn value_periods(h: &HorizonConfig) -> usize {
+    let n = (*h.periods.get_ref()).max(1.0) as usize;
+    let per_day = (86_400.0 / h.period_s.get_ref().max(1.0)).ceil() as usize;
+    per_day.max(n + 1)
+}
+
+/// [`horizon_problem`] over `n` periods.
+#[allow(clippy::too_many_arguments)]
+pub fn horizon_problem_over(
+    mg: &MicrogridConfig,
+    h: &HorizonConfig,
+    n: usize,
+    now: Timestamp,
+    measured: &DispatchProblem,
+    initial_kw: &Setpoints,
+    terminal_value: &dyn Fn(&str) -> f64,
+    hours_in_state: &dyn Fn(&str) -> Option<f64>,
+) -> HorizonProblem {
     let period_h = *h.period_s.get_ref() / 3600.0;
     let blend_h = *h.blend_h.get_ref();
     let now_h = hour_of_day(now);

@@ -40,7 +40,7 @@ pub(crate) struct MipLimits {
 impl Default for MipLimits {
     fn default() -> Self {
         MipLimits {
-            rel_gap: 5e-3,
+            rel_gap: 1e-3,
             abs_gap: 1e-2,
             max_nodes: 4000,
         }

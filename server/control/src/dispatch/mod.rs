@@ -288,6 +288,64 @@ mod tests {
     }
 
     #[test]
+    fn every_input_error_is_reported_with_its_location() {
+        let text = EXAMPLE
+            .replace("\"eff_charge\": 0.95", "\"eff_charge\": 1.2")
+            .replace("\"max_kw\": 150.0", "\"max_kw\": -150.0")
+            .replace("\"dt_h\": 0.25", "\"dt_h\": 9000.0");
+        let out = solve_text(&text);
+        assert_eq!(out.exit_code, 1);
+        let lines: Vec<&str> = out.stderr.lines().collect();
+        assert_eq!(lines.len(), 4, "{}", out.stderr);
+        assert!(lines
+            .iter()
+            .all(|l| l.starts_with("error: ") && l.contains("(line ")));
+        assert!(out
+            .stderr
+            .contains("dt_h: 9000 is not a number of hours in (0, 8784]"));
+        assert!(out.stderr.contains("oil[0].max_kw: -150 is negative"));
+        assert!(out.stderr.contains("oil[0].max_kw: -150 is below min_kw 30"));
+        assert!(out
+            .stderr
+            .contains("storage[0].eff_charge: 1.2 is outside (0, 1]"));
+    }
+
+    #[test]
+    fn the_unit_limit_is_enforced_and_named() {
+        let units: Vec<String> = (0..=single::MAX_UNITS)
+            .map(|i| format!(r#"{{"id": "pv{i}", "available_kw": 1.0, "cost_per_kwh": 0.0}}"#))
+            .collect();
+        let text = format!(
+            r#"{{"dt_h": 0.25, "demand_kw": 10.0, "voll_per_kwh": 5.0, "pv": [{}]}}"#,
+            units.join(",")
+        );
+        let out = solve_text(&text);
+        assert_eq!(out.exit_code, 1);
+        assert!(
+            out.stderr.contains("1001 units; at most 1000"),
+            "{}",
+            out.stderr
+        );
+        // A horizon asking for more on/off decisions than the limit.
+        let periods: Vec<&str> = vec![r#"{"demand_kw": 50.0}"#; 700];
+        let oil: Vec<String> = (0..3)
+            .map(|i| format!(r#"{{"id": "dg{i}", "running": false, "min_kw": 10.0, "max_kw": 100.0, "cost_per_kwh": 0.3, "optimize_commitment": true}}"#))
+            .collect();
+        let text = format!(
+            r#"{{"dt_h": 0.25, "voll_per_kwh": 5.0, "periods": [{}], "oil": [{}]}}"#,
+            periods.join(","),
+            oil.join(",")
+        );
+        let out = solve_text(&text);
+        assert_eq!(out.exit_code, 1);
+        assert!(
+            out.stderr.contains("2100 on/off decisions; at most 2016"),
+            "{}",
+            out.stderr
+        );
+    }
+
+    #[test]
     fn infeasible_prints_a_reason_and_exits_2() {
         let text = EXAMPLE
             .replace("\"demand_kw\": 180.0", "\"demand_kw\": 5.0")

@@ -34,7 +34,7 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
-use super::input::{index, InputError, Obj};
+use super::input::{index, InputError, Obj, Problems};
 use super::lp::{Model, Sense, FEAS_TOL};
 use super::{DispatchError, Setpoints};
 
@@ -190,16 +190,17 @@ impl OilUnit {
     }
 
     pub(crate) fn validate(&self, path: &str) -> Result<(), InputError> {
-        nonneg(format!("{path}.min_kw"), self.min_kw)?;
-        nonneg(format!("{path}.max_kw"), self.max_kw)?;
-        nonneg(format!("{path}.cost_per_kwh"), self.cost_per_kwh)?;
+        let mut pr = Problems::default();
+        pr.check(nonneg(format!("{path}.min_kw"), self.min_kw));
+        pr.check(nonneg(format!("{path}.max_kw"), self.max_kw));
+        pr.check(nonneg(format!("{path}.cost_per_kwh"), self.cost_per_kwh));
         if self.max_kw < self.min_kw {
-            return Err(bad(
+            pr.check(Err(bad(
                 format!("{path}.max_kw"),
                 format!("{} is below min_kw {}", self.max_kw, self.min_kw),
-            ));
+            )));
         }
-        Ok(())
+        pr.finish()
     }
 }
 
@@ -230,40 +231,47 @@ impl StorageUnit {
     }
 
     pub(crate) fn validate(&self, path: &str) -> Result<(), InputError> {
-        nonneg(format!("{path}.soc_kwh"), self.soc_kwh)?;
-        nonneg(format!("{path}.soc_min_kwh"), self.soc_min_kwh)?;
-        nonneg(format!("{path}.soc_max_kwh"), self.soc_max_kwh)?;
-        nonneg(format!("{path}.max_charge_kw"), self.max_charge_kw)?;
-        nonneg(format!("{path}.max_discharge_kw"), self.max_discharge_kw)?;
-        efficiency(format!("{path}.eff_charge"), self.eff_charge)?;
-        efficiency(format!("{path}.eff_discharge"), self.eff_discharge)?;
-        nonneg(
+        let mut pr = Problems::default();
+        pr.check(nonneg(format!("{path}.soc_kwh"), self.soc_kwh));
+        pr.check(nonneg(format!("{path}.soc_min_kwh"), self.soc_min_kwh));
+        pr.check(nonneg(format!("{path}.soc_max_kwh"), self.soc_max_kwh));
+        pr.check(nonneg(format!("{path}.max_charge_kw"), self.max_charge_kw));
+        pr.check(nonneg(
+            format!("{path}.max_discharge_kw"),
+            self.max_discharge_kw,
+        ));
+        pr.check(efficiency(format!("{path}.eff_charge"), self.eff_charge));
+        pr.check(efficiency(
+            format!("{path}.eff_discharge"),
+            self.eff_discharge,
+        ));
+        pr.check(nonneg(
             format!("{path}.cycle_cost_per_kwh"),
             self.cycle_cost_per_kwh,
-        )?;
-        nonneg(
+        ));
+        pr.check(nonneg(
             format!("{path}.stored_value_per_kwh"),
             self.stored_value_per_kwh,
-        )?;
+        ));
         if self.soc_max_kwh < self.soc_min_kwh {
-            return Err(bad(
+            pr.check(Err(bad(
                 format!("{path}.soc_max_kwh"),
                 format!(
                     "{} is below soc_min_kwh {}",
                     self.soc_max_kwh, self.soc_min_kwh
                 ),
-            ));
+            )));
         }
         if self.soc_kwh < self.soc_min_kwh || self.soc_kwh > self.soc_max_kwh {
-            return Err(bad(
+            pr.check(Err(bad(
                 format!("{path}.soc_kwh"),
                 format!(
                     "{} is outside [soc_min_kwh, soc_max_kwh] = [{}, {}]",
                     self.soc_kwh, self.soc_min_kwh, self.soc_max_kwh
                 ),
-            ));
+            )));
         }
-        Ok(())
+        pr.finish()
     }
 
     /// Charge limit this period: power, and room left below `soc_max`.
@@ -280,8 +288,10 @@ impl StorageUnit {
 }
 
 pub(crate) fn renewable_validate(u: &RenewableUnit, path: &str) -> Result<(), InputError> {
-    nonneg(format!("{path}.available_kw"), u.available_kw)?;
-    nonneg(format!("{path}.cost_per_kwh"), u.cost_per_kwh)
+    let mut pr = Problems::default();
+    pr.check(nonneg(format!("{path}.available_kw"), u.available_kw));
+    pr.check(nonneg(format!("{path}.cost_per_kwh"), u.cost_per_kwh));
+    pr.finish()
 }
 
 pub(crate) fn parse_list<T>(
@@ -297,11 +307,30 @@ pub(crate) fn parse_list<T>(
         .collect()
 }
 
+/// Longest period accepted, h: a leap year.
+pub const MAX_DT_H: f64 = 24.0 * 366.0;
+
+/// Most units (PV, wind, oil and storage together) a problem may have: far
+/// beyond any microgrid, and solved in well under a second (200,000 units
+/// took 31-52 s before this limit).
+pub const MAX_UNITS: usize = 1_000;
+
 pub(crate) fn dt_h_valid(path: String, dt_h: f64) -> Result<(), InputError> {
-    if !(dt_h.is_finite() && dt_h > 0.0 && dt_h <= 24.0 * 366.0) {
+    if !(dt_h.is_finite() && dt_h > 0.0 && dt_h <= MAX_DT_H) {
         return Err(bad(
             path,
-            format!("{dt_h} must be a positive number of hours"),
+            format!("{dt_h} is not a number of hours in (0, {MAX_DT_H}] (a period of at most a leap year)"),
+        ));
+    }
+    Ok(())
+}
+
+/// At most [`MAX_UNITS`] units in all.
+pub(crate) fn units_within_limit(path: String, units: usize) -> Result<(), InputError> {
+    if units > MAX_UNITS {
+        return Err(bad(
+            path,
+            format!("{units} units; at most {MAX_UNITS} (PV, wind, oil and storage together) are accepted"),
         ));
     }
     Ok(())
@@ -327,23 +356,29 @@ impl DispatchProblem {
 
     /// Checks every value; errors name the field (`prefix` + path).
     pub fn validate(&self, prefix: &str) -> Result<(), InputError> {
+        let mut pr = Problems::default();
         let at = |k: &str| super::input::join(prefix, k);
-        dt_h_valid(at("dt_h"), self.dt_h)?;
-        nonneg(at("demand_kw"), self.demand_kw)?;
-        nonneg(at("voll_per_kwh"), self.voll_per_kwh)?;
+        pr.check(dt_h_valid(at("dt_h"), self.dt_h));
+        pr.check(nonneg(at("demand_kw"), self.demand_kw));
+        pr.check(nonneg(at("voll_per_kwh"), self.voll_per_kwh));
+        pr.check(units_within_limit(
+            prefix.to_string(),
+            self.pv.len() + self.wind.len() + self.oil.len() + self.storage.len(),
+        ));
         for (i, u) in self.pv.iter().enumerate() {
-            renewable_validate(u, &index(&at("pv"), i))?;
+            pr.check(renewable_validate(u, &index(&at("pv"), i)));
         }
         for (i, u) in self.wind.iter().enumerate() {
-            renewable_validate(u, &index(&at("wind"), i))?;
+            pr.check(renewable_validate(u, &index(&at("wind"), i)));
         }
         for (i, u) in self.oil.iter().enumerate() {
-            u.validate(&index(&at("oil"), i))?;
+            pr.check(u.validate(&index(&at("oil"), i)));
         }
         for (i, u) in self.storage.iter().enumerate() {
-            u.validate(&index(&at("storage"), i))?;
+            pr.check(u.validate(&index(&at("storage"), i)));
         }
-        unique_ids(self.ids_with_paths(prefix))
+        pr.check(unique_ids(self.ids_with_paths(prefix)));
+        pr.finish()
     }
 
     fn ids_with_paths<'a>(&'a self, prefix: &str) -> impl Iterator<Item = (String, &'a str)> {

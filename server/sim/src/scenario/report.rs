@@ -83,7 +83,7 @@ pub struct Foresight {
     pub cost: Option<f64>,
     /// No schedule costs less than this (equal to `cost` when proven).
     pub lower_bound: Option<f64>,
-    /// The schedule is proven within 0.01 % of the optimum.
+    /// The schedule is proven within 0.1 % of the optimum.
     pub proven: bool,
     /// Relaxations the commitment search solved.
     pub nodes: usize,

@@ -294,6 +294,10 @@ impl HorizonProblem {
                         v.first_soc_row.push(m.rows.len());
                     }
                 }
+                if v.soc_rows.len() <= t {
+                    v.soc_rows.push(Vec::new());
+                }
+                v.soc_rows[t].push(m.rows.len());
                 m.row(
                     format!("{} state-of-charge dynamics in period {t}", u.id),
                     dyn_row,
@@ -500,6 +504,9 @@ pub(super) struct HVars {
     /// Per storage: the model row of its first-period state-of-charge
     /// dynamics, whose right-hand side is the starting state of charge.
     pub(super) first_soc_row: Vec<usize>,
+    /// Per period, per storage: the model row of its state-of-charge
+    /// dynamics (its price is the worth of a kWh at the period's start).
+    pub(super) soc_rows: Vec<Vec<usize>>,
     /// Per oil unit whose commitment is decided here, per period: its
     /// on/off (binary), start and stop variables.
     pub(super) commit: Vec<Vec<CommitVars>>,

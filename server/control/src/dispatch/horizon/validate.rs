@@ -5,13 +5,19 @@ use std::collections::BTreeMap;
 
 use serde_json::Value;
 
-use crate::dispatch::input::{index, join, kind, InputError, Obj};
-use crate::dispatch::single::{bad, dt_h_valid, nonneg, parse_list, unique_ids, StorageUnit};
+use crate::dispatch::input::{index, join, kind, InputError, Obj, Problems};
+use crate::dispatch::single::{
+    bad, dt_h_valid, nonneg, parse_list, unique_ids, units_within_limit, StorageUnit,
+};
 
 use super::{
     HorizonOil, HorizonProblem, HorizonRenewable, HorizonStorage, PeriodForecast, ReserveRule,
     MAX_PERIODS,
 };
+
+/// Most on/off decisions (units with `optimize_commitment` × periods) a
+/// problem may ask for: a week of 15-minute periods for three diesels.
+pub const MAX_COMMITMENT_BINARIES: usize = 2_016;
 
 /// Most relaxations a problem may ask the commitment search for.
 pub const MAX_COMMITMENT_NODES: usize = 200_000;
@@ -33,12 +39,13 @@ impl HorizonRenewable {
         Ok(u)
     }
     fn validate(&self, path: &str) -> Result<(), InputError> {
-        nonneg(format!("{path}.cost_per_kwh"), self.cost_per_kwh)?;
-        nonneg(format!("{path}.ramp_kw_per_s"), self.ramp_kw_per_s)?;
+        let mut pr = Problems::default();
+        pr.check(nonneg(format!("{path}.cost_per_kwh"), self.cost_per_kwh));
+        pr.check(nonneg(format!("{path}.ramp_kw_per_s"), self.ramp_kw_per_s));
         if let Some(i) = self.initial_kw {
-            nonneg(format!("{path}.initial_kw"), i)?;
+            pr.check(nonneg(format!("{path}.initial_kw"), i));
         }
-        Ok(())
+        pr.finish()
     }
 }
 
@@ -65,36 +72,37 @@ impl HorizonOil {
         Ok(u)
     }
     fn validate(&self, path: &str) -> Result<(), InputError> {
-        nonneg(format!("{path}.min_kw"), self.min_kw)?;
-        nonneg(format!("{path}.max_kw"), self.max_kw)?;
-        nonneg(format!("{path}.cost_per_kwh"), self.cost_per_kwh)?;
-        nonneg(format!("{path}.ramp_kw_per_s"), self.ramp_kw_per_s)?;
-        nonneg(
+        let mut pr = Problems::default();
+        pr.check(nonneg(format!("{path}.min_kw"), self.min_kw));
+        pr.check(nonneg(format!("{path}.max_kw"), self.max_kw));
+        pr.check(nonneg(format!("{path}.cost_per_kwh"), self.cost_per_kwh));
+        pr.check(nonneg(format!("{path}.ramp_kw_per_s"), self.ramp_kw_per_s));
+        pr.check(nonneg(
             format!("{path}.no_load_cost_per_h"),
             self.no_load_cost_per_h,
-        )?;
-        nonneg(format!("{path}.start_cost"), self.start_cost)?;
-        nonneg(format!("{path}.min_up_h"), self.min_up_h)?;
-        nonneg(format!("{path}.min_down_h"), self.min_down_h)?;
+        ));
+        pr.check(nonneg(format!("{path}.start_cost"), self.start_cost));
+        pr.check(nonneg(format!("{path}.min_up_h"), self.min_up_h));
+        pr.check(nonneg(format!("{path}.min_down_h"), self.min_down_h));
         if let Some(h) = self.hours_in_state {
-            nonneg(format!("{path}.hours_in_state"), h)?;
+            pr.check(nonneg(format!("{path}.hours_in_state"), h));
         }
         if self.optimize_commitment && self.relaxed_commitment {
-            return Err(bad(
+            pr.check(Err(bad(
                 format!("{path}.optimize_commitment"),
                 "cannot be combined with relaxed_commitment",
-            ));
+            )));
         }
         if self.max_kw < self.min_kw {
-            return Err(bad(
+            pr.check(Err(bad(
                 format!("{path}.max_kw"),
                 format!("{} is below min_kw {}", self.max_kw, self.min_kw),
-            ));
+            )));
         }
         if let Some(i) = self.initial_kw {
-            nonneg(format!("{path}.initial_kw"), i)?;
+            pr.check(nonneg(format!("{path}.initial_kw"), i));
         }
-        Ok(())
+        pr.finish()
     }
 }
 
@@ -113,33 +121,34 @@ impl HorizonStorage {
         Ok(u)
     }
     fn validate(&self, path: &str) -> Result<(), InputError> {
-        self.unit.validate(path)?;
-        nonneg(format!("{path}.ramp_kw_per_s"), self.ramp_kw_per_s)?;
-        nonneg(
+        let mut pr = Problems::default();
+        pr.check(self.unit.validate(path));
+        pr.check(nonneg(format!("{path}.ramp_kw_per_s"), self.ramp_kw_per_s));
+        pr.check(nonneg(
             format!("{path}.terminal_value_per_kwh"),
             self.terminal_value_per_kwh,
-        )?;
+        ));
         if let Some(f) = self.final_soc_min_kwh {
             if !(f.is_finite() && f <= self.unit.soc_max_kwh) {
-                return Err(bad(
+                pr.check(Err(bad(
                     format!("{path}.final_soc_min_kwh"),
                     format!("{f} is above soc_max_kwh {}", self.unit.soc_max_kwh),
-                ));
+                )));
             }
         }
         if let Some(i) = self.initial_kw {
             if !(i.is_finite() && i >= -self.unit.max_charge_kw && i <= self.unit.max_discharge_kw)
             {
-                return Err(bad(
+                pr.check(Err(bad(
                     format!("{path}.initial_kw"),
                     format!(
                         "{i} is outside [-max_charge_kw, max_discharge_kw] = [{}, {}]",
                         -self.unit.max_charge_kw, self.unit.max_discharge_kw
                     ),
-                ));
+                )));
             }
         }
-        Ok(())
+        pr.finish()
     }
 }
 
@@ -252,29 +261,44 @@ impl HorizonProblem {
     }
 
     pub fn validate(&self, prefix: &str) -> Result<(), InputError> {
+        let mut pr = Problems::default();
         let at = |k: &str| join(prefix, k);
-        dt_h_valid(at("dt_h"), self.dt_h)?;
-        nonneg(at("voll_per_kwh"), self.voll_per_kwh)?;
+        pr.check(dt_h_valid(at("dt_h"), self.dt_h));
+        pr.check(nonneg(at("voll_per_kwh"), self.voll_per_kwh));
         if self.periods.is_empty() {
-            return Err(bad(at("periods"), "needs at least one period"));
+            pr.check(Err(bad(at("periods"), "needs at least one period")));
         }
         if self.periods.len() > MAX_PERIODS {
-            return Err(bad(
+            pr.check(Err(bad(
                 at("periods"),
                 format!("more than {MAX_PERIODS} periods"),
-            ));
+            )));
+        }
+        let units = self.pv.len() + self.wind.len() + self.oil.len() + self.storage.len();
+        pr.check(units_within_limit(prefix.to_string(), units));
+        let decided = self.oil.iter().filter(|o| o.optimize_commitment).count();
+        if decided * self.periods.len() > MAX_COMMITMENT_BINARIES {
+            pr.check(Err(bad(
+                at("oil"),
+                format!(
+                    "{decided} units with optimize_commitment over {} periods make {} on/off \
+                     decisions; at most {MAX_COMMITMENT_BINARIES} are accepted",
+                    self.periods.len(),
+                    decided * self.periods.len()
+                ),
+            )));
         }
         for (i, u) in self.pv.iter().enumerate() {
-            u.validate(&index(&at("pv"), i))?;
+            pr.check(u.validate(&index(&at("pv"), i)));
         }
         for (i, u) in self.wind.iter().enumerate() {
-            u.validate(&index(&at("wind"), i))?;
+            pr.check(u.validate(&index(&at("wind"), i)));
         }
         for (i, u) in self.oil.iter().enumerate() {
-            u.validate(&index(&at("oil"), i))?;
+            pr.check(u.validate(&index(&at("oil"), i)));
         }
         for (i, u) in self.storage.iter().enumerate() {
-            u.validate(&index(&at("storage"), i))?;
+            pr.check(u.validate(&index(&at("storage"), i)));
         }
         let mut ids: Vec<(String, &str)> = Vec::new();
         for (k, list) in [("pv", &self.pv), ("wind", &self.wind)] {
@@ -296,26 +320,29 @@ impl HorizonProblem {
                 u.unit.id.as_str(),
             )
         }));
-        unique_ids(ids.clone().into_iter())?;
+        pr.check(unique_ids(ids.clone().into_iter()));
         if let Some(r) = &self.reserve {
             let rp = at("reserve");
-            nonneg(join(&rp, "load_frac"), r.load_frac)?;
-            nonneg(join(&rp, "pv_frac"), r.pv_frac)?;
-            nonneg(join(&rp, "wind_frac"), r.wind_frac)?;
-            nonneg(
+            pr.check(nonneg(join(&rp, "load_frac"), r.load_frac));
+            pr.check(nonneg(join(&rp, "pv_frac"), r.pv_frac));
+            pr.check(nonneg(join(&rp, "wind_frac"), r.wind_frac));
+            pr.check(nonneg(
                 join(&rp, "shortfall_cost_per_kwh"),
                 r.shortfall_cost_per_kwh,
-            )?;
+            ));
         }
         if let Some(s) = self.max_renewable_share {
             if !(s.is_finite() && (0.0..=1.0).contains(&s)) {
-                return Err(bad(
+                pr.check(Err(bad(
                     at("max_renewable_share"),
                     format!("{s} is outside [0, 1]"),
-                ));
+                )));
             }
         }
-        nonneg(at("smoothing_cost_per_kw2"), self.smoothing_cost_per_kw2)?;
+        pr.check(nonneg(
+            at("smoothing_cost_per_kw2"),
+            self.smoothing_cost_per_kw2,
+        ));
         let renewables: Vec<&str> = self
             .pv
             .iter()
@@ -325,28 +352,31 @@ impl HorizonProblem {
         let oils: Vec<&str> = self.oil.iter().map(|u| u.id.as_str()).collect();
         for (t, p) in self.periods.iter().enumerate() {
             let pp = index(&at("periods"), t);
-            nonneg(join(&pp, "demand_kw"), p.demand_kw)?;
+            pr.check(nonneg(join(&pp, "demand_kw"), p.demand_kw));
             for (id, v) in &p.available_kw {
                 let path = join(&join(&pp, "available_kw"), id);
                 if !renewables.contains(&id.as_str()) {
-                    return Err(bad(path, "is not a PV or wind unit"));
+                    pr.check(Err(bad(path.clone(), "is not a PV or wind unit")));
                 }
-                nonneg(path, *v)?;
+                pr.check(nonneg(path, *v));
             }
             for id in &renewables {
                 if !p.available_kw.contains_key(*id) {
-                    return Err(bad(
+                    pr.check(Err(bad(
                         join(&pp, "available_kw"),
                         format!("no forecast for '{id}'"),
-                    ));
+                    )));
                 }
             }
             for id in p.running.keys() {
                 if !oils.contains(&id.as_str()) {
-                    return Err(bad(join(&join(&pp, "running"), id), "is not an oil unit"));
+                    pr.check(Err(bad(
+                        join(&join(&pp, "running"), id),
+                        "is not an oil unit",
+                    )));
                 }
             }
         }
-        Ok(())
+        pr.finish()
     }
 }

@@ -31,6 +31,8 @@ pub const FIGURE_NAMES: &[&str] = &[
     "cost_ratio",
     "optimum_cost",
     "optimum_ratio",
+    "optimum_lower_bound",
+    "optimum_bound_ratio",
     "dispatch_shed_kwh",
     "dispatch_fallback_periods",
     "alarm_activations",
