@@ -21,7 +21,8 @@ use tokio::sync::{mpsc, watch};
 use tokio::task::JoinSet;
 
 use crate::data::open_store;
-use crate::{demo_plant, sinks, users};
+use crate::settings::diagnostics;
+use crate::{demo_plant, settings, sinks, users};
 
 #[cfg(test)]
 mod shutdown_tests;
@@ -50,15 +51,6 @@ pub fn report(result: anyhow::Result<()>) -> ExitCode {
             ExitCode::FAILURE
         }
     }
-}
-
-fn diagnostics(what: &str, diags: Vec<gridscada_config::Diagnostic>) -> anyhow::Error {
-    let lines: Vec<String> = diags.iter().map(|d| d.to_string()).collect();
-    anyhow!(
-        "{what} has {} problem(s); not starting:\n{}",
-        diags.len(),
-        lines.join("\n")
-    )
 }
 
 /// How the server runs.
@@ -107,9 +99,7 @@ pub async fn demo(
                     demo_plant::load().map_err(|d| diagnostics("the embedded demo plant", d))?
                 }
             };
-            let addr: SocketAddr = http
-                .parse()
-                .with_context(|| format!("--http '{http}' is not an address like 127.0.0.1:8080"))?;
+            let addr = settings::listen_addr(&http, "--http")?;
             if !addr.ip().is_loopback() {
                 return Err(anyhow!(
                     "the demo prints its passwords and serves a simulated plant, so it only binds loopback addresses; --http {addr} is not one"
@@ -121,20 +111,16 @@ pub async fn demo(
     )
 }
 
-/// `gridscada serve`: a real plant configuration. Refuses to start on any
-/// configuration problem.
-pub async fn serve(config: PathBuf) -> ExitCode {
+/// `gridscada serve`: a real plant configuration, with the `GRIDSCADA_*`
+/// environment and the `--http`/`--data` flags over it. Refuses to start on
+/// any configuration problem.
+pub async fn serve(config: PathBuf, http: Option<String>, data: Option<PathBuf>) -> ExitCode {
     report(
         async {
-            let plant = gridscada_config::load_path(&config)
-                .map_err(|d| diagnostics("the configuration", d))?;
-            let addr: SocketAddr = plant
-                .server
-                .http
-                .get_ref()
-                .parse()
-                .context("[server] http is not a socket address")?;
-            let data = PathBuf::from(&plant.server.data_dir);
+            let mut plant = settings::load_for_server(&config)?;
+            settings::apply_flags(&mut plant, http, data)?;
+            let addr = settings::listen_addr(plant.server.http.get_ref(), "[server] http")?;
+            let data = plant.data_dir.clone();
             run(plant, addr, &data, Mode::Serve, None).await
         }
         .await,
