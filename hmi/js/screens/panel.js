@@ -47,7 +47,10 @@ export function isolatedZones(status) {
   return out;
 }
 
-/** The last sequence in words: nothing before the first fault, "running" during one. */
+/**
+ * The last sequence in words: nothing before the first fault, "running" during one.
+ * `restore_s` is null when the sequence did not restore (lockout, stopped): no time is shown then.
+ */
 export function lastSequence(status) {
   const ls = (status && status.last_sequence) || {};
   const outcome = String(ls.outcome || 'none').toLowerCase();
@@ -55,12 +58,13 @@ export function lastSequence(status) {
   if (outcome === 'running') return 'a sequence is running now';
   // A Reset with nothing tripped "restores" in no time: not a sequence worth reporting.
   if (outcome === 'restored' && !Number(ls.trips) && !Number(ls.switching_ops)) return 'no fault since start or the last Reset';
-  const took = Number(ls.restore_s) > 0 ? ` in ${fmtDuration(Number(ls.restore_s))}` : '';
+  const restoreS = typeof ls.restore_s === 'number' && Number.isFinite(ls.restore_s) ? ls.restore_s : null;
+  const took = restoreS === null ? '' : ` in ${fmtDuration(restoreS)}`;
   const parts = [{
     restored: `every zone restored${took}`,
     isolated: `faulty zones isolated, healthy zones restored${took}`,
-    lockout: 'lockout: the sequence gave up',
-    stopped: 'stopped by the operator (manual mode)',
+    lockout: 'lockout: the sequence gave up without restoring',
+    stopped: 'stopped by the operator (manual mode) before restoring',
   }[outcome] || outcome];
   parts.push(`${ls.switching_ops} switching ops`, `${ls.trips} trips`, `${ls.elcb_resets} ELCB resets`);
   return parts.join(', ');

@@ -10,6 +10,7 @@ mod dispatch_cmd;
 mod logging;
 mod replay;
 mod runtime;
+mod settings;
 mod sinks;
 mod users;
 
@@ -84,11 +85,20 @@ enum Command {
         #[arg(long)]
         no_compare: bool,
     },
-    /// Run against a real plant configuration.
+    /// Run against a real plant configuration. GRIDSCADA_* environment
+    /// variables replace its secrets and addresses (docs/CONFIGURATION.md);
+    /// the flags below replace both.
     Serve {
         /// The main configuration file (gridscada.toml) or its folder.
         #[arg(long)]
         config: PathBuf,
+        /// HTTP bind address of the HMI and API, instead of [server] http.
+        #[arg(long)]
+        http: Option<String>,
+        /// Data folder (SQLite database, local state), instead of [server]
+        /// data_dir; a relative path is taken from the working directory.
+        #[arg(long)]
+        data: Option<PathBuf>,
     },
     /// Validate a configuration and report every problem with its location.
     Check {
@@ -211,7 +221,9 @@ fn main() -> ExitCode {
                 no_compare,
             })
         }
-        Command::Serve { config } => runtime::block_on(runtime::serve(config)),
+        Command::Serve { config, http, data } => {
+            runtime::block_on(runtime::serve(config, http, data))
+        }
         Command::Sim { config } => runtime::block_on(runtime::sim(config)),
         Command::User {
             command:
@@ -237,9 +249,21 @@ fn main() -> ExitCode {
     }
 }
 
+/// `gridscada check`: the files, then the `GRIDSCADA_*` environment as
+/// `serve` would apply it; warnings are printed and do not fail the check.
 fn check(path: &std::path::Path) -> ExitCode {
-    match gridscada_config::load_path(path) {
+    let loaded = gridscada_config::load_path(path).and_then(|mut plant| {
+        let applied = gridscada_config::apply_env(&mut plant, &settings::env)?;
+        if !applied.is_empty() {
+            println!("settings from the environment: {}", applied.join(", "));
+        }
+        Ok(plant)
+    });
+    match loaded {
         Ok(plant) => {
+            for w in &plant.warnings {
+                eprintln!("{w}");
+            }
             let screen_problems = runtime::check_screens(&plant);
             if !screen_problems.is_empty() {
                 for p in &screen_problems {

@@ -21,8 +21,11 @@ use tokio::sync::{mpsc, watch};
 use tokio::task::JoinSet;
 
 use crate::data::open_store;
-use crate::{demo_plant, sinks, users};
+use crate::settings::diagnostics;
+use crate::{demo_plant, settings, sinks, users};
 
+#[cfg(test)]
+mod shutdown_tests;
 mod sources;
 
 use sources::{StackDevices, StackMetrics};
@@ -48,15 +51,6 @@ pub fn report(result: anyhow::Result<()>) -> ExitCode {
             ExitCode::FAILURE
         }
     }
-}
-
-fn diagnostics(what: &str, diags: Vec<gridscada_config::Diagnostic>) -> anyhow::Error {
-    let lines: Vec<String> = diags.iter().map(|d| d.to_string()).collect();
-    anyhow!(
-        "{what} has {} problem(s); not starting:\n{}",
-        diags.len(),
-        lines.join("\n")
-    )
 }
 
 /// How the server runs.
@@ -105,9 +99,7 @@ pub async fn demo(
                     demo_plant::load().map_err(|d| diagnostics("the embedded demo plant", d))?
                 }
             };
-            let addr: SocketAddr = http
-                .parse()
-                .with_context(|| format!("--http '{http}' is not an address like 127.0.0.1:8080"))?;
+            let addr = settings::listen_addr(&http, "--http")?;
             if !addr.ip().is_loopback() {
                 return Err(anyhow!(
                     "the demo prints its passwords and serves a simulated plant, so it only binds loopback addresses; --http {addr} is not one"
@@ -119,20 +111,16 @@ pub async fn demo(
     )
 }
 
-/// `gridscada serve`: a real plant configuration. Refuses to start on any
-/// configuration problem.
-pub async fn serve(config: PathBuf) -> ExitCode {
+/// `gridscada serve`: a real plant configuration, with the `GRIDSCADA_*`
+/// environment and the `--http`/`--data` flags over it. Refuses to start on
+/// any configuration problem.
+pub async fn serve(config: PathBuf, http: Option<String>, data: Option<PathBuf>) -> ExitCode {
     report(
         async {
-            let plant = gridscada_config::load_path(&config)
-                .map_err(|d| diagnostics("the configuration", d))?;
-            let addr: SocketAddr = plant
-                .server
-                .http
-                .get_ref()
-                .parse()
-                .context("[server] http is not a socket address")?;
-            let data = PathBuf::from(&plant.server.data_dir);
+            let mut plant = settings::load_for_server(&config)?;
+            settings::apply_flags(&mut plant, http, data)?;
+            let addr = settings::listen_addr(plant.server.http.get_ref(), "[server] http")?;
+            let data = plant.data_dir.clone();
             run(plant, addr, &data, Mode::Serve, None).await
         }
         .await,
@@ -257,6 +245,12 @@ pub struct Stack {
     pub events: mpsc::Sender<NewEvent>,
     field: gridscada_modbus::FieldIo,
     historian: gridscada_store::Historian,
+    /// The task feeding tag changes to the historian, and its stop signal.
+    historian_feed: (watch::Sender<bool>, tokio::task::JoinHandle<()>),
+    /// The control loops (panel sequences, dispatch): producers of tag
+    /// changes, stopped before the historian feed.
+    loops: JoinSet<()>,
+    /// The sinks, stopped last.
     tasks: JoinSet<()>,
 }
 
@@ -358,14 +352,17 @@ impl Stack {
 
         // The historian.
         let historian = gridscada_store::Historian::spawn(store.clone(), Default::default());
-        tasks.spawn(sinks::historian_feed(
+        let (feed_stop, feed_stop_rx) = watch::channel(false);
+        let historian_feed = tokio::spawn(sinks::historian_feed(
             plant.clone(),
             db.clone(),
             historian.handle(),
             store.clone(),
             alarms.clone(),
             clock.clone(),
+            feed_stop_rx,
         ));
+        let mut loops = JoinSet::new();
 
         let field = gridscada_modbus::FieldIo::start(&plant, db.clone(), clock.clone())
             .context("starting field I/O")?;
@@ -408,7 +405,7 @@ impl Stack {
                 clock.clone(),
             ));
             let label = id.clone();
-            tasks.spawn(async move {
+            loops.spawn(async move {
                 if let Err(e) = driver.await {
                     tracing::error!(panel = %label, error = %e, "fault-isolation sequence stopped");
                 }
@@ -425,7 +422,7 @@ impl Stack {
             Some(mg) => {
                 let (status_tx, status_rx) = watch::channel(DispatchStatus::default());
                 let (notices_tx, notices_rx) = mpsc::channel(256);
-                tasks.spawn(dispatch::run_dispatch_with(
+                loops.spawn(dispatch::run_dispatch_with(
                     mg.clone(),
                     db.clone(),
                     writer.clone(),
@@ -463,6 +460,8 @@ impl Stack {
             events: events_tx,
             field,
             historian,
+            historian_feed: (feed_stop, historian_feed),
+            loops,
             tasks,
         })
     }
@@ -478,23 +477,38 @@ impl Stack {
     }
 
     /// Stops in reverse order: the producers first, then what records their
-    /// output, so nothing committed is lost.
-    pub async fn shutdown(mut self) {
+    /// output, so nothing committed is lost. Tag changes: field I/O and the
+    /// simulators, then the control loops, then the historian feed (which
+    /// offers every change published until then), then the historian's
+    /// writer (which writes everything offered). Returns the historian's
+    /// final figures, the ones it logs.
+    pub async fn shutdown(mut self) -> gridscada_store::HistorianMetrics {
         self.field.shutdown().await;
         if let Some(sim) = self.simulator.take() {
             sim.shutdown().await;
         }
-        let written = self.historian.shutdown().await;
-        tracing::info!(
-            samples = written.samples_written,
-            dropped = written.dropped,
-            "historian flushed"
-        );
+        self.loops.abort_all();
+        while self.loops.join_next().await.is_some() {}
+        let (feed_stop, feed) = self.historian_feed;
+        feed_stop.send_replace(true);
+        if let Err(e) = feed.await {
+            tracing::error!(error = %e, "historian feed failed");
+        }
+        let handle = self.historian.handle();
+        self.historian.shutdown().await;
         drop(self.events);
         // Give the sinks a moment to drain their channels into the store.
         tokio::time::sleep(std::time::Duration::from_millis(300)).await;
         self.tasks.abort_all();
         self.store.close().await;
+        // Read last, so the figure counts any sample lost on the way.
+        let written = handle.metrics();
+        tracing::info!(
+            samples = written.samples_written,
+            dropped = written.dropped,
+            "historian flushed"
+        );
+        written
     }
 }
 

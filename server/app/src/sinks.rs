@@ -328,6 +328,12 @@ pub fn recorder(plant: &Plant, db: &TagDb) -> Recorder {
 /// Feeds tag changes through the logging policy into the historian's bounded
 /// buffer, re-logs quiet tags at their maximum interval, applies retention
 /// daily, and raises a system alarm while samples are being dropped.
+///
+/// When `stop` turns true (or its sender is dropped) it offers every change
+/// already published (without waiting for more) and returns, dropping its
+/// handle: the stack stops it after the producers of tag changes and before
+/// the historian's writer, so an orderly shutdown offers every sample before
+/// the writer's final flush and none after it.
 pub async fn historian_feed(
     plant: Arc<Plant>,
     db: Arc<TagDb>,
@@ -335,6 +341,7 @@ pub async fn historian_feed(
     store: Store,
     alarms: Arc<AlarmEngine>,
     clock: Arc<dyn Clock>,
+    mut stop: watch::Receiver<bool>,
 ) {
     let mut recorder = recorder(&plant, &db);
     let mut sub = db.subscribe_all();
@@ -363,6 +370,13 @@ pub async fn historian_feed(
     let mut last_retention = None;
     loop {
         tokio::select! {
+            // A stop already signalled wins over more changes.
+            biased;
+            r = stop.changed() => {
+                if r.is_err() || *stop.borrow_and_update() {
+                    break;
+                }
+            }
             update = sub.recv() => {
                 let Some(update) = update else { return };
                 let samples: Vec<_> = update
@@ -400,4 +414,16 @@ pub async fn historian_feed(
             }
         }
     }
+    // Stopping: what was published before the stop is offered too.
+    let mut offered = 0;
+    while let Some(update) = sub.try_recv() {
+        let samples: Vec<_> = update
+            .batch()
+            .changes
+            .iter()
+            .filter_map(|(id, s)| recorder.offer(*id, s))
+            .collect();
+        offered += historian.push_all(samples);
+    }
+    tracing::debug!(offered, "historian feed stopped");
 }

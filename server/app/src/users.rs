@@ -115,11 +115,9 @@ pub async fn add(
     gridscada_web::api::users::check_user_name(&name).map_err(|e| anyhow!("{}", e.detail))?;
     let (plant, data) = match target {
         Target::Config(path) => {
-            let plant = gridscada_config::load_path(&path).map_err(|d| {
-                let lines: Vec<String> = d.iter().map(|x| x.to_string()).collect();
-                anyhow!("the configuration has problems:\n{}", lines.join("\n"))
-            })?;
-            let data = PathBuf::from(&plant.server.data_dir);
+            // The same database `serve` opens: the same files and environment.
+            let plant = crate::settings::load_for_server(&path)?;
+            let data = plant.data_dir.clone();
             (plant, data)
         }
         Target::DemoData(data) => {

@@ -301,10 +301,11 @@ fn check_isolated(s: &Stack, id: &str, zone: u8) -> Metrics {
     assert_eq!(st.faulty_zones, vec![zone], "{ctx}");
     assert_eq!(m.reenergisations, 1, "{ctx}");
     assert_eq!(m.trips, 2, "{ctx}");
-    assert!(m.restore_s > 0.0, "{ctx}");
+    let restore_s = m.restore_s.expect(&ctx);
+    assert!(restore_s > 0.0, "{ctx}");
     assert_within(
         &format!("{id} zone {zone}"),
-        m.restore_s,
+        restore_s,
         m.bound_s,
         &s.events(id),
     );
@@ -363,7 +364,8 @@ async fn permanent_fault_on_any_zone_is_isolated_within_the_bound() {
         let wall_s = wall.elapsed().as_secs_f64();
         for ((id, zone), trips_before) in faults.into_iter().zip(trips_before) {
             let m = check_isolated(&s, id, zone);
-            table.push((id, zone, m.restore_s, m.bound_s, m.switching_ops, wall_s));
+            let restore_s = m.restore_s.unwrap_or(f64::NAN);
+            table.push((id, zone, restore_s, m.bound_s, m.switching_ops, wall_s));
             let healthy: Vec<u8> = (1..=4).filter(|z| *z != zone).collect();
             s.wait(&format!("{id} breakers as isolated"), |s| {
                 let p = s.snap(id);
@@ -449,15 +451,16 @@ async fn transient_fault_restores_every_zone() {
     s.wait_sequence_end("ss1").await;
     let st = s.status("ss1");
     let m = &st.last_sequence;
+    let restore_s = m.restore_s.expect("a restored sequence has a restore time");
     println!(
-        "full stack, transient fault on zone 2 of ss1: restore_s = {:.2}, bound_s = {:.1}",
-        m.restore_s, m.bound_s
+        "full stack, transient fault on zone 2 of ss1: restore_s = {restore_s:.2}, bound_s = {:.1}",
+        m.bound_s
     );
     assert_eq!(st.step, "idle", "{st:#?}\n{:#?}", s.events("ss1"));
     assert!(!st.lockout && st.faulty_zones.is_empty());
     assert_eq!(m.trips, 1);
-    assert!(m.restore_s > 0.0, "{m:?}");
-    assert_within("transient fault", m.restore_s, m.bound_s, &s.events("ss1"));
+    assert!(restore_s > 0.0, "{m:?}");
+    assert_within("transient fault", restore_s, m.bound_s, &s.events("ss1"));
     let events = s.events("ss1");
     assert!(
         events.iter().any(|(k, _)| k == "transient_fault"),
@@ -486,10 +489,13 @@ async fn two_faulty_zones_leave_exactly_the_healthy_ones_on() {
     s.wait_sequence_end("ss1").await;
     let st = s.status("ss1");
     let m = &st.last_sequence;
+    let restore_s = m
+        .restore_s
+        .expect("an isolating sequence has a restore time");
     println!(
-        "full stack, permanent faults on zones 2 and 4 of ss1: restore_s = {:.2}, bound_s = {:.1} \
+        "full stack, permanent faults on zones 2 and 4 of ss1: restore_s = {restore_s:.2}, bound_s = {:.1} \
          (trips {})",
-        m.restore_s, m.bound_s, m.trips
+        m.bound_s, m.trips
     );
     assert_eq!(st.step, "isolated", "{st:#?}\n{:#?}", s.events("ss1"));
     assert!(!st.lockout);
@@ -500,7 +506,7 @@ async fn two_faulty_zones_leave_exactly_the_healthy_ones_on() {
     // reclose delay and at most one more dwell.
     let settings = fault_isolation::Settings::from_panel(&s.plant_panel("ss1"));
     let bound = m.bound_s + settings.reclose_delay_s + settings.dwell_s;
-    assert_within("two faulty zones", m.restore_s, bound, &s.events("ss1"));
+    assert_within("two faulty zones", restore_s, bound, &s.events("ss1"));
     s.wait("ss1 exactly zones 1 and 3 on", |s| {
         let p = s.snap("ss1");
         p.elcb_closed && p.mccb.closed && closed_zones(&p) == [1, 3]

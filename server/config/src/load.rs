@@ -13,6 +13,7 @@ use toml::de::{DeTable, DeValue, ValueDeserializer};
 
 use crate::diag::{Diagnostic, SourceFile};
 use crate::model::*;
+use crate::overrides::{has_plaintext_password, Warning, ENV_STORAGE_PASSWORD, ENV_STORAGE_URL};
 use crate::validate;
 
 /// A checked plant configuration.
@@ -20,6 +21,13 @@ use crate::validate;
 pub struct Plant {
     /// The main file.
     pub main_path: PathBuf,
+    /// The data folder: `[server] data_dir`, a relative one taken from the
+    /// main file's folder (like `tag_files`), unless replaced from the
+    /// environment or the command line (see [`crate::apply_env`]).
+    pub data_dir: PathBuf,
+    /// What works but should not be left so (`gridscada check` prints them,
+    /// `serve` logs them), e.g. a plaintext password in the storage URL.
+    pub warnings: Vec<Warning>,
     pub server: ServerConfig,
     pub storage: StorageConfig,
     pub devices: Vec<DeviceConfig>,
@@ -152,8 +160,22 @@ pub fn load_with(
         diags.dedup();
         return Err(diags);
     }
+    let mut warnings = Vec::new();
+    let url = &main_cfg.storage.url;
+    if has_plaintext_password(url.get_ref()) {
+        warnings.push(Warning(all_files[0].error_at(
+            url.span(),
+            format!(
+                "[storage] url holds a plaintext password; keep secrets out of the file: give \
+                 the password in {} (or the whole URL in {}) in the server's environment",
+                ENV_STORAGE_PASSWORD.name, ENV_STORAGE_URL.name
+            ),
+        )));
+    }
     Ok(Plant {
         main_path: main.to_path_buf(),
+        data_dir: base.join(&main_cfg.server.data_dir),
+        warnings,
         server: main_cfg.server,
         storage: main_cfg.storage,
         devices: devices.into_iter().map(|(_, d)| d).collect(),

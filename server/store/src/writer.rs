@@ -6,6 +6,8 @@
 //! counted, and the overflow flag goes up (for a system alarm) until the buffer
 //! is back under half full. A batch that fails to write is retried with
 //! backoff, never discarded, except at shutdown, where it is counted as dropped.
+//! A sample offered after shutdown is counted as dropped too, but is no
+//! overflow: whoever stops the writer stops its producers first.
 //!
 //! **Owns:** buffering, batching, retry and the historian metrics. **Must not
 //! touch:** which samples to log (that is [`crate::Recorder`]).
@@ -14,7 +16,7 @@
 //! with the database, not plant behaviour, so a compressed replay clock must
 //! not speed it up.
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -55,7 +57,8 @@ pub struct HistorianMetrics {
     /// Samples waiting in the buffer (not counting a batch being written).
     pub buffered: usize,
     pub capacity: usize,
-    /// Samples dropped because the buffer was full (or the writer stopped).
+    /// Samples lost: dropped because the buffer was full, offered after the
+    /// writer stopped, or not written at shutdown.
     pub dropped: u64,
     pub samples_written: u64,
     pub batches_written: u64,
@@ -81,6 +84,8 @@ struct Shared {
     counters: Counters,
     overflow: watch::Sender<bool>,
     capacity: usize,
+    /// A sample was offered after the writer stopped (logged once).
+    stopped_drop: AtomicBool,
 }
 
 /// Pushes samples into the historian buffer. Cheap to clone.
@@ -102,24 +107,37 @@ pub struct Historian {
 impl HistorianHandle {
     /// Queues a sample without waiting. Returns false if it was dropped
     /// (buffer full or writer stopped); the drop is counted either way.
+    ///
+    /// A full buffer is an overflow (the flag goes up, for a system alarm).
+    /// A sample offered after the writer stopped is not: nothing will drain
+    /// the buffer again, so it is a loss at shutdown, counted in `dropped`
+    /// like any other and logged once, but no overflow. (The application
+    /// stops every producer before the writer, so an orderly shutdown offers
+    /// none.)
     pub fn push(&self, sample: HistorySample) -> bool {
         match self.tx.try_send(sample) {
             Ok(()) => true,
-            Err(e) => {
+            Err(mpsc::error::TrySendError::Full(_)) => {
                 let dropped = self.shared.counters.dropped.fetch_add(1, Ordering::Relaxed) + 1;
                 let raised = self
                     .shared
                     .overflow
                     .send_if_modified(|o| !std::mem::replace(o, true));
                 if raised {
-                    let why = match e {
-                        mpsc::error::TrySendError::Full(_) => "buffer full",
-                        mpsc::error::TrySendError::Closed(_) => "writer stopped",
-                    };
                     tracing::error!(
                         dropped,
-                        why,
-                        "historian overflow: samples are being dropped"
+                        "historian overflow: buffer full, samples are being dropped"
+                    );
+                }
+                false
+            }
+            Err(mpsc::error::TrySendError::Closed(_)) => {
+                let dropped = self.shared.counters.dropped.fetch_add(1, Ordering::Relaxed) + 1;
+                if !self.shared.stopped_drop.swap(true, Ordering::Relaxed) {
+                    tracing::error!(
+                        dropped,
+                        "historian stopped: a sample offered after its writer stopped was \
+                         dropped (a producer outlived the writer; counted in dropped)"
                     );
                 }
                 false
@@ -163,6 +181,7 @@ impl Historian {
             counters: Counters::default(),
             overflow: watch::channel(false).0,
             capacity,
+            stopped_drop: AtomicBool::new(false),
         });
         let (stop, stop_rx) = watch::channel(false);
         let (pause, pause_rx) = watch::channel(false);

@@ -1172,6 +1172,29 @@ async fn pause_and_shutdown_flush(db: TestDb) {
 }
 both_backends!(pause_flush, pause_and_shutdown_flush);
 
+/// A sample offered after the writer stopped is lost and counted, but it is
+/// no overflow (no flag, so no system alarm); one offered during shutdown's
+/// flush is written.
+async fn a_sample_after_shutdown_is_counted_but_no_overflow(db: TestDb) {
+    let hist = Historian::spawn(db.store.clone(), HistorianConfig::default());
+    let h = hist.handle();
+    let overflow = h.overflow();
+    assert!(h.push(sample("L", 1, Some(1.0), QualityCode::Good)));
+    let m = hist.shutdown().await;
+    assert_eq!((m.samples_written, m.dropped), (1, 0));
+    assert!(!h.push(sample("L", 2, Some(2.0), QualityCode::Good)));
+    assert!(!h.push(sample("L", 3, Some(3.0), QualityCode::Good)));
+    let m = h.metrics();
+    assert_eq!(m.dropped, 2, "counted in the figure");
+    assert!(!m.overflow, "a stopped writer is not an overflow");
+    assert!(!*overflow.borrow());
+    db.cleanup().await;
+}
+both_backends!(
+    after_shutdown,
+    a_sample_after_shutdown_is_counted_but_no_overflow
+);
+
 #[tokio::test]
 async fn bad_urls_are_refused_with_the_url_named() {
     let dir = tempfile::tempdir().unwrap();

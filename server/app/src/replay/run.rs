@@ -422,8 +422,15 @@ async fn finish(
             at_s: f.at_s,
             source: "sequence".into(),
             text: format!(
-                "{}: sequence ended {} — restoration {:.1} s, {} switching operations, {} re-energisations",
-                f.panel, f.outcome, f.restore_s, f.switching_ops, f.reenergisations
+                "{}: sequence ended {} — {}, {} switching operations, {} re-energisations",
+                f.panel,
+                f.outcome,
+                match f.restore_s {
+                    Some(s) => format!("restoration {s:.1} s"),
+                    None => "not restored".into(),
+                },
+                f.switching_ops,
+                f.reenergisations
             ),
             priority: None,
         });

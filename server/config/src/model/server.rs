@@ -12,7 +12,7 @@ pub struct ServerConfig {
     #[serde(default = "default_http")]
     pub http: Spanned<String>,
     /// Folder for the SQLite database and other local state, relative to the
-    /// working directory.
+    /// main file's folder (resolved in [`crate::Plant::data_dir`]).
     #[serde(default = "default_data_dir")]
     pub data_dir: String,
     /// Host names (without port) the HMI may be reached by, besides IP

@@ -294,6 +294,24 @@ async fn driver_isolates_a_faulty_zone_and_publishes_status() {
     assert!(s.breakers.values().all(|b| b.closed && b.good), "{s:?}");
 }
 
+/// A sequence that locks out publishes no restoration time: `restore_s` is
+/// `null` in the status the API serves, not 0.
+#[tokio::test]
+async fn driver_lockout_publishes_no_restore_time() {
+    let mut r = rig(200.0);
+    r.wait_step("idle").await;
+    r.fault(0, true);
+    let s = r.wait_step("lockout").await;
+    let json = serde_json::to_value(&s).unwrap();
+    let last = &json["last_sequence"];
+    assert_eq!(last["outcome"], "lockout", "{json}");
+    assert!(last["restore_s"].is_null(), "{json}");
+    assert!(
+        last.as_object().unwrap().contains_key("restore_s"),
+        "{json}"
+    );
+}
+
 #[tokio::test]
 async fn driver_operator_commands_are_checked() {
     let mut r = rig(200.0);

@@ -757,6 +757,209 @@ fn back_to_auto_after_an_interrupted_sequence_alarms_the_loads_left_off() {
     );
 }
 
+/// The same, with the server restarted while the loads are left off in
+/// automatic mode: the alarm stays standing across the restart (the first
+/// snapshot still finds them off), the step stays at rest, and nothing is
+/// switched until Reset.
+#[test]
+fn loads_left_off_stay_alarmed_across_a_restart() {
+    let mut h = Harness::new(settings(4));
+    h.fault(&[3]);
+    h.run_until(|h| h.seq.step() == Step::OlucDwell && h.seq.count_l_cur_c() == 1);
+    h.command(OperatorCommand::SetMode(Mode::Manual)).unwrap();
+    h.run();
+    h.command(OperatorCommand::SetMode(Mode::Auto)).unwrap();
+    h.run();
+    assert!(h.alarm_active("loads_off"), "{:?}", h.alarms);
+    let r = h.seq.retained();
+    assert!(
+        r.loads_off && r.interrupted_at.is_none() && !r.lockout,
+        "{r:?}"
+    );
+    // The key the application keeps standing is the one raised at once.
+    assert_eq!(r.alarm_keys(4), vec!["loads_off".to_string()]);
+    let mut out = Vec::new();
+    Sequence::restore(settings(4), &r, &mut out);
+    assert_eq!(raised_alarms(&out), r.alarm_keys(4));
+
+    let mut h = Harness::restart(&h);
+    h.run();
+    assert_eq!(h.seq.step(), Step::Idle);
+    assert!(h.alarm_active("loads_off"), "{:?}", h.alarms);
+    assert!(h.commands.is_empty(), "{:?}", h.commands);
+    assert!(h.seq.retained().loads_off);
+    // And again after a second restart, then Reset restores them.
+    let mut h = Harness::restart(&h);
+    h.run();
+    assert!(h.alarm_active("loads_off"), "{:?}", h.alarms);
+    h.clear_faults();
+    h.command(OperatorCommand::Reset).unwrap();
+    h.run();
+    assert!(!h.alarm_active("loads_off"));
+    assert!(!h.seq.retained().loads_off);
+    assert!(
+        h.panel.zones.iter().all(|z| *z) && h.panel.mccb,
+        "{:?}",
+        h.panel
+    );
+}
+
+/// Loads left off by a sequence stopped in manual mode, the server restarted
+/// while in manual mode, then automatic mode: alarmed. And automatic mode
+/// chosen while the panel's signals are Bad: alarmed as soon as it is read.
+#[test]
+fn loads_left_off_are_alarmed_after_a_manual_restart_and_after_a_comm_loss() {
+    let mut h = Harness::new(settings(4));
+    h.fault(&[3]);
+    h.run_until(|h| h.seq.step() == Step::OlucDwell && h.seq.count_l_cur_c() == 1);
+    h.command(OperatorCommand::SetMode(Mode::Manual)).unwrap();
+    h.run();
+    let mut h = Harness::restart(&h);
+    h.run();
+    assert_eq!(h.seq.step(), Step::Manual);
+    assert!(!h.alarm_active("loads_off"));
+    h.command(OperatorCommand::SetMode(Mode::Auto)).unwrap();
+    h.run();
+    assert_eq!(h.seq.step(), Step::Idle);
+    assert!(h.alarm_active("loads_off"), "{:?}", h.alarms);
+    assert!(h.commands.is_empty(), "{:?}", h.commands);
+
+    let mut h = Harness::new(settings(4));
+    h.fault(&[3]);
+    h.run_until(|h| h.seq.step() == Step::OlucDwell && h.seq.count_l_cur_c() == 1);
+    h.command(OperatorCommand::SetMode(Mode::Manual)).unwrap();
+    h.run();
+    h.panel.comm_ok = false;
+    h.need_snapshot = true;
+    h.run();
+    assert!(!h.seq.comm_good());
+    h.command(OperatorCommand::SetMode(Mode::Auto)).unwrap();
+    h.run();
+    assert!(!h.alarm_active("loads_off"), "nothing is known yet");
+    h.panel.comm_ok = true;
+    h.need_snapshot = true;
+    h.run();
+    assert_eq!(h.seq.step(), Step::Idle);
+    assert!(h.alarm_active("loads_off"), "{:?}", h.alarms);
+}
+
+/// A restart in the middle of a sequence leaves the loads off under a
+/// standing lockout alarm; a mode change back and forth keeps it; Reset
+/// restores.
+#[test]
+fn a_sequence_interrupted_by_a_restart_stays_alarmed_through_mode_changes() {
+    let mut h = Harness::new(settings(4));
+    h.fault(&[3]);
+    h.run_until(|h| h.seq.step() == Step::OlucDwell && h.seq.count_l_cur_c() == 1);
+    let mut h = Harness::restart(&h);
+    h.run();
+    assert_eq!(h.seq.step(), Step::Lockout);
+    assert!(h.alarm_active("lockout"));
+    h.command(OperatorCommand::SetMode(Mode::Manual)).unwrap();
+    h.command(OperatorCommand::SetMode(Mode::Auto)).unwrap();
+    h.run();
+    assert_eq!(h.seq.step(), Step::Lockout);
+    assert!(h.alarm_active("lockout"));
+    let mut h = Harness::restart(&h);
+    h.run();
+    assert_eq!(h.seq.step(), Step::Lockout);
+    assert!(h.alarm_active("lockout"));
+    assert!(h.commands.is_empty(), "{:?}", h.commands);
+    h.clear_faults();
+    h.command(OperatorCommand::Reset).unwrap();
+    h.run();
+    assert_eq!(h.seq.step(), Step::Idle);
+    assert!(!h.alarm_active("lockout") && !h.alarm_active("loads_off"));
+    assert!(
+        h.panel.zones.iter().all(|z| *z) && h.panel.mccb,
+        "{:?}",
+        h.panel
+    );
+}
+
+/// A breaker opened by hand at the panel while it rests in automatic mode
+/// is alarmed too, and the alarm clears when it is closed again.
+#[test]
+fn a_load_opened_by_hand_at_rest_is_alarmed_until_closed_again() {
+    let mut h = Harness::new(settings(3));
+    h.run();
+    assert_eq!(h.seq.step(), Step::Idle);
+    assert!(!h.alarm_active("loads_off"));
+    h.panel.zones[1] = false;
+    h.panel.update();
+    h.need_snapshot = true;
+    h.run();
+    assert!(h.alarm_active("loads_off"), "{:?}", h.alarms);
+    assert!(h.commands.is_empty());
+    h.panel.zones[1] = true;
+    h.panel.update();
+    h.need_snapshot = true;
+    h.run();
+    assert!(!h.alarm_active("loads_off"), "{:?}", h.alarms);
+}
+
+/// Restoration time: none before the first sequence or while one runs, the
+/// time once healthy loads are all on, and none (JSON null) for a sequence
+/// that ends in a lockout or is stopped, even when the loads had all been on
+/// before the trip that led to the lockout.
+#[test]
+fn no_restore_time_for_a_sequence_that_did_not_restore() {
+    let json = |m: &Metrics| serde_json::to_value(m).unwrap()["restore_s"].clone();
+    // Isolated: a time.
+    let mut h = Harness::new(settings(4));
+    assert_eq!(h.seq.metrics().restore_s, None);
+    assert_eq!(json(h.seq.metrics()), serde_json::Value::Null);
+    h.fault(&[3]);
+    h.run_until(|h| h.seq.step() == Step::RecloseWait);
+    assert_eq!(h.seq.metrics().restore_s, None, "running");
+    h.run();
+    assert_eq!(h.seq.metrics().outcome, Outcome::Isolated);
+    assert!(h.seq.metrics().restore_s.is_some_and(|s| s > 0.0));
+    assert!(
+        h.events
+            .iter()
+            .any(|(k, m)| *k == "step" && m.contains("healthy zones restored in 10.0 s")),
+        "{:?}",
+        h.events
+    );
+
+    // Trip limit: a lockout.
+    let mut s = settings(4);
+    s.max_trips = 2;
+    let mut h = Harness::new(s.clone());
+    h.fault(&[2, 3]);
+    h.run();
+    assert_eq!(h.seq.metrics().outcome, Outcome::Lockout);
+    assert_eq!(h.seq.metrics().restore_s, None);
+    assert_eq!(json(h.seq.metrics()), serde_json::Value::Null);
+
+    // Every healthy load on (zone 3 isolated, zone 4 dwelling), then zone 4
+    // faults: the third trip locks out, and the time noted before is void.
+    let mut h = Harness::new(s);
+    h.fault(&[3]);
+    h.run_until(|h| h.seq.step() == Step::OldcDwell && h.seq.metrics().restore_s.is_some());
+    h.panel.fault[4] = true;
+    h.panel.update();
+    h.need_snapshot = true;
+    h.run();
+    assert_eq!(h.seq.step(), Step::Lockout);
+    assert_eq!(h.seq.metrics().outcome, Outcome::Lockout);
+    assert_eq!(h.seq.metrics().restore_s, None);
+    assert!(
+        !h.events.iter().any(|(_, m)| m.contains("restored in")),
+        "{:?}",
+        h.events
+    );
+
+    // Stopped by manual mode.
+    let mut h = Harness::new(settings(4));
+    h.fault(&[3]);
+    h.run_until(|h| h.seq.step() == Step::OldcDwell && h.seq.metrics().restore_s.is_some());
+    h.command(OperatorCommand::SetMode(Mode::Manual)).unwrap();
+    assert_eq!(h.seq.metrics().outcome, Outcome::Stopped);
+    assert_eq!(h.seq.metrics().restore_s, None);
+}
+
 #[test]
 fn seed_case_zone_2_of_4() {
     let mut h = Harness::new(settings(4));
@@ -841,20 +1044,21 @@ fn timing_bound_vs_measured() {
             for late_trip in [false, true] {
                 let h = run_case_with(n, 1 << k, true, None, late_trip);
                 let m = h.seq.metrics();
+                let ctx = format!("N={n} k={k} late_trip={late_trip}: {m:?}");
+                let restore_s = m.restore_s.expect(&ctx);
                 if !late_trip {
                     println!(
-                        "{n} | {k} | {:.1} | {:.1} | {} | {}",
-                        m.restore_s, m.bound_s, m.switching_ops, m.reenergisations
+                        "{n} | {k} | {restore_s:.1} | {:.1} | {} | {}",
+                        m.bound_s, m.switching_ops, m.reenergisations
                     );
                 }
-                let ctx = format!("N={n} k={k} late_trip={late_trip}: {m:?}");
                 assert_eq!(m.bound_s, 6.0 + f64::from(n) + 1.0, "{ctx}");
-                assert!(m.restore_s <= m.bound_s, "{ctx}");
+                assert!(restore_s <= m.bound_s, "{ctx}");
                 // Instantaneous I/O: exactly 2 × reclose + N × dwell, and
                 // 2 × N + 5 + 2k switching operations (the first trip opens
                 // N + 1 loads; the ELCB is reset twice; k + 1 closes and
                 // opens around the second trip; N closes at the end).
-                assert!((m.restore_s - (6.0 + f64::from(n))).abs() < 1e-9, "{ctx}");
+                assert!((restore_s - (6.0 + f64::from(n))).abs() < 1e-9, "{ctx}");
                 assert_eq!(
                     m.switching_ops,
                     2 * u32::from(n) + 5 + 2 * u32::from(k),
@@ -1454,6 +1658,7 @@ fn a_restart_in_the_middle_of_a_sequence_locks_out_and_keeps_manual_mode() {
         faulty: vec![2, 9],
         lockout: false,
         interrupted_at: None,
+        loads_off: false,
     };
     let s = Sequence::restore(settings(4), &r, &mut out);
     assert_eq!(s.faulty_zones(), vec![2]);
@@ -1466,6 +1671,7 @@ fn a_restart_in_the_middle_of_a_sequence_locks_out_and_keeps_manual_mode() {
         faulty: vec![0],
         lockout: true,
         interrupted_at: None,
+        loads_off: false,
     };
     let mut out = Vec::new();
     Sequence::restore(settings(4), &locked, &mut out);

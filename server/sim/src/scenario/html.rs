@@ -176,7 +176,7 @@ Clock: {clock}; wall time {wall:.1} s, speed-up ×{speed:.0}.</p>
                 esc(&f.panel),
                 offset(f.at_s),
                 esc(&f.outcome),
-                num(f.restore_s),
+                f.restore_s.map_or_else(|| "—".into(), num),
                 num(f.bound_s),
                 f.switching_ops,
                 f.reenergisations,

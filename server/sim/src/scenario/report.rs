@@ -137,7 +137,8 @@ pub struct FaultRecord {
     /// Offset when the sequence finished, s.
     pub at_s: f64,
     pub outcome: String,
-    pub restore_s: f64,
+    /// `None` when the sequence did not restore (lockout, stopped).
+    pub restore_s: Option<f64>,
     pub bound_s: f64,
     pub switching_ops: u32,
     pub reenergisations: u32,

@@ -302,9 +302,41 @@ pub struct PanelStatus {
     pub load0_faulty: bool,
     pub lockout: bool,
     pub comm_ok: bool,
+    pub last_sequence: SequenceFigures,
     /// Tag prefix of the panel's I/O, e.g. SS1
     #[schema(required = false)]
     pub prefix: String,
+}
+
+#[derive(ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum SequenceOutcome {
+    None,
+    Running,
+    Restored,
+    Isolated,
+    Lockout,
+    Stopped,
+}
+
+/// `gridscada_control::fault_isolation::Metrics`: how the panel's last
+/// sequence went.
+#[derive(ToSchema)]
+#[schema(as = SequenceFigures)]
+pub struct SequenceFigures {
+    /// Seconds from the first trip (or Reset) until every load not known
+    /// faulty was confirmed closed; null before the first sequence, while one
+    /// runs, and when it did not restore (lockout, stopped)
+    #[schema(required = true)]
+    pub restore_s: Option<f64>,
+    pub switching_ops: u32,
+    pub reenergisations: u32,
+    /// 2 × reclose delay + (N + 1) × dwell
+    pub bound_s: f64,
+    pub trips: u32,
+    pub elcb_resets: u32,
+    #[schema(inline)]
+    pub outcome: SequenceOutcome,
 }
 
 #[derive(ToSchema)]

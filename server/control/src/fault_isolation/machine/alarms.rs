@@ -1,8 +1,9 @@
 //! What the sequence annunciates: alarm priorities and keys, raising and
 //! clearing its alarms, and its events.
 
-use super::io::Output;
-use super::Sequence;
+use super::io::{Breaker, Output};
+use super::step::Step;
+use super::{Mode, Sequence};
 
 /// Alarm priorities (the alarm engine's scale: higher is more urgent).
 pub mod priority {
@@ -23,7 +24,7 @@ pub const ELCB_TRIP_ALARM: &str = "elcb.trip";
 pub(super) const LOCKOUT_ALARM: &str = "lockout";
 
 /// Key of the alarm of healthy loads left off in automatic mode (cleared by
-/// the next sequence, or by manual mode).
+/// the next sequence, by manual mode, or when they read closed again).
 pub(super) const LOADS_OFF_ALARM: &str = "loads_off";
 
 /// Key of the alarm of a faulty load.
@@ -49,6 +50,41 @@ impl Sequence {
             )
         };
         self.raise(&faulty_alarm_key(load), priority, message, out);
+    }
+
+    /// The standing alarm of loads left off in automatic mode: at rest
+    /// (`idle` or `isolated`) with the ELCB closed, every load not known
+    /// faulty should be on. One that is not (a sequence stopped by manual
+    /// mode, or the server restarted, before it restored them; a breaker
+    /// opened by hand) is not switched on by the machine, since that is
+    /// Reset's job, so the operator is told. Checked on entering automatic
+    /// mode and on every good snapshot at rest; cleared when they all read
+    /// closed again.
+    pub(super) fn check_loads_off(&mut self, out: &mut Vec<Output>) {
+        let at_rest = self.mode == Mode::Auto
+            && !self.lockout
+            && matches!(self.step, Step::Idle | Step::Isolated);
+        let off: Vec<String> = match &self.known {
+            Some(k) if at_rest && self.comm_good && k.elcb => (0..=self.settings.zones)
+                .filter(|l| !self.faulty.contains(l) && !k.closed(Breaker::load(*l)))
+                .map(|l| l.to_string())
+                .collect(),
+            // Not at rest, or nothing known yet: left as it is.
+            _ => return,
+        };
+        if off.is_empty() {
+            self.clear(LOADS_OFF_ALARM, out);
+        } else {
+            self.raise(
+                LOADS_OFF_ALARM,
+                priority::ZONE_ISOLATED,
+                format!(
+                    "automatic mode with load(s) {} off and not known faulty: press Reset to restore them",
+                    off.join(", ")
+                ),
+                out,
+            );
+        }
     }
 
     pub(super) fn raise_trip_alarm(&mut self, out: &mut Vec<Output>) {

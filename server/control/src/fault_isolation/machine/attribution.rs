@@ -182,6 +182,7 @@ impl Sequence {
         self.metrics.trips += 1;
         self.metrics.reenergisations += 1;
         self.restored = false;
+        self.metrics.restore_s = None;
         self.count_sv = load;
         self.found_new = true;
         self.faulty.insert(load);
@@ -256,6 +257,7 @@ impl Sequence {
         self.pending.clear();
         self.metrics.trips += 1;
         self.restored = false;
+        self.metrics.restore_s = None;
         self.proven.clear();
         self.fast_reclose = false;
         self.raise_trip_alarm(out);

@@ -26,6 +26,8 @@ impl Sequence {
                 self.known = Some(state);
                 if tripped && self.mode == Mode::Auto {
                     self.start_sequence(Cause::Trip, now_s, out);
+                } else {
+                    self.check_loads_off(out);
                 }
             }
             Step::Manual | Step::Lockout => {

@@ -122,6 +122,10 @@
 //! - the trip of the faulty zone is seen only when the ELCB is read;
 //! - `restore_s` ends when the last healthy load reads closed.
 //!
+//! A sequence that does not restore (a lockout, or stopped by manual mode)
+//! has no restore time (`None`), nor has one while it runs; a trip after the
+//! healthy loads were all on withdraws the time noted until then.
+//!
 //! Attribution requires `dwell_s` to exceed the ELCB status latency (its
 //! module's scan period + request timeout + the breaker's operating time +
 //! margin): a dwell counts from the close command, and a trip read after the
@@ -154,7 +158,12 @@
 //!   In manual mode nothing switches by itself. Back in automatic mode,
 //!   loads left off and not known faulty stay off (a mode change switches
 //!   nothing on) under a standing `loads_off` alarm until Reset restores
-//!   them.
+//!   them. The alarm is checked on every good snapshot at rest in automatic
+//!   mode (so it also comes when automatic mode was chosen while the panel
+//!   was unreadable, or a breaker was opened by hand, and goes when the
+//!   loads read closed again), and it stays standing across a restart
+//!   (`Retained::loads_off`). A sequence interrupted by a restart locks out
+//!   instead (its standing `lockout` alarm).
 //!
 //! ## Asynchronous status inputs
 //! Over real I/O the panel's signals sit on different modules, each scanned on
@@ -290,7 +299,7 @@ impl Sequence {
     pub fn new(settings: Settings) -> Sequence {
         let mode = settings.start_mode;
         let metrics = Metrics {
-            restore_s: 0.0,
+            restore_s: None,
             switching_ops: 0,
             reenergisations: 0,
             bound_s: settings.bound_s(),

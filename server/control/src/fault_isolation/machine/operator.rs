@@ -1,6 +1,6 @@
 //! Operator commands: the mode switch, Reset and manual breaker commands.
 
-use super::alarms::{event, priority, LOADS_OFF_ALARM};
+use super::alarms::{event, LOADS_OFF_ALARM};
 use super::io::{Breaker, CommandError, Output, Timer};
 use super::step::{Outcome, Step};
 use super::steps::Cause;
@@ -19,6 +19,7 @@ impl Sequence {
         // Commands already sent stay checked against their status inputs.
         if was.is_running() || was == Step::Suspended {
             self.metrics.outcome = Outcome::Stopped;
+            self.metrics.restore_s = None;
             self.clear("comm", out);
             event(
                 out,
@@ -62,24 +63,7 @@ impl Sequence {
         // Loads left off (an interrupted sequence, or switched off by hand)
         // are not switched on by a mode change: that is Reset's job, and the
         // operator is told so by a standing alarm.
-        let off: Vec<String> = match &self.known {
-            Some(k) if self.comm_good && k.elcb => (0..=self.settings.zones)
-                .filter(|l| !self.faulty.contains(l) && !k.closed(Breaker::load(*l)))
-                .map(|l| l.to_string())
-                .collect(),
-            _ => Vec::new(),
-        };
-        if !off.is_empty() {
-            self.raise(
-                LOADS_OFF_ALARM,
-                priority::ZONE_ISOLATED,
-                format!(
-                    "automatic mode with load(s) {} off and not known faulty: press Reset to restore them",
-                    off.join(", ")
-                ),
-                out,
-            );
-        }
+        self.check_loads_off(out);
     }
 
     pub(super) fn reset(&mut self, now_s: f64, out: &mut Vec<Output>) -> Result<(), CommandError> {

@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::alarms::{event, faulty_alarm_key, LOCKOUT_ALARM};
+use super::alarms::{event, faulty_alarm_key, priority, LOADS_OFF_ALARM, LOCKOUT_ALARM};
 use super::io::{Output, Settings};
 use super::step::{Outcome, Step};
 use super::{Mode, Sequence};
@@ -21,6 +21,11 @@ pub struct Retained {
     /// The step a sequence was at (running or suspended) when this was
     /// saved: the server stopped in the middle of it.
     pub interrupted_at: Option<String>,
+    /// The standing alarm of loads left off in automatic mode was active (a
+    /// sequence stopped before it restored them, then automatic mode again):
+    /// it stays standing across the restart until the panel is read.
+    #[serde(default)]
+    pub loads_off: bool,
 }
 
 impl Retained {
@@ -37,6 +42,8 @@ impl Retained {
             .collect();
         if self.lockout || self.interrupted_at.is_some() {
             keys.push(LOCKOUT_ALARM.into());
+        } else if self.loads_off && self.mode == Mode::Auto {
+            keys.push(LOADS_OFF_ALARM.into());
         }
         keys
     }
@@ -86,7 +93,21 @@ impl Sequence {
                 ),
                 out,
             ),
-            (None, false) => s.set_rest_step("restored after a server restart", out),
+            (None, false) => {
+                s.set_rest_step("restored after a server restart", out);
+                if r.loads_off && r.mode == Mode::Auto {
+                    // Until the first snapshot says otherwise (see
+                    // `check_loads_off`), loads are still off.
+                    s.raise(
+                        LOADS_OFF_ALARM,
+                        priority::ZONE_ISOLATED,
+                        "automatic mode with loads left off before the server restarted: \
+                         press Reset to restore them"
+                            .into(),
+                        out,
+                    );
+                }
+            }
         }
         s
     }
@@ -106,6 +127,7 @@ impl Sequence {
             lockout: self.lockout,
             interrupted_at: (self.step == Step::Suspended || step.is_running())
                 .then(|| step.name().to_string()),
+            loads_off: self.active_alarms.contains_key(LOADS_OFF_ALARM),
         }
     }
 }

@@ -86,8 +86,11 @@ pub enum Outcome {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Metrics {
     /// From the first trip (or Reset) until every load not known faulty was
-    /// confirmed closed.
-    pub restore_s: f64,
+    /// confirmed closed after the last trip. `None` (JSON `null`) while no
+    /// such moment came: before the first sequence, while one runs, and
+    /// after a sequence that did not restore (ended in a lockout or stopped
+    /// by manual mode), so no such sequence reads "restored in 0.0 s".
+    pub restore_s: Option<f64>,
     /// Breaker state changes commanded (opens, closes, ELCB resets).
     pub switching_ops: u32,
     /// Switch-ons of a load that turned out faulty.

@@ -21,7 +21,7 @@ impl Sequence {
         self.restored = false;
         self.started_s = now_s;
         self.metrics = Metrics {
-            restore_s: 0.0,
+            restore_s: None,
             switching_ops: 0,
             reenergisations: 0,
             bound_s: self.settings.bound_s(),
@@ -373,15 +373,19 @@ impl Sequence {
                 "transient fault: every load switched on again without a trip".into(),
             );
         }
+        let took = match self.metrics.restore_s {
+            Some(s) => format!(" in {s:.1} s"),
+            None => String::new(),
+        };
         if faulty.is_empty() {
             self.metrics.outcome = Outcome::Restored;
-            self.set_rest_step("all loads restored", out);
+            self.set_rest_step(&format!("all loads restored{took}"), out);
         } else {
             self.metrics.outcome = Outcome::Isolated;
             let list: Vec<String> = faulty.iter().map(|z| z.to_string()).collect();
             self.set_rest_step(
                 &format!(
-                    "healthy zones restored; faulty zone(s) {} isolated",
+                    "healthy zones restored{took}; faulty zone(s) {} isolated",
                     list.join(", ")
                 ),
                 out,
@@ -402,7 +406,7 @@ impl Sequence {
                 .all(|(i, b)| self.faulty.contains(&(i as u8)) || k.closed(b));
         if all_on {
             self.restored = true;
-            self.metrics.restore_s = (now_s - self.started_s).max(0.0);
+            self.metrics.restore_s = Some((now_s - self.started_s).max(0.0));
         }
     }
 
@@ -412,7 +416,9 @@ impl Sequence {
         self.lockout = true;
         self.suspended_from = None;
         if self.metrics.outcome == Outcome::Running {
+            // Whatever was on before, the sequence ended without restoring.
             self.metrics.outcome = Outcome::Lockout;
+            self.metrics.restore_s = None;
         }
         self.raise(
             LOCKOUT_ALARM,
