@@ -128,6 +128,46 @@ def gen_multi(rng, i):
     return p
 
 
+def gen_commit(rng, i):
+    """A horizon whose diesels' on/off the problem decides (optimize_commitment):
+    a night or a cloudy morning, 8-16 periods, one or two diesels priced by a
+    fuel curve (no-load cost per hour, start cost, minimum up and down times,
+    the time already spent in the present state), one battery."""
+    nt = rng.choice([8, 12, 16])
+    dt = rng.choice([0.25, 0.5])
+    ids = iter(f"c{k}" for k in range(100))
+    pv = [{"id": next(ids), "cost_per_kwh": round(rng.uniform(0, 0.02), 4)}]
+    oil = []
+    for _ in range(rng.randint(1, 2)):
+        mx = round(rng.uniform(50, 160), 3)
+        mn = round(mx * rng.uniform(0.2, 0.4), 3)
+        running = rng.random() < 0.5
+        oil.append({"id": next(ids), "running": running, "min_kw": mn, "max_kw": mx,
+                    "cost_per_kwh": round(rng.uniform(0.3, 0.45), 4),
+                    "optimize_commitment": True,
+                    "no_load_cost_per_h": round(mx * rng.uniform(0.08, 0.15), 3),
+                    "start_cost": round(rng.choice([0.0, rng.uniform(0.5, 5.0)]), 3),
+                    "min_up_h": rng.choice([0.0, 0.25, 0.5, 1.0]),
+                    "min_down_h": rng.choice([0.0, 0.25, 0.5]),
+                    "hours_in_state": rng.choice([0.1, 0.3, 5.0])})
+    smin = 20.0
+    storage = [{"id": next(ids), "soc_kwh": round(rng.uniform(25, 180), 3), "soc_min_kwh": smin,
+                "soc_max_kwh": 190.0, "max_charge_kw": 50.0, "max_discharge_kw": 60.0,
+                "eff_charge": 0.95, "eff_discharge": 0.95,
+                "cycle_cost_per_kwh": round(rng.uniform(0, 0.03), 4),
+                "terminal_value_per_kwh": round(rng.uniform(0, 0.45), 4)}]
+    base = rng.uniform(40, 110)
+    periods = [{"demand_kw": round(base * rng.uniform(0.8, 1.2), 3),
+                "available_kw": {pv[0]["id"]: round(max(0.0, rng.uniform(-40, 60)), 3)}}
+               for _ in range(nt)]
+    p = {"dt_h": dt, "voll_per_kwh": 5.0, "periods": periods, "pv": pv, "wind": [],
+         "oil": oil, "storage": storage}
+    if rng.random() < 0.4:
+        p["reserve"] = {"load_frac": 0.1, "pv_frac": 0.2, "wind_frac": 0.0,
+                        "shortfall_cost_per_kwh": round(rng.uniform(0.1, 1.0), 3)}
+    return p
+
+
 # ------------------------------------------------------- independent models
 
 
@@ -136,6 +176,7 @@ class Lp:
 
     def __init__(self):
         self.lb, self.ub, self.c, self.rows, self.q, self.const = [], [], [], [], {}, 0.0
+        self.integer = []
 
     def var(self, lb, ub, c=0.0):
         self.lb.append(lb); self.ub.append(ub); self.c.append(c)
@@ -162,6 +203,10 @@ class Lp:
             idx = np.array([i for i, _ in coefs], dtype=np.int32)
             val = np.array([a for _, a in coefs], dtype=float)
             h.addRow(lo, hi, len(coefs), idx, val)
+        if self.integer:
+            h.changeColsIntegrality(len(self.integer), np.array(self.integer, dtype=np.int32),
+                                    np.array([highspy.HighsVarType.kInteger] * len(self.integer)))
+            h.setOptionValue("mip_rel_gap", 1e-7)
         if self.q:
             # Lower triangle, column-wise.
             start, index, value = [], [], []
@@ -300,6 +345,96 @@ def highs_multi(p):
     return m.solve()
 
 
+def highs_commit(p):
+    """The commitment problem as a MILP, from docs/DISPATCH.md's semantics:
+    on_t binary, start_t - stop_t = on_t - on_(t-1) (on_-1 = running),
+    min_kw on_t <= p_t <= max_kw on_t, a start within the last ceil(min_up/dt)
+    periods keeps it on, a stop within the last ceil(min_down/dt) keeps it
+    off, the first periods forced while the present state's minimum time
+    runs; cost dt (cost_per_kwh p + no_load on) + start_cost start."""
+    import math
+    m, dt, nt = Lp(), p["dt_h"], len(p["periods"])
+    rz = p.get("reserve")
+    span = lambda h: max(1, math.ceil(h / dt - 1e-9))
+    hist = {u["id"]: [] for u in p["oil"]}
+    soc_prev = {}
+    for t, per in enumerate(p["periods"]):
+        bal, ren, heads, oil_terms, oil_cap = [], [], [], [], 0.0
+        for kind in ("pv", "wind"):
+            for u in p.get(kind, []):
+                j = m.var(0, per["available_kw"][u["id"]], dt * u["cost_per_kwh"])
+                bal.append((j, 1.0)); ren.append((j, kind))
+        for u in p["oil"]:
+            j = m.var(0, u["max_kw"], dt * u["cost_per_kwh"])
+            left = 0.0
+            if u.get("hours_in_state") is not None:
+                need = u["min_up_h"] if u["running"] else u["min_down_h"]
+                left = max(0.0, need - u["hours_in_state"])
+            forced = math.ceil(left / dt - 1e-9 / dt) if left > 0 else 0
+            if t < forced:
+                v = 1.0 if u["running"] else 0.0
+                on = m.var(v, v, dt * u["no_load_cost_per_h"])
+            else:
+                on = m.var(0, 1, dt * u["no_load_cost_per_h"])
+            m.integer.append(on)
+            st = m.var(0, 1, u["start_cost"])
+            sp = m.var(0, 1, 0.0)
+            m.row(-INF, 0, [(j, 1), (on, -u["max_kw"])])
+            m.row(-INF, 0, [(j, -1), (on, u["min_kw"])])
+            h = hist[u["id"]]
+            if h:
+                m.row(0, 0, [(on, 1), (h[-1][0], -1), (st, -1), (sp, 1)])
+            else:
+                r0 = 1.0 if u["running"] else 0.0
+                m.row(r0, r0, [(on, 1), (st, -1), (sp, 1)])
+            h.append((on, st, sp))
+            if u["min_up_h"] > 0:
+                win = h[max(0, len(h) - span(u["min_up_h"])):]
+                m.row(-INF, 0, [(x[1], 1) for x in win] + [(on, -1)])
+            if u["min_down_h"] > 0:
+                win = h[max(0, len(h) - span(u["min_down_h"])):]
+                m.row(-INF, 1, [(x[2], 1) for x in win] + [(on, 1)])
+            bal.append((j, 1.0))
+            oil_terms.append((j, on, u["max_kw"]))
+        for s_ in p["storage"]:
+            c = dt * s_["cycle_cost_per_kwh"]
+            ch = m.var(0, s_["max_charge_kw"], c)
+            dis = m.var(0, s_["max_discharge_kw"], c)
+            floor = s_["soc_min_kwh"]
+            if t == nt - 1 and s_.get("final_soc_min_kwh") is not None:
+                floor = min(max(floor, s_["final_soc_min_kwh"]), s_["soc_max_kwh"])
+            soc = m.var(floor, s_["soc_max_kwh"],
+                        -s_.get("terminal_value_per_kwh", 0) if t == nt - 1 else 0)
+            bal += [(ch, -1.0), (dis, 1.0)]
+            dyn = [(soc, 1), (ch, -s_["eff_charge"] * dt), (dis, dt / s_["eff_discharge"])]
+            ps = soc_prev.get(s_["id"])
+            if ps is None:
+                m.row(s_["soc_kwh"], s_["soc_kwh"], dyn)
+            else:
+                m.row(0, 0, dyn + [(ps, -1)])
+            if rz:
+                hv = m.var(0, INF)
+                g = s_["eff_discharge"] / dt
+                net = [(dis, 1), (ch, -1)]
+                m.row(-INF, s_["max_discharge_kw"], [(hv, 1)] + net)
+                if ps is None:
+                    m.row(-INF, (s_["soc_kwh"] - s_["soc_min_kwh"]) * g, [(hv, 1)] + net)
+                else:
+                    m.row(-INF, -s_["soc_min_kwh"] * g, [(hv, 1)] + net + [(ps, -g)])
+                heads.append(hv)
+            soc_prev[s_["id"]] = soc
+        bal.append((m.var(0, per["demand_kw"], dt * p["voll_per_kwh"]), 1.0))
+        m.row(per["demand_kw"], per["demand_kw"], bal)
+        if rz:
+            sf = m.var(0, INF, dt * rz["shortfall_cost_per_kwh"])
+            # sum(max on - p_oil) + sum h + sf >= load_frac D + pv_frac p_pv
+            coefs = [(j, -1) for j, _, _ in oil_terms] + [(on, mx) for _, on, mx in oil_terms]
+            coefs += [(hh, 1) for hh in heads] + [(sf, 1)]
+            coefs += [(j, -rz.get(f"{k}_frac", 0)) for j, k in ren]
+            m.row(rz.get("load_frac", 0) * per["demand_kw"], INF, coefs)
+    return m.solve()
+
+
 # -------------------------------------------------- checks of our answers
 
 
@@ -408,6 +543,41 @@ def check_multi(p, s):
     return err, cost
 
 
+def check_commit(p, s, hobj):
+    """Our commitment answer against HiGHS's MILP optimum: the objective within
+    the search's gap (0.1 %, or the gap it reports when unproven), and the
+    schedule it chose, fixed, is feasible and costs what it says."""
+    import copy
+    errs = []
+    c = s.get("commitment")
+    if not c:
+        return ["no commitment in the answer"]
+    gap = 1e-3 * max(1.0, abs(hobj)) + 1e-6
+    if s["objective"] < hobj - 1e-5 * max(1.0, abs(hobj)):
+        errs.append(f"objective {s['objective']!r} below HiGHS's optimum {hobj!r}")
+    if c["proven"] and s["objective"] > hobj + gap:
+        errs.append(f"proven objective {s['objective']!r} vs HiGHS {hobj!r}")
+    if not c["proven"] and s["objective"] > hobj * 1.01 + 1e-6:
+        errs.append(f"unproven objective {s['objective']!r} more than 1 % above HiGHS {hobj!r}")
+    if c["lower_bound"] > hobj + gap:
+        errs.append(f"lower bound {c['lower_bound']!r} above HiGHS's optimum {hobj!r}")
+    fixed = copy.deepcopy(p)
+    extra = 0.0
+    for u in fixed["oil"]:
+        sched = c["running"][u["id"]]
+        prev = u["running"]
+        for t, on in enumerate(sched):
+            fixed["periods"][t].setdefault("running", {})[u["id"]] = on
+            extra += p["dt_h"] * u["no_load_cost_per_h"] * on + u["start_cost"] * (on and not prev)
+            prev = on
+        u.pop("initial_kw", None)
+    e, recomputed = check_multi(fixed, s)
+    errs += e
+    if not rel_ok(recomputed + extra, s["objective"]):
+        errs.append(f"objective {s['objective']!r} but setpoints and schedule cost {recomputed + extra!r}")
+    return errs
+
+
 # ------------------------------------------------------------------- main
 
 
@@ -420,6 +590,7 @@ def main():
     ap.add_argument("bin", nargs="?", default=os.environ.get("GRIDSCADA_BIN"))
     ap.add_argument("--single", type=int, default=200)
     ap.add_argument("--multi", type=int, default=50)
+    ap.add_argument("--commit", type=int, default=40)
     ap.add_argument("--seed", type=int, default=20240601)
     a = ap.parse_args()
     if not a.bin:
@@ -427,7 +598,8 @@ def main():
     rng = random.Random(a.seed)
     singles = [gen_single(rng, i) for i in range(a.single)]
     multis = [gen_multi(rng, i) for i in range(a.multi)]
-    problems = singles + multis
+    commits = [gen_commit(rng, i) for i in range(a.commit)]
+    problems = singles + multis + commits
 
     t0 = time.perf_counter()
     proc = subprocess.run([a.bin, "dispatch", "solve", "-"], input=json.dumps(problems),
@@ -439,17 +611,25 @@ def main():
     assert len(answers) == len(problems)
 
     passed, failed = 0, 0
-    ours_ms = {"single": [], "multi": []}
-    highs_ms = {"single": [], "multi": []}
+    ours_ms = {"single": [], "multi": [], "commit": []}
+    highs_ms = {"single": [], "multi": [], "commit": []}
     for i, (p, s) in enumerate(zip(problems, answers)):
-        kind = "multi" if "periods" in p else "single"
-        hs, hobj, hms = (highs_multi if kind == "multi" else highs_single)(p)
+        if "periods" not in p:
+            kind = "single"
+        elif any(u.get("optimize_commitment") for u in p["oil"]):
+            kind = "commit"
+        else:
+            kind = "multi"
+        solver = {"single": highs_single, "multi": highs_multi, "commit": highs_commit}[kind]
+        hs, hobj, hms = solver(p)
         highs_ms[kind].append(hms)
         problems_found = []
         if s["status"] == "optimal":
             ours_ms[kind].append(s["solve_ms"])
         if s["status"] != hs:
             problems_found.append(f"status {s['status']} vs HiGHS {hs} ({s.get('reason', '')})")
+        elif hs == "optimal" and kind == "commit":
+            problems_found += check_commit(p, s, hobj)
         elif hs == "optimal":
             if not rel_ok(s["objective"], hobj):
                 problems_found.append(f"objective {s['objective']!r} vs HiGHS {hobj!r}")
@@ -463,7 +643,7 @@ def main():
         else:
             passed += 1
 
-    for kind in ("single", "multi"):
+    for kind in ("single", "multi", "commit"):
         print(f"{kind}: gridscada solve_ms p50 {pct(ours_ms[kind], 50):.3f} p99 {pct(ours_ms[kind], 99):.3f}; "
               f"HiGHS p50 {pct(highs_ms[kind], 50):.3f} p99 {pct(highs_ms[kind], 99):.3f}")
     print(f"batch wall time {wall:.2f} s for {len(problems)} problems")

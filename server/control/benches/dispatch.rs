@@ -198,6 +198,31 @@ fn main() {
     let n = nodes.len();
     report("  relaxations per plan (count, not ms)", nodes);
     println!("  schedules proven optimal within 0.1 %: {proven} of {n}");
+    // A day ahead with everything known (the replay's perfect-foresight
+    // optimum): 96 periods, the commitment decided over the whole day.
+    for soc in [30.0, 100.0] {
+        let mut p = lookahead(0, soc, false);
+        let day = horizon(0.0);
+        p.periods = day.periods.clone();
+        p.max_commitment_nodes = Some(1500);
+        // For solving the same day with another solver (docs/BENCHMARKS.md).
+        if let Some(dir) = std::env::var_os("BENCH_DUMP_DIR") {
+            let path = std::path::Path::new(&dir).join(format!("day-ahead-soc{soc}.json"));
+            std::fs::write(path, serde_json::to_string(&p).expect("problem as JSON"))
+                .expect("writing the problem");
+        }
+        let t = Instant::now();
+        let sol = p.solve().expect("day-ahead commitment");
+        let c = sol.commitment.unwrap();
+        println!(
+            "day-ahead 96 x 15 min commitment, soc {soc:>5}: {:>8.0} ms, {} relaxations, cost {:.2}, bound {:.2} ({}proven)",
+            t.elapsed().as_secs_f64() * 1e3,
+            c.nodes,
+            sol.objective,
+            c.lower_bound,
+            if c.proven { "" } else { "not " }
+        );
+    }
     let q = horizon(0.001);
     report(
         "96-period horizon, 5 units, QP",

@@ -138,6 +138,16 @@ pub(super) fn perfect_foresight(
         return None;
     }
     let problem = day_problem(mg, fuel_price, rec.period_h(), periods, baseline, end)?;
+    // The day's problem as `gridscada dispatch solve` reads it, for solving it
+    // with another solver (docs/BENCHMARKS.md, "Dispatch against the optimum").
+    if let Some(path) = std::env::var_os("GRIDSCADA_FORESIGHT_OUT") {
+        let written = serde_json::to_string(&problem)
+            .map_err(|e| e.to_string())
+            .and_then(|text| std::fs::write(&path, text).map_err(|e| e.to_string()));
+        if let Err(e) = written {
+            tracing::warn!("cannot write the perfect-foresight problem to {path:?}: {e}");
+        }
+    }
     let covered_h = periods.len() as f64 * rec.period_h();
     Some(match problem.solve() {
         Ok(sol) => {

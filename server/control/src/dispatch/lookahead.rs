@@ -63,6 +63,10 @@ pub fn forecast(
     (expected * (1.0 + (ratio - 1.0) * fade)).max(0.0)
 }
 
+/// Seconds of full discharge the plan keeps stored above the minimum: a
+/// diesel's start (10 s in the simulator) and a few dispatch periods.
+pub const START_RESERVE_S: f64 = 60.0;
+
 /// Relaxations the live plan's commitment search may solve.
 pub const LIVE_COMMITMENT_NODES: usize = 300;
 
@@ -255,6 +259,14 @@ pub fn horizon_problem_over(
             .map(|s| HorizonStorage {
                 unit: StorageUnit {
                     stored_value_per_kwh: 0.0,
+                    // The plan keeps enough stored to carry full discharge
+                    // while a diesel starts ([`START_RESERVE_S`]): a plan
+                    // that empties the battery the moment it starts the
+                    // diesel sheds load for the start's seconds. Never above
+                    // what is stored now, so the plan stays feasible.
+                    soc_min_kwh: (s.soc_min_kwh + s.max_discharge_kw * START_RESERVE_S / 3600.0)
+                        .min(s.soc_kwh.max(s.soc_min_kwh))
+                        .min(s.soc_max_kwh),
                     ..s.clone()
                 },
                 ramp_kw_per_s: ramp_of(&s.id),

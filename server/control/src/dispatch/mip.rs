@@ -94,10 +94,21 @@ pub(crate) fn solve_binary(
     binaries: &[usize],
     limits: MipLimits,
 ) -> Result<MipSolution, SolveFailure> {
+    solve_binary_from(model, binaries, limits, None)
+}
+
+/// [`solve_binary`] starting from a known integer point `start` (its
+/// objective prunes from the first node on).
+pub(crate) fn solve_binary_from(
+    model: &Model,
+    binaries: &[usize],
+    limits: MipLimits,
+    start: Option<Vec<f64>>,
+) -> Result<MipSolution, SolveFailure> {
     let mut work = model.clone();
     let mut nodes = 0usize;
     let mut seq = 0usize;
-    let mut best: Option<(f64, Vec<f64>)> = None;
+    let mut best: Option<(f64, Vec<f64>)> = start.map(|x| (model.objective(&x), x));
     let mut heap = BinaryHeap::new();
     heap.push(Node {
         bound: f64::NEG_INFINITY,
@@ -158,7 +169,7 @@ pub(crate) fn solve_binary(
         };
         // Rounding dives: at the root and now and then, fix every binary to
         // a rounded value and solve the rest, for an incumbent to prune with.
-        if nodes == 1 || nodes % 16 == 0 {
+        if nodes == 1 || nodes.is_multiple_of(16) {
             for threshold in [INT_TOL, 0.5] {
                 let fixes: Vec<(usize, f64)> = binaries
                     .iter()
@@ -208,6 +219,49 @@ pub(crate) fn solve_binary(
             }
         })),
     }
+}
+
+/// Relax and fix: a good integer point for a long horizon, fast. The
+/// binaries come in `groups` in time order (one group per period); a window
+/// of `window` groups is searched as binaries with everything before it
+/// fixed and everything after it relaxed, then its first `step` groups are
+/// fixed, and the window moves on. Not a proof of anything: it gives the
+/// exact search an incumbent to prune with from the start.
+pub(crate) fn relax_and_fix(
+    model: &Model,
+    groups: &[Vec<usize>],
+    window: usize,
+    step: usize,
+    nodes_per_window: usize,
+) -> Option<Vec<f64>> {
+    let mut fixed = model.clone();
+    let step = step.max(1);
+    let mut at = 0;
+    while at < groups.len() {
+        let end = (at + window.max(step)).min(groups.len());
+        let ints: Vec<usize> = groups[at..end].iter().flatten().copied().collect();
+        let limits = MipLimits {
+            max_nodes: nodes_per_window,
+            ..MipLimits::default()
+        };
+        let sol = solve_binary(&fixed, &ints, limits).ok()?;
+        let keep = if end == groups.len() {
+            end
+        } else {
+            (at + step).min(end)
+        };
+        for &j in groups[at..keep].iter().flatten() {
+            let v = sol.x[j].round();
+            fixed.lb[j] = v;
+            fixed.ub[j] = v;
+        }
+        at = keep;
+    }
+    let mut x = fixed.solve_relaxation().ok()?;
+    for &j in groups.iter().flatten() {
+        x[j] = x[j].round();
+    }
+    Some(x)
 }
 
 /// Solves the relaxation of `model` with `fixes` applied to a working copy

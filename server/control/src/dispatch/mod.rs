@@ -304,7 +304,9 @@ mod tests {
             .stderr
             .contains("dt_h: 9000 is not a number of hours in (0, 8784]"));
         assert!(out.stderr.contains("oil[0].max_kw: -150 is negative"));
-        assert!(out.stderr.contains("oil[0].max_kw: -150 is below min_kw 30"));
+        assert!(out
+            .stderr
+            .contains("oil[0].max_kw: -150 is below min_kw 30"));
         assert!(out
             .stderr
             .contains("storage[0].eff_charge: 1.2 is outside (0, 1]"));

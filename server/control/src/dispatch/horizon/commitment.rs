@@ -5,7 +5,10 @@
 
 use std::collections::BTreeMap;
 
-use crate::dispatch::mip::{solve_binary, MipLimits};
+use crate::dispatch::mip::{relax_and_fix, solve_binary_from, MipLimits};
+
+/// Horizons longer than this many periods get a relax-and-fix start.
+const RELAX_AND_FIX_FROM: usize = 24;
 use crate::dispatch::DispatchError;
 
 use super::{CommitmentResult, HorizonProblem};
@@ -24,7 +27,24 @@ pub(super) fn decide(p: &HorizonProblem) -> Result<CommitmentResult, DispatchErr
         max_nodes: p.max_nodes(),
         ..MipLimits::default()
     };
-    let sol = solve_binary(&model, &binaries, limits)?;
+    // A long horizon starts from a relax-and-fix schedule (a day of 15-minute
+    // periods has too many on/off decisions for rounding to find a good one).
+    let start = if p.periods.len() > RELAX_AND_FIX_FROM {
+        let groups: Vec<Vec<usize>> = (0..p.periods.len())
+            .map(|t| {
+                v.commit
+                    .iter()
+                    .filter_map(|c| c.get(t))
+                    .map(|c| c.on)
+                    .filter(|&j| model.lb[j] != model.ub[j])
+                    .collect()
+            })
+            .collect();
+        relax_and_fix(&model, &groups, 16, 8, 40)
+    } else {
+        None
+    };
+    let sol = solve_binary_from(&model, &binaries, limits, start)?;
     let mut running = BTreeMap::new();
     let mut starts = BTreeMap::new();
     for (k, u) in p.oil.iter().enumerate() {

@@ -105,14 +105,18 @@ impl HorizonProblem {
                     .find(|(id, _)| *id == u.id)
                     .map(|(_, j)| *j)
             };
-            let (up, down, rhs0): (Vec<(usize, f64)>, Vec<(usize, f64)>, f64) = match prev_p {
-                Some(pp) => (vec![(p, 1.0), (pp, -1.0)], vec![(p, -1.0), (pp, 1.0)], 0.0),
-                None => (vec![(p, 1.0)], vec![(p, -1.0)], u.initial_kw.unwrap_or(0.0)),
+            // p − p_prev ≤ r + max·start and p_prev − p ≤ r + max·stop
+            // (p_prev is the setpoint in force before the first period).
+            let mut up = vec![(p, 1.0), (start, -u.max_kw)];
+            let mut down = vec![(p, -1.0), (stop, -u.max_kw)];
+            let rhs0 = match prev_p {
+                Some(pp) => {
+                    up.push((pp, -1.0));
+                    down.push((pp, 1.0));
+                    0.0
+                }
+                None => u.initial_kw.unwrap_or(0.0),
             };
-            let mut up = up;
-            up.push((start, -u.max_kw));
-            let mut down = down;
-            down.push((stop, -u.max_kw));
             m.row(
                 format!("{} ramp-up limit in period {t}", u.id),
                 up,
