@@ -195,6 +195,16 @@ pub(crate) fn solve_binary_from(
             });
         }
     }
+    // Stopped short: polish the incumbent by single flips (each binary
+    // turned over, the rest held, the continuous part solved again), while
+    // one improves it.
+    if !proven {
+        if let Some((v, x)) = best.take() {
+            let (v, x, tried) = improve_by_flips(model, &mut work, binaries, v, x);
+            nodes += tried;
+            best = Some((v, x));
+        }
+    }
     let lowest_open = heap.iter().map(|n| n.bound).fold(f64::INFINITY, f64::min);
     match best {
         Some((objective, x)) => Ok(MipSolution {
@@ -219,6 +229,53 @@ pub(crate) fn solve_binary_from(
             }
         })),
     }
+}
+
+/// First-improvement local search over single flips of the binaries, at
+/// most three passes; returns the point, its objective and the
+/// relaxations solved.
+fn improve_by_flips(
+    model: &Model,
+    work: &mut Model,
+    binaries: &[usize],
+    mut value: f64,
+    mut x: Vec<f64>,
+) -> (f64, Vec<f64>, usize) {
+    let mut tried = 0;
+    for _pass in 0..3 {
+        let mut improved = false;
+        for &flip in binaries {
+            let fixes: Vec<(usize, f64)> = binaries
+                .iter()
+                .map(|&b| {
+                    (
+                        b,
+                        if b == flip {
+                            1.0 - x[b].round()
+                        } else {
+                            x[b].round()
+                        },
+                    )
+                })
+                .collect();
+            tried += 1;
+            if let Ok(xr) = relax(model, work, &fixes) {
+                let v = model.objective(&xr);
+                if v < value - 1e-9 * value.abs().max(1.0) {
+                    value = v;
+                    x = xr;
+                    for &b in binaries {
+                        x[b] = x[b].round();
+                    }
+                    improved = true;
+                }
+            }
+        }
+        if !improved {
+            break;
+        }
+    }
+    (value, x, tried)
 }
 
 /// Relax and fix: a good integer point for a long horizon, fast. The

@@ -7,8 +7,8 @@ use std::collections::BTreeMap;
 
 use crate::dispatch::mip::{relax_and_fix, solve_binary_from, MipLimits};
 
-/// Horizons longer than this many periods get a relax-and-fix start.
-const RELAX_AND_FIX_FROM: usize = 24;
+/// Searches with more on/off decisions than this start from relax and fix.
+const RELAX_AND_FIX_FROM: usize = 16;
 use crate::dispatch::DispatchError;
 
 use super::{CommitmentResult, HorizonProblem};
@@ -27,9 +27,10 @@ pub(super) fn decide(p: &HorizonProblem) -> Result<CommitmentResult, DispatchErr
         max_nodes: p.max_nodes(),
         ..MipLimits::default()
     };
-    // A long horizon starts from a relax-and-fix schedule (a day of 15-minute
-    // periods has too many on/off decisions for rounding to find a good one).
-    let start = if p.periods.len() > RELAX_AND_FIX_FROM {
+    // Many on/off decisions (a day of 15-minute periods, or several
+    // diesels) start from a relax-and-fix schedule: rounding the relaxation
+    // rarely finds a good one there.
+    let start = if binaries.len() > RELAX_AND_FIX_FROM {
         let groups: Vec<Vec<usize>> = (0..p.periods.len())
             .map(|t| {
                 v.commit
@@ -40,7 +41,8 @@ pub(super) fn decide(p: &HorizonProblem) -> Result<CommitmentResult, DispatchErr
                     .collect()
             })
             .collect();
-        relax_and_fix(&model, &groups, 16, 8, 40)
+        let window = if p.periods.len() > 24 { 16 } else { 8 };
+        relax_and_fix(&model, &groups, window, window / 2, 40)
     } else {
         None
     };
