@@ -407,7 +407,7 @@ fn the_demo_plant_looks_ahead_with_forecasts() {
 fn horizon_settings_and_forecast_curves_are_checked() {
     let got = demo_plant_with(|s| {
         s.replace("periods = 16\n", "periods = 2.5\n")
-            .replace("resolve_s = 60.0", "resolve_s = 1.0")
+            .replace("resolve_s = 300.0", "resolve_s = 1.0")
             .replace("[0, 61], [2, 60]", "[0, 61], [0, 60]")
             .replace("[12, 95]", "[12, 195]")
             .replace("[18, 0],\n]", "[24, 0],\n]")
