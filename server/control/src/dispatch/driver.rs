@@ -52,14 +52,14 @@ pub enum DispatchPolicy {
     Rule,
 }
 
-/// What a kWh left in `unit` is worth to the single-period LP: the cheapest
-/// diesel energy it will displace later, discounted by the round trip and a
-/// margin. That makes storing a renewable surplus (or a running diesel's
-/// minimum-load excess) worth more than curtailing it, while charging from a
-/// diesel that could be turned down never pays (value·eff_c < diesel cost),
-/// and discharging stays cheaper than starting the diesel. Without a diesel,
-/// stored energy displaces shedding later: a small share of the value of
-/// lost load.
+/// What a kWh left in `unit` is worth when no plan says better: the
+/// cheapest diesel energy it will displace later (a kWh at full load, no-load
+/// fuel included), discounted by the round trip and a margin. That makes
+/// storing a renewable surplus (or a running diesel's minimum-load excess)
+/// worth more than curtailing it. It prices stored energy in the
+/// single-period LP without a fresh plan and ends the day-long relaxation
+/// that values what a plan leaves stored. Without a diesel, stored energy
+/// displaces shedding later: a small share of the value of lost load.
 fn stored_energy_value(mg: &MicrogridConfig, unit: &UnitConfig) -> f64 {
     const MARGIN: f64 = 0.9;
     let round_trip = *unit.eff_charge.get_ref() * *unit.eff_discharge.get_ref();
@@ -413,10 +413,10 @@ impl Dispatcher {
             o.running = cmd && meas.unwrap_or(cmd);
         }
 
-        // A running diesel stops only once the battery is charged (the
-        // commitment rule, which the plan relaxes away), so while one runs a
-        // stored kWh is worth at least the fixed estimate: storing surplus
-        // then shortens the diesel's run.
+        // While a diesel runs, a stored kWh is worth at least the fixed
+        // estimate, so surplus beside it is stored rather than curtailed
+        // (kept from the rule's days: a plan expecting the battery to fill
+        // anyway curtailed wind beside a diesel at minimum load).
         let diesel_committed = self.diesels.iter().any(|d| d.run);
         for s in &mut problem.storage {
             if let Some(v) = self.planned_value(&s.id, now) {

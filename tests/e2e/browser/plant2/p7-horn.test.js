@@ -41,6 +41,9 @@ test('the horn sounds until silenced or acknowledged; mute belongs to the sessio
     assert.ok(stored.until > Date.now() && stored.until <= Date.now() + 16 * 60_000, 'the mute expires');
     assert.equal(await page.evaluate(() => localStorage.getItem('gridscada.alarmMuted')), null, 'not kept in the browser for good');
     await page.locator('#logout').click();
+    // The log out ends (session deleted on the server) before the next
+    // login: a page loaded while the DELETE is in flight still has a session.
+    await page.locator('#login-user').waitFor();
     await login(page, c.user, c.password);
     await page.locator('#footer-mute[aria-pressed="false"]', { hasText: 'Mute horn' }).waitFor();
 
