@@ -645,9 +645,7 @@ impl Dispatcher {
     /// price of shedding: a shortfall the forecast only expects later never
     /// makes the dispatch shed now to save energy for it.
     fn planned_value(&self, id: &str, now: Timestamp) -> Option<f64> {
-        let h = self.cfg.horizon.as_ref()?;
-        let p = self.plan.as_ref().filter(|p| p.is_optimal())?;
-        let fresh = now >= p.at && now.since(p.at).as_secs_f64() <= 3.0 * *h.resolve_s.get_ref();
+        let p = self.fresh_plan(now)?;
         let eff_d = self
             .cfg
             .units
@@ -655,10 +653,16 @@ impl Dispatcher {
             .find(|u| u.id.get_ref() == id)
             .map_or(1.0, |u| *u.eff_discharge.get_ref());
         let cap = 0.9 * self.cfg.voll_per_kwh * eff_d;
-        fresh
-            .then(|| p.stored_energy_value_per_kwh.get(id))
-            .flatten()
-            .map(|v| v.min(cap))
+        p.stored_energy_value_per_kwh.get(id).map(|v| v.min(cap))
+    }
+
+    /// The last plan, while it is optimal and no older than three re-plan
+    /// intervals: the one freshness rule for its prices and its commitment.
+    fn fresh_plan(&self, now: Timestamp) -> Option<&HorizonPlan> {
+        let h = self.cfg.horizon.as_ref()?;
+        let p = self.plan.as_ref().filter(|p| p.is_optimal())?;
+        let fresh = now >= p.at && now.since(p.at).as_secs_f64() <= 3.0 * *h.resolve_s.get_ref();
+        fresh.then_some(p)
     }
 
     /// The single-period LP with each running diesel held at the plan's
@@ -704,10 +708,7 @@ impl Dispatcher {
     /// Whether the plan runs diesel `id` now, while the plan is optimal and
     /// no older than three re-plan intervals.
     fn planned_run(&self, id: &str, now: Timestamp) -> Option<bool> {
-        let h = self.cfg.horizon.as_ref()?;
-        let p = self.plan.as_ref().filter(|p| p.is_optimal())?;
-        let fresh = now >= p.at && now.since(p.at).as_secs_f64() <= 3.0 * *h.resolve_s.get_ref();
-        fresh.then(|| p.runs_now(id)).flatten()
+        self.fresh_plan(now)?.runs_now(id)
     }
 
     fn apply_fallback(&self, problem: &DispatchProblem, st: &mut DispatchStatus) {
