@@ -639,19 +639,8 @@ async fn load_screens(web: &gridscada_web::WebState, mode: Mode) -> anyhow::Resu
 /// The web layer's view of a running stack.
 pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
     let policy = gridscada_web::auth::SessionPolicy::from_config(&stack.plant.server.sessions);
-    let auth = gridscada_web::Auth::new(policy, false).await;
-    // Abandoned sessions are forgotten, not kept until the next restart.
-    let sessions = Arc::downgrade(&auth.sessions);
-    tokio::spawn(async move {
-        let mut tick = tokio::time::interval(std::time::Duration::from_secs(60));
-        loop {
-            tick.tick().await;
-            match sessions.upgrade() {
-                Some(s) => s.sweep(),
-                None => return,
-            }
-        }
-    });
+    // Sessions in the store, with their upkeep (activity, re-checks, sweep).
+    let auth = gridscada_web::Auth::new(policy, false, stack.store.clone()).await;
     gridscada_web::WebState {
         db: stack.db.clone(),
         plant: stack.plant.clone(),

@@ -35,7 +35,10 @@ pub async fn demo_credentials(
             .map_err(|e| anyhow!("hashing a password: {e}"))?;
         match store.user(name).await? {
             Some(_) => {
-                store.set_password_hash(name, &hash, clock.now()).await?;
+                // The new password ends the account's sessions.
+                store
+                    .set_password_hash(name, &hash, clock.now(), None)
+                    .await?;
                 store.set_user_blocked(name, false).await?;
                 store.set_user_role(name, role).await?;
             }

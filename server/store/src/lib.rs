@@ -3,7 +3,7 @@
 //! **Owns:** the database schema (one logical schema, two backends: SQLite
 //! embedded by default, PostgreSQL for large or shared sites), its migrations,
 //! and every query: historian samples, the event log, alarm states and alarm
-//! history, users and screen access, dispatch records. Also the historian's
+//! history, users and screen access, login sessions, dispatch records. Also the historian's
 //! logging policy ([`Recorder`], pure) and its bounded writer task
 //! ([`Historian`]).
 //!
@@ -49,6 +49,8 @@ mod historian;
 mod panels;
 mod recorder;
 mod screens;
+#[macro_use]
+mod sessions;
 mod store;
 mod users;
 mod writer;
@@ -65,6 +67,7 @@ pub use historian::{
 };
 pub use recorder::{RecordPolicy, Recorder};
 pub use screens::{ScreenRecord, MAX_SCREEN_BYTES};
+pub use sessions::{SessionKey, SessionRecord};
 pub use store::{BackendKind, OpenOptions, SqliteSync, Store};
 pub use users::{NewUser, User, UserSummary};
 pub use writer::{Historian, HistorianConfig, HistorianHandle, HistorianMetrics};

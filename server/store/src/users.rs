@@ -1,6 +1,8 @@
 //! Users and screen access.
 //!
-//! **Owns:** the `users` and `group_screens` tables. **Must not touch:**
+//! **Owns:** the `users` and `group_screens` tables; a change that ends a
+//! user's sessions (block, delete, password, role) deletes them from
+//! `sessions` in the same transaction. **Must not touch:**
 //! password hashing and login policy (the web layer hashes; this stores the
 //! hash string as given and never sees a password).
 
@@ -10,6 +12,7 @@ use serde::Serialize;
 
 use crate::error::{db, is_unique_violation};
 use crate::events::check_text;
+use crate::sessions::{Revoke, SessionKey};
 use crate::{Result, Store, StoreError};
 
 /// A user to create.
@@ -148,18 +151,35 @@ impl Store {
         rows.into_iter().map(user).collect()
     }
 
-    async fn update_user(&self, name: &str, sql: &str, bind: UserUpdate<'_>) -> Result<()> {
+    /// Runs one `UPDATE users ... WHERE name = $1` and ends the sessions
+    /// `revoke` names, in one transaction.
+    async fn update_user(
+        &self,
+        name: &str,
+        sql: &str,
+        bind: UserUpdate<'_>,
+        revoke: Revoke<'_>,
+    ) -> Result<()> {
         let n = on_backend!(self, writer, |p| {
+            let mut tx = p.begin().await.map_err(db("changing a user"))?;
             let q = sqlx::query(sql).bind(name);
             let q = match bind {
                 UserUpdate::Text(s) => q.bind(s),
                 UserUpdate::Flag(b) => q.bind(b),
                 UserUpdate::Hash(h, at) => q.bind(h).bind(at),
             };
-            q.execute(p)
+            let n = q
+                .execute(&mut *tx)
                 .await
                 .map_err(db("changing a user"))?
-                .rows_affected()
+                .rows_affected();
+            if n > 0 {
+                let ended: std::result::Result<u64, sqlx::Error> =
+                    revoke_on!(&mut *tx, name, revoke);
+                ended.map_err(db("ending a user's sessions"))?;
+                tx.commit().await.map_err(db("changing a user"))?;
+            }
+            n
         });
         if n == 0 {
             return Err(StoreError::NotFound(format!("user '{name}'")));
@@ -167,32 +187,45 @@ impl Store {
         Ok(())
     }
 
-    /// Replaces a user's password hash and stamps the change.
-    pub async fn set_password_hash(&self, name: &str, hash: &str, at: Timestamp) -> Result<()> {
+    /// Replaces a user's password hash and stamps the change. Every session
+    /// of the user ends with it but `keep` (the one that changed its own
+    /// password).
+    pub async fn set_password_hash(
+        &self,
+        name: &str,
+        hash: &str,
+        at: Timestamp,
+        keep: Option<&SessionKey>,
+    ) -> Result<()> {
         check_text("password hash", hash, 1024)?;
         self.update_user(
             name,
             "UPDATE users SET password_hash = $2, password_changed_at = $3 WHERE name = $1",
             UserUpdate::Hash(hash, at.as_millis()),
+            Revoke::AllBut(keep),
         )
         .await
     }
 
-    /// Blocks (a blocked user cannot log in) or unblocks a user.
+    /// Blocks (a blocked user cannot log in, and their sessions end) or
+    /// unblocks a user.
     pub async fn set_user_blocked(&self, name: &str, blocked: bool) -> Result<()> {
         self.update_user(
             name,
             "UPDATE users SET blocked = $2 WHERE name = $1",
             UserUpdate::Flag(blocked),
+            if blocked { Revoke::All } else { Revoke::None },
         )
         .await
     }
 
+    /// Changes a user's role; the sessions started under another role end.
     pub async fn set_user_role(&self, name: &str, role: Role) -> Result<()> {
         self.update_user(
             name,
             "UPDATE users SET role = $2 WHERE name = $1",
             UserUpdate::Text(role.label()),
+            Revoke::RoleNot(role),
         )
         .await
     }
@@ -203,20 +236,26 @@ impl Store {
             name,
             "UPDATE users SET group_name = $2 WHERE name = $1",
             UserUpdate::Text(group),
+            Revoke::None,
         )
         .await
     }
 
-    /// Deletes a user; returns whether it existed.
+    /// Deletes a user and their sessions; returns whether it existed.
     pub async fn delete_user(&self, name: &str) -> Result<bool> {
         Ok(on_backend!(self, writer, |p| {
-            sqlx::query("DELETE FROM users WHERE name = $1")
+            let mut tx = p.begin().await.map_err(db("deleting a user"))?;
+            let ended: std::result::Result<u64, sqlx::Error> =
+                revoke_on!(&mut *tx, name, Revoke::All);
+            ended.map_err(db("ending a user's sessions"))?;
+            let n = sqlx::query("DELETE FROM users WHERE name = $1")
                 .bind(name)
-                .execute(p)
+                .execute(&mut *tx)
                 .await
                 .map_err(db("deleting a user"))?
-                .rows_affected()
-                > 0
+                .rows_affected();
+            tx.commit().await.map_err(db("deleting a user"))?;
+            n > 0
         }))
     }
 

@@ -856,7 +856,7 @@ async fn users_crud(db: TestDb) {
     s.set_user_blocked("alice", true).await.unwrap();
     s.set_user_role("alice", Role::Supervisor).await.unwrap();
     s.set_user_group("alice", "supervisors").await.unwrap();
-    s.set_password_hash("alice", "$argon2id$new", ts(5000))
+    s.set_password_hash("alice", "$argon2id$new", ts(5000), None)
         .await
         .unwrap();
     let a = s.user("alice").await.unwrap().unwrap();

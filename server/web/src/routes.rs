@@ -715,16 +715,19 @@ impl WebState {
         let background = headers
             .get(BACKGROUND_HEADER)
             .is_some_and(|v| v.as_bytes() == b"1");
-        let name = if background {
-            self.auth.sessions.user_untouched(&token)
+        let session = if background {
+            self.auth.sessions.user_untouched(&token).await
         } else {
-            self.auth.sessions.user(&token)
+            self.auth.sessions.user(&token).await
         };
-        let Some(name) = name else {
+        let Some(session) = session else {
             return Principal::anonymous();
         };
-        match self.store.user(&name).await {
-            Ok(Some(u)) if !u.blocked => {
+        match self.store.user(&session.user).await {
+            // The role is checked too: a change made by another process
+            // (`gridscada user`, another server) ends the session here at
+            // once, before the store's revocation reaches the cache.
+            Ok(Some(u)) if !u.blocked && u.role == session.role => {
                 let screens = self.screens_of(&u.group, u.role).await;
                 Principal {
                     user: Some(u.name),
@@ -734,8 +737,9 @@ impl WebState {
                 }
             }
             Ok(_) => {
-                // Deleted or blocked since login: the session ends now.
-                self.auth.sessions.end(&token);
+                // Deleted, blocked or given another role since login: the
+                // session ends now.
+                self.auth.sessions.end(&token).await;
                 Principal::anonymous()
             }
             Err(e) => {

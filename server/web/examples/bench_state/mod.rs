@@ -9,7 +9,7 @@ use std::time::Instant;
 use gridscada_config::Role;
 use gridscada_store::{NewUser, OpenOptions, Store};
 use gridscada_tagdb::{SystemClock, TagDb, Timestamp};
-use gridscada_web::auth::{self, SessionPolicy, Sessions};
+use gridscada_web::auth::{self, SessionPolicy};
 use gridscada_web::{Auth, Components, WebState};
 
 const MAIN: &str = "tag_files = [\"tags.toml\"]\n";
@@ -42,17 +42,23 @@ pub async fn web_state(db: Arc<TagDb>, dir: &Path) -> (WebState, String) {
         })
         .await
         .expect("user");
-    let sessions = Arc::new(Sessions::new(SessionPolicy::default()));
-    let token = sessions.create("bench", gridscada_config::Role::Operator, None);
+    let auth = Auth::new(SessionPolicy::default(), false, store.clone()).await;
+    let token = auth
+        .sessions
+        .create(
+            "bench",
+            gridscada_config::Role::Operator,
+            None,
+            Default::default(),
+        )
+        .await
+        .expect("session");
     let plant_ref = plant.clone();
     let state = WebState {
         db,
         plant: Arc::new(plant),
         store,
-        auth: Auth {
-            sessions,
-            ..Auth::new(SessionPolicy::default(), false).await
-        },
+        auth,
         clock: Arc::new(SystemClock),
         writer: None,
         started: Instant::now(),

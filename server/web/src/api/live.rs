@@ -176,7 +176,7 @@ async fn run(
                         Ok(ClientMessage { visible: Some(true), subscribe: None }) => {
                             if let Some(t) = token.as_deref() {
                                 // Touches the idle timer; an ended session closes below.
-                                let _ = s.auth.sessions.user(t);
+                                let _ = s.auth.sessions.user(t).await;
                             }
                         }
                         Ok(ClientMessage { subscribe: Some(sub_req), .. }) => {

@@ -114,10 +114,19 @@ pub async fn login(
     s.auth.throttle.success(attempt);
     let previous =
         auth::token_from_cookies(headers.get(header::COOKIE).and_then(|v| v.to_str().ok()));
+    // Stored before the cookie is sent, so the session outlives a restart.
+    let client = auth::Client {
+        address: Some(ip.to_string()),
+        user_agent: headers
+            .get(header::USER_AGENT)
+            .and_then(|v| v.to_str().ok())
+            .map(str::to_string),
+    };
     let token = s
         .auth
         .sessions
-        .create(&user.name, user.role, previous.as_deref());
+        .create(&user.name, user.role, previous.as_deref(), client)
+        .await?;
     let screens = s.screens_of(&user.group, user.role).await;
     let who = Principal {
         user: Some(user.name.clone()),
@@ -205,7 +214,7 @@ pub async fn logout(
     if let Some(token) =
         auth::token_from_cookies(headers.get(header::COOKIE).and_then(|v| v.to_str().ok()))
     {
-        s.auth.sessions.end(&token);
+        s.auth.sessions.end(&token).await;
     }
     if p.is_logged_in() {
         audit(

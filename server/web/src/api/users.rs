@@ -248,6 +248,7 @@ pub async fn update(
     let mut changes = vec![];
     if let Some(role) = b.role {
         s.store.set_user_role(&name, role).await?;
+        s.auth.sessions.forget_role_change(&name, role);
         changes.push(format!("role {}", role.label()));
     }
     if let Some(group) = &b.group {
@@ -257,7 +258,7 @@ pub async fn update(
     if let Some(blocked) = b.blocked {
         s.store.set_user_blocked(&name, blocked).await?;
         if blocked {
-            s.auth.sessions.end_user(&name);
+            s.auth.sessions.forget_user(&name, None);
         }
         changes.push(if blocked {
             "blocked".into()
@@ -320,7 +321,7 @@ pub async fn remove(
     )
     .await?;
     s.store.delete_user(&name).await?;
-    s.auth.sessions.end_user(&name);
+    s.auth.sessions.forget_user(&name, None);
     audit(
         &s,
         &who,
@@ -379,21 +380,23 @@ pub async fn password(
         .hash(b.password)
         .await
         .map_err(|e| ApiError::new(StatusCode::TOO_MANY_REQUESTS, "busy", e))?;
+    // Own password: every other session of this user ends (a stolen one
+    // among them); this one goes on. Another's: all of theirs end. The
+    // store ends them with the change.
+    let mine = own
+        .then(|| {
+            auth::token_from_cookies(
+                headers
+                    .get(axum::http::header::COOKIE)
+                    .and_then(|v| v.to_str().ok()),
+            )
+        })
+        .flatten();
+    let keep = mine.as_deref().map(gridscada_store::SessionKey::of_token);
     s.store
-        .set_password_hash(&name, &hash, s.clock.now())
+        .set_password_hash(&name, &hash, s.clock.now(), keep.as_ref())
         .await?;
-    if own {
-        // Every other session of this user ends (a stolen one among them);
-        // this one goes on.
-        let mine = auth::token_from_cookies(
-            headers
-                .get(axum::http::header::COOKIE)
-                .and_then(|v| v.to_str().ok()),
-        );
-        s.auth.sessions.end_others(&name, mine.as_deref());
-    } else {
-        s.auth.sessions.end_user(&name);
-    }
+    s.auth.sessions.forget_user(&name, mine.as_deref());
     audit(
         &s,
         &who,

@@ -1,9 +1,12 @@
 //! Who is asking: passwords, sessions, login throttling and the caller's
 //! [`Principal`].
 //!
-//! Sessions live on the server. The browser holds only a random 256-bit token
-//! in an HttpOnly, SameSite=Strict cookie; the token rotates at every login and
-//! dies on logout, after idle time, and after an absolute lifetime.
+//! Sessions live on the server, in the store (so they survive a restart).
+//! The browser holds only a random 256-bit token in an HttpOnly,
+//! SameSite=Strict cookie; the store only its SHA-256. The token rotates at
+//! every login and dies on logout, after idle time, after an absolute
+//! lifetime, and when its user is blocked, deleted, or changes password or
+//! role.
 //!
 //! This file holds the caller ([`Principal`]), the shared state ([`Auth`])
 //! and the session cookie. The parts, re-exported here: passwords and their
@@ -13,6 +16,7 @@
 use std::sync::Arc;
 
 use gridscada_config::Role;
+use gridscada_store::Store;
 use serde::Serialize;
 
 mod passwords;
@@ -77,10 +81,13 @@ pub struct Auth {
 }
 
 impl Auth {
-    /// Sessions with `policy`, fresh throttling, a password pool per core.
-    pub async fn new(policy: SessionPolicy, secure_cookies: bool) -> Auth {
+    /// Sessions with `policy` kept in `store` (their upkeep task started:
+    /// [`Sessions::upkeep`]), fresh throttling, a password pool per core.
+    pub async fn new(policy: SessionPolicy, secure_cookies: bool, store: Store) -> Auth {
+        let sessions = Arc::new(Sessions::new(policy, store));
+        Sessions::upkeep(&sessions);
         Auth {
-            sessions: Arc::new(Sessions::new(policy)),
+            sessions,
             throttle: Arc::new(Throttle::default()),
             secure_cookies,
             decoy_hash: make_decoy_hash().await.into(),

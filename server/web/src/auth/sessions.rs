@@ -1,12 +1,49 @@
-//! Sessions: the policy per role (`[server.sessions]`), the server-side
-//! session table, idle and absolute expiry, and the tokens.
+//! Sessions: the policy per role (`[server.sessions]`), idle and absolute
+//! expiry, the tokens, and the cache in front of the store's `sessions`
+//! table.
+//!
+//! The store is the truth: a login is recorded before its cookie is sent,
+//! a logout deletes the row, and a change of the user that ends sessions
+//! deletes them in the user's own transaction (`gridscada_store`'s
+//! `users.rs`). So sessions survive a restart, and every server on one
+//! database (and the `gridscada user` command) sees the same ones.
+//!
+//! This server keeps the sessions it has seen in memory, so a request costs
+//! no database read for its session and no write for its activity:
+//! - activity is written through by [`Sessions::sync`] every [`SYNC_EVERY`],
+//!   only for the sessions used since; so the stored `last_seen` trails the
+//!   last activity by at most that (plus the write). After a restart a
+//!   session's idle timer resumes from the stored `last_seen`: it ends at
+//!   most [`SYNC_EVERY`] early, never late;
+//! - the same pass re-reads the table: a session deleted elsewhere (another
+//!   process's revocation, another server's logout or sweep) leaves the
+//!   cache and its live sockets close within [`SYNC_EVERY`]; a later
+//!   `last_seen` written by another server is taken;
+//! - a token not in the cache is looked up in the store;
+//! - an expired session is refused whether or not the sweep has deleted it;
+//!   the sweep ([`Sessions::sweep`], every [`SWEEP_EVERY`]) deletes the
+//!   expired rows, idle ones only [`SWEEP_GRACE`] after their idle timeout
+//!   (another server may hold activity not written yet).
 
 use std::collections::HashMap;
+use std::sync::{Arc, Weak};
 use std::time::{Duration, Instant};
 
 use gridscada_config::Role;
+use gridscada_store::{SessionKey, SessionRecord, Store, StoreError};
+use gridscada_tagdb::Timestamp;
 use parking_lot::Mutex;
 use rand::Rng;
+
+/// How often activity is written through and the cache re-checked against
+/// the store: the bound on a revocation from elsewhere, and on how early an
+/// idle expiry may come after a restart.
+pub const SYNC_EVERY: Duration = Duration::from_secs(5);
+/// How often expired sessions are deleted from the store.
+pub const SWEEP_EVERY: Duration = Duration::from_secs(60);
+/// How long after its idle timeout (by the stored `last_seen`) the sweep
+/// deletes a session: more than the longest a server holds activity back.
+pub const SWEEP_GRACE: Duration = Duration::from_secs(30);
 
 /// When sessions end: an idle timeout and an absolute lifetime, each per
 /// role (group), `None` meaning never. The HMI's live connection counts as
@@ -77,127 +114,305 @@ impl SessionPolicy {
     }
 }
 
+/// A session this server has seen.
 #[derive(Debug, Clone)]
-struct Session {
-    user: String,
-    expiry: Expiry,
-    created: Instant,
-    last_seen: Instant,
+struct Cached {
+    record: SessionRecord,
+    /// The last activity seen here (`record.last_seen` is what the store has).
+    last_seen: Timestamp,
+    /// When it entered the cache: a re-check that read the table before
+    /// then cannot tell it is gone.
+    loaded: Instant,
 }
 
-impl Session {
-    fn expired(&self, now: Instant) -> bool {
-        self.expiry
-            .idle
-            .is_some_and(|d| now.duration_since(self.last_seen) > d)
-            || self
-                .expiry
-                .absolute
-                .is_some_and(|d| now.duration_since(self.created) > d)
+impl Cached {
+    fn expired(&self, now: Timestamp) -> bool {
+        SessionRecord {
+            last_seen: self.last_seen,
+            ..self.record.clone()
+        }
+        .expired(now)
     }
 }
 
-/// Server-side sessions, keyed by token.
+/// The caller of a live session.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SessionUser {
+    pub user: String,
+    /// The role at login: the session ends if the user's role is now another.
+    pub role: Role,
+}
+
+/// Who opens a session, for the administrator's view of the table.
+#[derive(Debug, Clone, Default)]
+pub struct Client {
+    /// The client's address.
+    pub address: Option<String>,
+    /// The browser's `User-Agent`.
+    pub user_agent: Option<String>,
+}
+
+/// Server-side sessions: the store's table with a cache in front (module docs).
 pub struct Sessions {
     policy: SessionPolicy,
-    by_token: Mutex<HashMap<String, Session>>,
+    store: Store,
+    cache: Mutex<HashMap<SessionKey, Cached>>,
     /// Bumped whenever sessions end, so live sockets re-check theirs.
     ended: tokio::sync::watch::Sender<u64>,
 }
 
 impl Sessions {
-    pub fn new(policy: SessionPolicy) -> Self {
+    /// Sessions kept in `store`. Nothing runs by itself: see [`Sessions::upkeep`].
+    pub fn new(policy: SessionPolicy, store: Store) -> Self {
         Sessions {
             policy,
-            by_token: Mutex::new(HashMap::new()),
+            store,
+            cache: Mutex::new(HashMap::new()),
             ended: tokio::sync::watch::channel(0).0,
         }
     }
 
-    /// Starts a session for `user` (of `role`) and returns its new token.
-    /// Any token the client held before is ended (rotation on login).
-    pub fn create(&self, user: &str, role: Role, previous: Option<&str>) -> String {
+    /// Starts the task that writes activity through and re-checks the
+    /// cache every [`SYNC_EVERY`] and sweeps every [`SWEEP_EVERY`]; it ends
+    /// when the sessions are dropped.
+    pub fn upkeep(sessions: &Arc<Sessions>) -> tokio::task::JoinHandle<()> {
+        let weak: Weak<Sessions> = Arc::downgrade(sessions);
+        tokio::spawn(async move {
+            let mut tick = tokio::time::interval(SYNC_EVERY);
+            tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+            let mut last_sweep: Option<Instant> = None;
+            loop {
+                tick.tick().await;
+                let Some(s) = weak.upgrade() else { return };
+                s.sync().await;
+                if last_sweep.is_none_or(|t| t.elapsed() >= SWEEP_EVERY) {
+                    last_sweep = Some(Instant::now());
+                    s.sweep().await;
+                }
+            }
+        })
+    }
+
+    /// Starts a session for `user` (of `role`) and returns its new token,
+    /// once the store holds it. Any token the client held before is ended
+    /// (rotation on login).
+    pub async fn create(
+        &self,
+        user: &str,
+        role: Role,
+        previous: Option<&str>,
+        client: Client,
+    ) -> Result<String, StoreError> {
         let token = new_token();
-        let now = Instant::now();
-        let mut map = self.by_token.lock();
-        if let Some(prev) = previous {
-            map.remove(prev);
+        let now = Timestamp::now_utc();
+        let expiry = self.policy.expiry(role);
+        let record = SessionRecord {
+            key: SessionKey::of_token(&token),
+            user: user.to_string(),
+            role,
+            created_at: now,
+            last_seen: now,
+            idle: expiry.idle,
+            expires_at: expiry.absolute.map(|d| {
+                Timestamp::from_millis(
+                    now.as_millis()
+                        .saturating_add(i64::try_from(d.as_millis()).unwrap_or(i64::MAX)),
+                )
+            }),
+            client: client.address,
+            user_agent: client.user_agent,
+        };
+        let previous = previous.map(SessionKey::of_token);
+        self.store
+            .create_session(&record, previous.as_ref())
+            .await?;
+        let mut cache = self.cache.lock();
+        if let Some(prev) = &previous {
+            cache.remove(prev);
         }
-        map.insert(
-            token.clone(),
-            Session {
-                user: user.to_string(),
-                expiry: self.policy.expiry(role),
-                created: now,
+        cache.insert(
+            record.key.clone(),
+            Cached {
+                record,
                 last_seen: now,
+                loaded: Instant::now(),
             },
         );
-        drop(map);
+        drop(cache);
         self.ended.send_modify(|v| *v += 1);
-        token
+        Ok(token)
     }
 
-    /// The user of a live session, touching its idle timer.
-    pub fn user(&self, token: &str) -> Option<String> {
-        self.lookup(token, true)
+    /// The caller of a live session, touching its idle timer.
+    pub async fn user(&self, token: &str) -> Option<SessionUser> {
+        self.lookup(token, true).await
     }
 
-    /// The user of a live session, without touching its idle timer: for a
-    /// request the HMI makes on its own (a poll), which is not activity.
-    pub fn user_untouched(&self, token: &str) -> Option<String> {
-        self.lookup(token, false)
+    /// The caller of a live session, without touching its idle timer: for
+    /// a request the HMI makes on its own (a poll), which is not activity.
+    pub async fn user_untouched(&self, token: &str) -> Option<SessionUser> {
+        self.lookup(token, false).await
     }
 
-    fn lookup(&self, token: &str, touch: bool) -> Option<String> {
-        let now = Instant::now();
-        let mut map = self.by_token.lock();
-        let s = map.get_mut(token)?;
-        if s.expired(now) {
-            map.remove(token);
-            drop(map);
-            self.ended.send_modify(|v| *v += 1);
+    async fn lookup(&self, token: &str, touch: bool) -> Option<SessionUser> {
+        let key = SessionKey::of_token(token);
+        let now = Timestamp::now_utc();
+        let cached = self.cache.lock().get(&key).cloned();
+        let mut entry = match cached {
+            Some(c) => c,
+            None => match self.store.session(&key).await {
+                Ok(Some(record)) => Cached {
+                    last_seen: record.last_seen,
+                    record,
+                    loaded: Instant::now(),
+                },
+                Ok(None) => return None,
+                Err(e) => {
+                    // Refused, not guessed: the caller is anonymous until
+                    // the store answers again.
+                    tracing::error!(error = %e, "reading a session");
+                    return None;
+                }
+            },
+        };
+        if entry.expired(now) {
+            self.end_key(&key).await;
             return None;
         }
         if touch {
-            s.last_seen = now;
+            entry.last_seen = now;
         }
-        Some(s.user.clone())
+        let who = SessionUser {
+            user: entry.record.user.clone(),
+            role: entry.record.role,
+        };
+        let mut cache = self.cache.lock();
+        match cache.get_mut(&key) {
+            Some(c) => c.last_seen = c.last_seen.max(entry.last_seen),
+            None => {
+                cache.insert(key, entry);
+            }
+        }
+        Some(who)
     }
 
-    /// Whether a token is still live, without touching its idle timer.
+    /// Whether a token is a session this server holds live, without
+    /// touching its idle timer (a live socket's re-check; the socket's
+    /// session entered the cache when it connected).
     pub fn is_live(&self, token: &str) -> bool {
-        let now = Instant::now();
-        self.by_token
+        let now = Timestamp::now_utc();
+        self.cache
             .lock()
-            .get(token)
+            .get(&SessionKey::of_token(token))
             .is_some_and(|s| !s.expired(now))
     }
 
-    pub fn end(&self, token: &str) {
-        if self.by_token.lock().remove(token).is_some() {
+    /// Ends a session (logout): its row goes.
+    pub async fn end(&self, token: &str) {
+        self.end_key(&SessionKey::of_token(token)).await;
+    }
+
+    async fn end_key(&self, key: &SessionKey) {
+        self.cache.lock().remove(key);
+        self.ended.send_modify(|v| *v += 1);
+        if let Err(e) = self.store.end_session(key).await {
+            // The sweep or the next re-check deletes it; it is refused here.
+            tracing::error!(error = %e, "deleting an ended session");
+        }
+    }
+
+    /// Drops `user`'s sessions but `keep` from the cache, at once, after the
+    /// store has ended them (block, delete, password change).
+    pub fn forget_user(&self, user: &str, keep: Option<&str>) {
+        let keep = keep.map(SessionKey::of_token);
+        self.forget(|k, s| s.record.user == user && Some(k) != keep.as_ref());
+    }
+
+    /// Drops `user`'s sessions started under another role than `role` from
+    /// the cache, after the store has ended them.
+    pub fn forget_role_change(&self, user: &str, role: Role) {
+        self.forget(|_, s| s.record.user == user && s.record.role != role);
+    }
+
+    fn forget(&self, gone: impl Fn(&SessionKey, &Cached) -> bool) {
+        let mut cache = self.cache.lock();
+        let before = cache.len();
+        cache.retain(|k, s| !gone(k, s));
+        let changed = cache.len() != before;
+        drop(cache);
+        if changed {
             self.ended.send_modify(|v| *v += 1);
         }
     }
 
-    /// Ends every session of `user` (blocked, deleted, password changed by an admin).
-    pub fn end_user(&self, user: &str) {
-        self.by_token.lock().retain(|_, s| s.user != user);
-        self.ended.send_modify(|v| *v += 1);
-    }
-
-    /// Ends every session of `user` but `keep` (own password changed).
-    pub fn end_others(&self, user: &str, keep: Option<&str>) {
-        self.by_token
+    /// Writes the activity seen since the last pass through to the store,
+    /// then re-reads the table: sessions gone from it leave the cache (their
+    /// sockets close), a later `last_seen` from another server is taken.
+    /// Runs every [`SYNC_EVERY`] ([`Sessions::upkeep`]).
+    pub async fn sync(&self) {
+        let seen: Vec<(SessionKey, Timestamp)> = self
+            .cache
             .lock()
-            .retain(|t, s| s.user != user || Some(t.as_str()) == keep);
-        self.ended.send_modify(|v| *v += 1);
+            .iter()
+            .filter(|(_, s)| s.last_seen > s.record.last_seen)
+            .map(|(k, s)| (k.clone(), s.last_seen))
+            .collect();
+        match self.store.touch_sessions(&seen).await {
+            Ok(()) => {
+                let mut cache = self.cache.lock();
+                for (k, at) in &seen {
+                    if let Some(c) = cache.get_mut(k) {
+                        c.record.last_seen = c.record.last_seen.max(*at);
+                    }
+                }
+            }
+            Err(e) => tracing::warn!(error = %e, "writing session activity"),
+        }
+        let read_at = Instant::now();
+        let stored = match self.store.sessions().await {
+            Ok(rows) => rows,
+            Err(e) => {
+                tracing::warn!(error = %e, "re-checking sessions");
+                return;
+            }
+        };
+        let stored: HashMap<SessionKey, SessionRecord> =
+            stored.into_iter().map(|r| (r.key.clone(), r)).collect();
+        let mut cache = self.cache.lock();
+        let before = cache.len();
+        cache.retain(|k, c| match stored.get(k) {
+            Some(r) => {
+                c.record.last_seen = c.record.last_seen.max(r.last_seen);
+                c.last_seen = c.last_seen.max(r.last_seen);
+                true
+            }
+            None => c.loaded > read_at,
+        });
+        let changed = cache.len() != before;
+        drop(cache);
+        if changed {
+            self.ended.send_modify(|v| *v += 1);
+        }
     }
 
-    /// Forgets expired sessions (called now and then), so abandoned ones do
-    /// not pile up.
-    pub fn sweep(&self) {
-        let now = Instant::now();
-        self.by_token.lock().retain(|_, s| !s.expired(now));
+    /// Forgets expired sessions here and deletes them from the store, so
+    /// abandoned ones do not pile up. Runs every [`SWEEP_EVERY`]
+    /// ([`Sessions::upkeep`]); returns how many rows went.
+    pub async fn sweep(&self) -> u64 {
+        let now = Timestamp::now_utc();
+        self.forget(|_, s| s.expired(now));
+        match self.store.sweep_sessions(now, SWEEP_GRACE).await {
+            Ok(n) => {
+                if n > 0 {
+                    tracing::debug!(sessions = n, "expired sessions swept");
+                }
+                n
+            }
+            Err(e) => {
+                tracing::warn!(error = %e, "sweeping expired sessions");
+                0
+            }
+        }
     }
 
     /// The session policy.
@@ -214,33 +429,4 @@ impl Sessions {
 fn new_token() -> String {
     let bytes: [u8; 32] = rand::rng().random();
     bytes.iter().map(|b| format!("{b:02x}")).collect()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn sessions_rotate_and_end() {
-        let s = Sessions::new(SessionPolicy::default());
-        let a = s.create("ann", Role::Operator, None);
-        assert_eq!(s.user(&a).as_deref(), Some("ann"));
-        let b = s.create("ann", Role::Operator, Some(&a));
-        assert_ne!(a, b);
-        assert!(s.user(&a).is_none(), "the old token dies at login");
-        s.end(&b);
-        assert!(s.user(&b).is_none());
-    }
-
-    #[test]
-    fn sessions_expire_when_idle() {
-        let s = Sessions::new(SessionPolicy {
-            idle: Duration::from_millis(20),
-            absolute: Duration::from_secs(60),
-            ..Default::default()
-        });
-        let t = s.create("ann", Role::Operator, None);
-        std::thread::sleep(Duration::from_millis(40));
-        assert!(s.user(&t).is_none());
-    }
 }

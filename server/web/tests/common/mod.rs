@@ -176,6 +176,9 @@ impl SimControl for FakeSim {
 pub struct Options {
     pub sim: bool,
     pub policy: SessionPolicy,
+    /// The database: a temp SQLite file by default, or a fresh schema in
+    /// the PostgreSQL database at this URL.
+    pub postgres: Option<String>,
 }
 
 impl Default for Options {
@@ -183,6 +186,30 @@ impl Default for Options {
         Options {
             sim: true,
             policy: SessionPolicy::default(),
+            postgres: None,
+        }
+    }
+}
+
+/// The PostgreSQL test database (`GRIDSCADA_TEST_PG_URL`), or `None` with a
+/// loud notice: the PostgreSQL variant of `test` is skipped. Fails instead
+/// when `GRIDSCADA_REQUIRE_PG=1`.
+pub fn pg_url(test: &str) -> Option<String> {
+    match std::env::var("GRIDSCADA_TEST_PG_URL") {
+        Ok(u) if !u.is_empty() => Some(u),
+        _ => {
+            assert!(
+                std::env::var("GRIDSCADA_REQUIRE_PG").as_deref() != Ok("1"),
+                "{test}: GRIDSCADA_REQUIRE_PG=1 but GRIDSCADA_TEST_PG_URL is not set"
+            );
+            use std::io::Write;
+            let _ = std::io::stderr().write_all(
+                format!(
+                    "\n!!!!!!!! SKIPPED PostgreSQL variant of {test}: GRIDSCADA_TEST_PG_URL is not set !!!!!!!!\n"
+                )
+                .as_bytes(),
+            );
+            None
         }
     }
 }
@@ -195,6 +222,10 @@ pub struct Harness {
     /// The alarm engine's transitions and events, until [`Harness::run_alarms`]
     /// takes them into the store.
     alarm_outputs: Mutex<Option<AlarmOutputs>>,
+    /// How the store was opened, so [`Harness::restart`] opens it again.
+    store_url: String,
+    store_options: OpenOptions,
+    policy: SessionPolicy,
     _dir: tempfile::TempDir,
 }
 
@@ -255,7 +286,19 @@ pub fn plant() -> gridscada_config::Plant {
 impl Harness {
     pub async fn new(opts: Options) -> Harness {
         let dir = tempfile::tempdir().expect("temp dir");
-        let store = Store::open("sqlite://test.db", &OpenOptions::new(dir.path()))
+        let mut store_options = OpenOptions::new(dir.path());
+        let store_url = match &opts.postgres {
+            None => "sqlite://test.db".to_string(),
+            Some(url) => {
+                store_options.pg_schema = Some(format!(
+                    "gs_webtest_{}_{}",
+                    std::process::id(),
+                    rand::random::<u32>()
+                ));
+                url.clone()
+            }
+        };
+        let store = Store::open(&store_url, &store_options)
             .await
             .expect("open store");
         store.migrate().await.expect("migrate");
@@ -295,8 +338,8 @@ impl Harness {
         let state = WebState {
             db,
             plant: Arc::new(plant),
+            auth: Auth::new(opts.policy.clone(), false, store.clone()).await,
             store,
-            auth: Auth::new(opts.policy, false).await,
             clock: Arc::new(SystemClock),
             writer: Some(writer.clone() as Arc<dyn TagWriter>),
             started: Instant::now(),
@@ -317,12 +360,49 @@ impl Harness {
             writer,
             sim,
             alarm_outputs: Mutex::new(Some((trx, erx))),
+            store_url,
+            store_options,
+            policy: opts.policy,
             _dir: dir,
         };
         for role in Role::ALL {
             h.add_user(role.label(), role, role.label()).await;
         }
         h
+    }
+
+    /// As a restart of the server: the store opened again on the same
+    /// database, fresh sessions state (nothing cached, activity not yet
+    /// written is lost as in a crash), a new app over them.
+    pub async fn restart(&mut self) {
+        let store = Store::open(&self.store_url, &self.store_options)
+            .await
+            .expect("reopen store");
+        self.state = WebState {
+            auth: Auth::new(self.policy.clone(), false, store.clone()).await,
+            store,
+            ..self.state.clone()
+        };
+        self.app = gridscada_web::router(self.state.clone());
+    }
+
+    /// Drops the PostgreSQL test schema, if any.
+    pub async fn cleanup(self) {
+        if let Some(schema) = &self.store_options.pg_schema {
+            self.state.store.close().await;
+            // With psql, the real client: the web crate speaks no SQL.
+            let out = std::process::Command::new("psql")
+                .arg(&self.store_url)
+                .args([
+                    "-q",
+                    "-c",
+                    &format!("DROP SCHEMA IF EXISTS {schema} CASCADE"),
+                ])
+                .output();
+            if !out.as_ref().is_ok_and(|o| o.status.success()) {
+                eprintln!("test schema {schema} not dropped: {out:?}");
+            }
+        }
     }
 
     /// Runs the alarm engine, with its operator events going to the event log
