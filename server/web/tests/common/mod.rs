@@ -386,6 +386,14 @@ impl Harness {
         self.app = gridscada_web::router(self.state.clone());
     }
 
+    /// The same database opened by another handle, as another process
+    /// (`gridscada user`, a second server) would open it.
+    pub async fn another_store(&self) -> Store {
+        Store::open(&self.store_url, &self.store_options)
+            .await
+            .expect("open the store again")
+    }
+
     /// Drops the PostgreSQL test schema, if any.
     pub async fn cleanup(self) {
         if let Some(schema) = &self.store_options.pg_schema {
