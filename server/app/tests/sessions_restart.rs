@@ -1,8 +1,7 @@
 //! A login outlives a restart of `gridscada serve` (killed with SIGKILL, no
 //! orderly stop), on SQLite and on PostgreSQL: the same cookie is the same
-//! user afterwards. Then a password set from another process while the
-//! server runs ends that session (the server re-checks the store), and
-//! logging out ends it for good, restart or not.
+//! user afterwards, also while `gridscada user add` changes the user table
+//! from another process; logging out ends it for good, restart or not.
 
 mod common;
 
