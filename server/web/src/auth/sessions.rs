@@ -258,23 +258,18 @@ impl Sessions {
         let key = SessionKey::of_token(token);
         let now = Timestamp::now_utc();
         let cached = self.cache.lock().get(&key).cloned();
+        let from_cache = cached.is_some();
         let mut entry = match cached {
             Some(c) => c,
-            None => match self.store.session(&key).await {
-                Ok(Some(record)) => Cached {
-                    last_seen: record.last_seen,
-                    record,
-                    loaded: Instant::now(),
-                },
-                Ok(None) => return None,
-                Err(e) => {
-                    // Refused, not guessed: the caller is anonymous until
-                    // the store answers again.
-                    tracing::error!(error = %e, "reading a session");
-                    return None;
-                }
-            },
+            None => self.load(&key).await?,
         };
+        if entry.expired(now) && from_cache {
+            // Another server on the database may have seen it since this
+            // one last re-read the table: its word before ending it.
+            if let Some(stored) = self.load(&key).await {
+                entry.last_seen = entry.last_seen.max(stored.last_seen);
+            }
+        }
         if entry.expired(now) {
             self.end_key(&key).await;
             return None;
@@ -294,6 +289,24 @@ impl Sessions {
             }
         }
         Some(who)
+    }
+
+    /// The stored session of `key`, for the cache; `None` if there is
+    /// none, or the store cannot say (refused, not guessed: the caller is
+    /// anonymous until the store answers again).
+    async fn load(&self, key: &SessionKey) -> Option<Cached> {
+        match self.store.session(key).await {
+            Ok(Some(record)) => Some(Cached {
+                last_seen: record.last_seen,
+                record,
+                loaded: Instant::now(),
+            }),
+            Ok(None) => None,
+            Err(e) => {
+                tracing::error!(error = %e, "reading a session");
+                None
+            }
+        }
     }
 
     /// Whether a token is a session this server holds live, without
