@@ -291,3 +291,56 @@ async fn revoked_from_another_process(opts: Options) {
     h.cleanup().await;
 }
 both_backends!(cli_revocation, revoked_from_another_process);
+
+/// Two servers on one database: a login on one is good on the other, and a
+/// logout or a block on one reaches the other within the re-check interval.
+async fn two_servers_share_sessions(opts: Options) {
+    let a = Harness::new(opts).await;
+    let b = a.another_server().await;
+    let peer = "127.0.0.1:40001".parse().unwrap();
+    let who_on_b = |cookie: String| {
+        let b = b.clone();
+        async move {
+            let r = send_to(
+                &b,
+                request(Method::GET, "/api/session", Some(&cookie), None),
+                peer,
+            )
+            .await;
+            assert_eq!(r.status, StatusCode::OK);
+            r.json()["user"].as_str().map(str::to_string)
+        }
+    };
+    let op = a.login("operator", PASSWORD).await;
+    let sup = a.login("supervisor", PASSWORD).await;
+    assert_eq!(who_on_b(op.clone()).await.as_deref(), Some("operator"));
+    assert_eq!(who_on_b(sup.clone()).await.as_deref(), Some("supervisor"));
+    // Logged out on B: A has it cached, and drops it within its re-check.
+    let r = send_to(
+        &b,
+        request(Method::DELETE, "/api/session", Some(&op), None),
+        peer,
+    )
+    .await;
+    assert_eq!(r.status, StatusCode::NO_CONTENT);
+    eventually(
+        "A refuses a session ended on B",
+        SYNC_EVERY + Duration::from_secs(3),
+        || async { whoami(&a, &op).await.is_none().then_some(()) },
+    )
+    .await;
+    // Blocked through A's API: B refuses at its next request.
+    let admin = a.login("administrator", PASSWORD).await;
+    let r = a
+        .call(
+            Method::PATCH,
+            "/api/users/supervisor",
+            Some(&admin),
+            Some(json!({"blocked": true})),
+        )
+        .await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text());
+    assert_eq!(who_on_b(sup.clone()).await, None);
+    a.cleanup().await;
+}
+both_backends!(two_servers, two_servers_share_sessions);

@@ -394,6 +394,17 @@ impl Harness {
             .expect("open the store again")
     }
 
+    /// A second server on the same database: its own store handle and
+    /// sessions (nothing cached), the same plant and fakes.
+    pub async fn another_server(&self) -> Router {
+        let store = self.another_store().await;
+        gridscada_web::router(WebState {
+            auth: Auth::new(self.policy.clone(), false, store.clone()).await,
+            store,
+            ..self.state.clone()
+        })
+    }
+
     /// Drops the PostgreSQL test schema, if any.
     pub async fn cleanup(self) {
         if let Some(schema) = &self.store_options.pg_schema {
