@@ -344,3 +344,36 @@ async fn two_servers_share_sessions(opts: Options) {
     a.cleanup().await;
 }
 both_backends!(two_servers, two_servers_share_sessions);
+
+/// Requests cost no database write: activity stays in memory until the
+/// write-through pass, which writes it once, and a token is read from the
+/// store only when this server has not seen it.
+async fn activity_is_written_through_not_per_request(opts: Options) {
+    use gridscada_web::auth::Sessions;
+    let h = Harness::new(opts).await;
+    // Sessions without their upkeep task, so only this test writes through.
+    let sessions = Sessions::new(SessionPolicy::default(), h.state.store.clone());
+    let token = sessions
+        .create("operator", Role::Operator, None, Default::default())
+        .await
+        .unwrap();
+    let k = SessionKey::of_token(&token);
+    let at_login = h.state.store.session(&k).await.unwrap().unwrap().last_seen;
+    tokio::time::sleep(Duration::from_millis(20)).await;
+    for _ in 0..200 {
+        assert!(sessions.user(&token).await.is_some());
+    }
+    let stored = h.state.store.session(&k).await.unwrap().unwrap();
+    assert_eq!(stored.last_seen, at_login, "no write per request");
+    sessions.sync().await;
+    let stored = h.state.store.session(&k).await.unwrap().unwrap();
+    assert!(stored.last_seen > at_login, "written through by the pass");
+    // A poll marked as background is not activity: nothing more to write.
+    tokio::time::sleep(Duration::from_millis(20)).await;
+    assert!(sessions.user_untouched(&token).await.is_some());
+    sessions.sync().await;
+    let again = h.state.store.session(&k).await.unwrap().unwrap();
+    assert_eq!(again.last_seen, stored.last_seen);
+    h.cleanup().await;
+}
+both_backends!(write_through, activity_is_written_through_not_per_request);
