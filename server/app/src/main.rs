@@ -143,13 +143,67 @@ enum UserCommand {
         /// Screen-access group; the role's name by default.
         #[arg(long)]
         group: Option<String>,
-        /// The plant whose database holds the user.
-        #[arg(long, conflicts_with = "data")]
-        config: Option<PathBuf>,
-        /// The demo's data folder (when not using --config).
-        #[arg(long, default_value = "gridscada-data")]
-        data: PathBuf,
+        #[command(flatten)]
+        at: UserTable,
     },
+    /// List the users: name, role, screen-access group, blocked.
+    List {
+        #[command(flatten)]
+        at: UserTable,
+    },
+    /// Set a user's password: read from standard input when piped, otherwise
+    /// generated and printed once. Every session of the user ends.
+    Password {
+        name: String,
+        #[command(flatten)]
+        at: UserTable,
+    },
+    /// Block a user: they cannot log in, and their sessions end.
+    Block {
+        name: String,
+        #[command(flatten)]
+        at: UserTable,
+    },
+    /// Unblock a user.
+    Unblock {
+        name: String,
+        #[command(flatten)]
+        at: UserTable,
+    },
+    /// Change a user's role; their sessions under the old role end.
+    Role {
+        name: String,
+        #[arg(long, value_parser = parse_role)]
+        role: gridscada_config::Role,
+        #[command(flatten)]
+        at: UserTable,
+    },
+    /// Delete a user and their sessions.
+    Delete {
+        name: String,
+        #[command(flatten)]
+        at: UserTable,
+    },
+}
+
+/// Which user table a `user` command works on.
+#[derive(clap::Args)]
+struct UserTable {
+    /// The plant whose database holds the users (the file `serve` runs).
+    #[arg(long, conflicts_with = "data")]
+    config: Option<PathBuf>,
+    /// The demo's data folder (when not using --config).
+    #[arg(long, default_value = "gridscada-data")]
+    data: PathBuf,
+}
+
+impl UserTable {
+    fn target(self) -> users::Target {
+        match self.config {
+            Some(c) => users::Target::Config(c),
+            None => users::Target::DemoData(self.data),
+        }
+    }
 }
 
 #[derive(Subcommand)]
@@ -225,23 +279,34 @@ fn main() -> ExitCode {
             runtime::block_on(runtime::serve(config, http, data))
         }
         Command::Sim { config } => runtime::block_on(runtime::sim(config)),
-        Command::User {
-            command:
-                UserCommand::Add {
-                    name,
-                    role,
-                    group,
-                    config,
-                    data,
-                },
-        } => {
-            let target = match config {
-                Some(c) => users::Target::Config(c),
-                None => users::Target::DemoData(data),
+        Command::User { command } => {
+            let work = async move {
+                match command {
+                    UserCommand::Add {
+                        name,
+                        role,
+                        group,
+                        at,
+                    } => users::add(name, role, group, at.target()).await,
+                    UserCommand::List { at } => users::list(at.target()).await,
+                    UserCommand::Password { name, at } => {
+                        users::change(name, users::Change::Password, at.target()).await
+                    }
+                    UserCommand::Block { name, at } => {
+                        users::change(name, users::Change::Blocked(true), at.target()).await
+                    }
+                    UserCommand::Unblock { name, at } => {
+                        users::change(name, users::Change::Blocked(false), at.target()).await
+                    }
+                    UserCommand::Role { name, role, at } => {
+                        users::change(name, users::Change::Role(role), at.target()).await
+                    }
+                    UserCommand::Delete { name, at } => {
+                        users::change(name, users::Change::Delete, at.target()).await
+                    }
+                }
             };
-            runtime::block_on(async move {
-                runtime::report(users::add(name, role, group, target).await)
-            })
+            runtime::block_on(async move { runtime::report(work.await) })
         }
         Command::Dispatch {
             command: DispatchCommand::Solve { file },

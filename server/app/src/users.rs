@@ -1,5 +1,9 @@
 //! Accounts from the command line: the demo's generated credentials and
-//! `gridscada user add`. There are no default passwords, ever.
+//! `gridscada user add|list|password|block|unblock|role|delete`, for the
+//! administrator of an installed server (e.g. the first account, or a lost
+//! administrator password). There are no default passwords, ever. Each change
+//! is an event, and the store ends the sessions it must in the same
+//! transaction; a running server notices within its session re-check.
 
 use std::io::{IsTerminal, Read};
 use std::path::{Path, PathBuf};
@@ -107,15 +111,8 @@ pub enum Target {
     DemoData(PathBuf),
 }
 
-/// `gridscada user add NAME --role ROLE`: the password comes from standard
-/// input when it is piped, or is generated and printed once.
-pub async fn add(
-    name: String,
-    role: Role,
-    group: Option<String>,
-    target: Target,
-) -> anyhow::Result<()> {
-    gridscada_web::api::users::check_user_name(&name).map_err(|e| anyhow!("{}", e.detail))?;
+/// Opens the user table that `serve` (or the demo) uses.
+async fn open(target: Target) -> anyhow::Result<Store> {
     let (plant, data) = match target {
         Target::Config(path) => {
             // The same database `serve` opens: the same files and environment.
@@ -129,8 +126,13 @@ pub async fn add(
             (plant, data)
         }
     };
-    // A password piped in is used; a terminal, or nothing on stdin (e.g.
-    // </dev/null in a provisioning script), gets a generated one, printed once.
+    crate::data::open_store(&plant, &data).await
+}
+
+/// A password piped in on standard input (checked for strength), or, from a
+/// terminal or with nothing on stdin (e.g. `</dev/null` in a provisioning
+/// script), a generated one; `true` when generated, to be printed once.
+fn read_or_generate_password() -> anyhow::Result<(String, bool)> {
     let piped = if std::io::stdin().is_terminal() {
         String::new()
     } else {
@@ -140,16 +142,46 @@ pub async fn add(
             .context("reading the password from stdin")?;
         text.lines().next().unwrap_or("").to_string()
     };
-    let (password, generated) = if piped.is_empty() {
-        (gridscada_web::auth::generate_password(), true)
+    if piped.is_empty() {
+        Ok((gridscada_web::auth::generate_password(), true))
     } else {
         gridscada_web::auth::check_password_strength(&piped).map_err(|e| anyhow!(e))?;
-        (piped, false)
-    };
-    let store = crate::data::open_store(&plant, &data).await?;
-    let hash = gridscada_web::auth::hash_password(password.clone())
+        Ok((piped, false))
+    }
+}
+
+async fn hash(password: &str) -> anyhow::Result<String> {
+    gridscada_web::auth::hash_password(password.to_string())
         .await
-        .map_err(|e| anyhow!("hashing the password: {e}"))?;
+        .map_err(|e| anyhow!("hashing the password: {e}"))
+}
+
+/// Records what the command line did in the event log.
+async fn log_event(store: &Store, message: String) -> anyhow::Result<()> {
+    store
+        .insert_event(&gridscada_store::NewEvent {
+            ts: SystemClock.now(),
+            user: None,
+            source: "cli".into(),
+            kind: "user".into(),
+            message,
+        })
+        .await?;
+    Ok(())
+}
+
+/// `gridscada user add NAME --role ROLE`: the password comes from standard
+/// input when it is piped, or is generated and printed once.
+pub async fn add(
+    name: String,
+    role: Role,
+    group: Option<String>,
+    target: Target,
+) -> anyhow::Result<()> {
+    gridscada_web::api::users::check_user_name(&name).map_err(|e| anyhow!("{}", e.detail))?;
+    let (password, generated) = read_or_generate_password()?;
+    let store = open(target).await?;
+    let hash = hash(&password).await?;
     store
         .create_user(&NewUser {
             name: name.clone(),
@@ -160,18 +192,14 @@ pub async fn add(
         })
         .await
         .with_context(|| format!("creating user '{name}'"))?;
-    store
-        .insert_event(&gridscada_store::NewEvent {
-            ts: SystemClock.now(),
-            user: None,
-            source: "cli".into(),
-            kind: "user".into(),
-            message: format!(
-                "user '{name}' created as {} from the command line",
-                role.label()
-            ),
-        })
-        .await?;
+    log_event(
+        &store,
+        format!(
+            "user '{name}' created as {} from the command line",
+            role.label()
+        ),
+    )
+    .await?;
     store.close().await;
     if generated {
         println!(
@@ -182,4 +210,108 @@ pub async fn add(
         println!("Created user '{name}' ({}).", role.label());
     }
     Ok(())
+}
+
+/// `gridscada user list`: name, role, group, and whether blocked.
+pub async fn list(target: Target) -> anyhow::Result<()> {
+    let store = open(target).await?;
+    let users = store.users().await?;
+    store.close().await;
+    if users.is_empty() {
+        println!("No users.");
+    }
+    for u in users {
+        println!(
+            "{:<24} {:<14} group {:<16}{}",
+            u.name,
+            u.role.label(),
+            u.group,
+            if u.blocked { " BLOCKED" } else { "" }
+        );
+    }
+    Ok(())
+}
+
+/// What `gridscada user password|block|unblock|role|delete` changes.
+pub enum Change {
+    /// A new password (piped in, or generated and printed once).
+    Password,
+    Blocked(bool),
+    Role(Role),
+    Delete,
+}
+
+/// Changes an existing user. Every change but unblocking ends the sessions
+/// it must (all of them; for a role change, those of the old role).
+pub async fn change(name: String, change: Change, target: Target) -> anyhow::Result<()> {
+    let new_password = match change {
+        Change::Password => Some(read_or_generate_password()?),
+        _ => None,
+    };
+    let store = open(target).await?;
+    let result = apply(&store, &name, change, new_password).await;
+    store.close().await;
+    println!("{}", result?);
+    Ok(())
+}
+
+async fn apply(
+    store: &Store,
+    name: &str,
+    change: Change,
+    new_password: Option<(String, bool)>,
+) -> anyhow::Result<String> {
+    if store.user(name).await?.is_none() {
+        anyhow::bail!("there is no user '{name}' (see `gridscada user list`)");
+    }
+    let (event, said) = match change {
+        Change::Password => {
+            let (password, generated) = new_password.expect("read before opening the store");
+            store
+                .set_password_hash(name, &hash(&password).await?, SystemClock.now(), None)
+                .await?;
+            let said = if generated {
+                format!("New password for '{name}' (shown once): {password}")
+            } else {
+                format!("Password of '{name}' changed.")
+            };
+            (
+                format!("password of user '{name}' changed from the command line"),
+                said,
+            )
+        }
+        Change::Blocked(true) => {
+            store.set_user_blocked(name, true).await?;
+            (
+                format!("user '{name}' blocked from the command line"),
+                format!("Blocked '{name}'; their sessions have ended."),
+            )
+        }
+        Change::Blocked(false) => {
+            store.set_user_blocked(name, false).await?;
+            (
+                format!("user '{name}' unblocked from the command line"),
+                format!("Unblocked '{name}'."),
+            )
+        }
+        Change::Role(role) => {
+            store.set_user_role(name, role).await?;
+            (
+                format!(
+                    "role of user '{name}' set to {} from the command line",
+                    role.label()
+                ),
+                format!("'{name}' is now {}.", role.label()),
+            )
+        }
+        Change::Delete => {
+            store.delete_user(name).await?;
+            (
+                format!("user '{name}' deleted from the command line"),
+                format!("Deleted '{name}'."),
+            )
+        }
+    };
+    log_event(store, event).await?;
+    Ok(said)
 }

@@ -47,8 +47,16 @@ fn gridscada() -> Command {
 
 /// `gridscada user add NAME` with the password piped in.
 fn user_add(config: &Path, name: &str) {
+    user_cli(config, &["add", name, "--role", "operator"]);
+}
+
+/// `gridscada user ARGS --config CONFIG` with the password piped in; its
+/// standard output.
+fn user_cli(config: &Path, args: &[&str]) -> String {
     let mut child = gridscada()
-        .args(["user", "add", name, "--role", "operator", "--config"])
+        .arg("user")
+        .args(args)
+        .arg("--config")
         .arg(config)
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
@@ -63,9 +71,10 @@ fn user_add(config: &Path, name: &str) {
     let out = child.wait_with_output().unwrap();
     assert!(
         out.status.success(),
-        "user add: {}",
+        "user {args:?}: {}",
         String::from_utf8_lossy(&out.stderr)
     );
+    String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
 /// A running `serve`; SIGKILL when dropped.
@@ -191,4 +200,56 @@ fn rand_suffix() -> u32 {
         .duration_since(std::time::UNIX_EPOCH)
         .unwrap()
         .subsec_nanos()
+}
+
+/// Logs alice in on the server at `addr`; her cookie.
+fn login(addr: &str) -> String {
+    let mut c = Client::new(addr);
+    let (status, body) = c.post(
+        "/api/session",
+        json!({"username": "alice", "password": PASSWORD}),
+    );
+    assert_eq!(status, 200, "{body}");
+    c.cookie.clone().expect("session cookie")
+}
+
+/// Waits for the server to refuse `cookie`: a change made by another process
+/// reaches a running server within its session re-check (seconds).
+fn refused_soon(addr: &str, cookie: &str, what: &str) {
+    let deadline = Instant::now() + Duration::from_secs(15);
+    while whoami(addr, cookie).is_some() {
+        assert!(Instant::now() < deadline, "{what}: the session still works");
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+/// The administrator's commands on an installed server, while it runs: each
+/// of block, password, role and delete ends the user's sessions; unblock
+/// lets them log in again; `list` shows who is there.
+#[test]
+fn user_commands_revoke_sessions_of_a_running_server() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = plant(dir.path(), None);
+    user_add(&config, "alice");
+    let (_server, addr) = serve(&config);
+
+    let cookie = login(&addr);
+    user_cli(&config, &["block", "alice"]);
+    refused_soon(&addr, &cookie, "block");
+    assert!(user_cli(&config, &["list"]).contains("BLOCKED"));
+    user_cli(&config, &["unblock", "alice"]);
+
+    let cookie = login(&addr);
+    user_cli(&config, &["password", "alice"]); // the same password, piped in
+    refused_soon(&addr, &cookie, "password");
+
+    let cookie = login(&addr);
+    user_cli(&config, &["role", "alice", "--role", "supervisor"]);
+    refused_soon(&addr, &cookie, "role");
+    assert!(user_cli(&config, &["list"]).contains("supervisor"));
+
+    let cookie = login(&addr);
+    user_cli(&config, &["delete", "alice"]);
+    refused_soon(&addr, &cookie, "delete");
+    assert!(!user_cli(&config, &["list"]).contains("alice"));
 }
