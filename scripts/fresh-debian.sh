@@ -98,7 +98,7 @@ inner_chroot=$(cat <<'EOF'
 set -euo pipefail
 export DEBIAN_FRONTEND=noninteractive
 echo "fresh-debian: installing Debian's postgresql in the chroot" >&2
-timeout 600 apt-get update -qq
+timeout 600 apt-get update -qq --error-on=any
 timeout 1200 apt-get install -y -qq postgresql >/dev/null
 # The package made its cluster; start it as its init script would.
 v=$(ls /usr/lib/postgresql | sort -V | tail -n 1)
@@ -126,6 +126,7 @@ chmod 1777 "$root/tmp"
 mount --bind "$rustup_home" "$root/root/.rustup"
 mount -o remount,bind,ro "$root/root/.rustup"
 /usr/bin/python3 "$proxy" bridge 3128 "$sock" &
+for _ in $(seq 1 50); do (exec 3<>/dev/tcp/127.0.0.1/3128) 2>/dev/null && break; sleep 0.1; done
 p=http://127.0.0.1:3128
 no=127.0.0.1,localhost,::1
 exec chroot "$root" /usr/bin/env -i HOME=/root TERM=dumb LANG=C.UTF-8 CI=true \
