@@ -77,6 +77,24 @@ for p in cargo rustc rustdoc rustfmt cargo-fmt cargo-clippy clippy-driver; do
     ln -sf rustup "$root/root/.cargo/bin/$p"
 done
 
+# The trust store this machine's environment points its tools to
+# (SSL_CERT_FILE, PIP_CERT, NODE_EXTRA_CA_CERTS...: on a network whose TLS
+# is inspected, it holds that network's CA), given to the chroot's tools under
+# the same variable names, so that they reach the registries as this
+# machine's do. Nothing else of this machine's environment goes in.
+ca_vars=()
+for v in SSL_CERT_FILE CURL_CA_BUNDLE PIP_CERT REQUESTS_CA_BUNDLE NODE_EXTRA_CA_CERTS GIT_SSL_CAINFO CARGO_HTTP_CAINFO; do
+    f=${!v:-}
+    if [ -n "$f" ] && [ -f "$f" ]; then
+        cp "$f" "$root/etc/ssl/host-trust-$v.crt"
+        ca_vars+=("$v=/etc/ssl/host-trust-$v.crt")
+    fi
+done
+if [ -n "${SSL_CERT_FILE:-}" ] && [ -z "${CARGO_HTTP_CAINFO:-}" ] && [ -f "$SSL_CERT_FILE" ]; then
+    ca_vars+=("CARGO_HTTP_CAINFO=/etc/ssl/host-trust-SSL_CERT_FILE.crt")
+fi
+[ ${#ca_vars[@]} -eq 0 ] || log "the chroot's tools trust what this machine's do: ${ca_vars[*]}"
+
 # The repository, as committed.
 rm -rf "$root/src/gridscada"
 mkdir -p "$root/src"
@@ -115,6 +133,7 @@ EOF
 inner_ns=$(cat <<'EOF'
 set -euo pipefail
 root=$1 sock=$2 proxy=$3 rustup_home=$4; shift 4
+read -r -a ca_vars <<<"$CA_VARS"
 ip link set lo up
 mount -t proc proc "$root/proc"
 mount --rbind /sys "$root/sys"
@@ -131,13 +150,13 @@ p=http://127.0.0.1:3128
 no=127.0.0.1,localhost,::1
 exec chroot "$root" /usr/bin/env -i HOME=/root TERM=dumb LANG=C.UTF-8 CI=true \
     PATH=/root/.cargo/bin:/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin \
-    http_proxy=$p https_proxy=$p HTTP_PROXY=$p HTTPS_PROXY=$p no_proxy=$no NO_PROXY=$no \
+    http_proxy=$p https_proxy=$p HTTP_PROXY=$p HTTPS_PROXY=$p no_proxy=$no NO_PROXY=$no "${ca_vars[@]}" \
     bash -c "$INNER_CHROOT" fresh-debian "$@"
 EOF
 )
 log "running in the chroot's own namespaces: bash scripts/test-all.sh ${test_args[*]}"
 rc=0
-INNER_CHROOT=$inner_chroot unshare --net --pid --mount --fork --propagation private \
+CA_VARS="${ca_vars[*]}" INNER_CHROOT=$inner_chroot unshare --net --pid --mount --fork --propagation private \
     bash -c "$inner_ns" fresh-debian-ns "$root" "$sock" "$repo/scripts/fresh-debian-proxy.py" "$rustup_home" \
     "${test_args[@]}" || rc=$?
 log "finished with exit status $rc (the chroot stays in $root; --reuse runs in it again)"
