@@ -83,6 +83,7 @@ done
 # the same variable names, so that they reach the registries as this
 # machine's do. Nothing else of this machine's environment goes in.
 ca_vars=()
+mkdir -p "$root/etc/ssl"
 for v in SSL_CERT_FILE CURL_CA_BUNDLE PIP_CERT REQUESTS_CA_BUNDLE NODE_EXTRA_CA_CERTS GIT_SSL_CAINFO CARGO_HTTP_CAINFO; do
     f=${!v:-}
     if [ -n "$f" ] && [ -f "$f" ]; then
