@@ -110,9 +110,9 @@ as_pkg_user() {
 }
 
 # --- first start, as docs/INSTALL.md tells it --------------------------------
-as_pkg_user /usr/bin/gridscada check "$conf" >"$tmp/check.log" 2>&1 \
+as_pkg_user /usr/bin/gridscada check --config "$conf" >"$tmp/check.log" 2>&1 \
     || { cat "$tmp/check.log"; fail "gridscada check $conf"; }
-log "gridscada check: $(tail -n 1 "$tmp/check.log")"
+log "gridscada check --config: $(tail -n 1 "$tmp/check.log")"
 password="first-admin-$RANDOM-$RANDOM"
 printf '%s\n' "$password" | as_pkg_user /usr/bin/gridscada user add admin \
     --role administrator --config "$conf" >"$tmp/user.log" 2>&1 \
