@@ -11,7 +11,8 @@
 #   administrator, both as the package's user;
 # - runs the unit's ExecStart command line, read from the installed unit, by
 #   hand as the package's user with the unit's groups, no capabilities and
-#   no new privileges (systemd is not PID 1 in containers and CI), with
+#   no new privileges (systemd is not PID 1 in containers and CI; where it
+#   is, `systemctl start gridscada` runs the real unit instead), with
 #   /etc/gridscada/gridscada.env as its EnvironmentFile; /healthz answers,
 #   the first administrator logs in, and the database lands in
 #   /var/lib/gridscada owned by the user;
@@ -57,7 +58,9 @@ chmod 755 "$tmp"
 server_pid=""
 installed=""
 cleanup() {
-    if [ -n "$server_pid" ]; then
+    if [ -n "$server_pid" ] && [ -n "${use_systemd:-}" ]; then
+        as_root systemctl stop gridscada || true
+    elif [ -n "$server_pid" ]; then
         as_root kill "$server_pid" 2>/dev/null || true
         wait "$server_pid" 2>/dev/null || true
     fi
@@ -89,6 +92,8 @@ getent passwd gridscada >/dev/null || fail "no system user gridscada"
 [ -L /etc/systemd/system/multi-user.target.wants/gridscada.service ] \
     || fail "the unit is not enabled"
 log "installed: binary, unit (enabled), conffile, user gridscada, $data"
+# postinst starts the service where systemd runs: stopped until configured.
+if [ -d /run/systemd/system ]; then as_root systemctl stop gridscada || true; fi
 
 if command -v systemd-analyze >/dev/null 2>&1; then
     systemd-analyze verify "$unit" >"$tmp/verify.log" 2>&1 \
@@ -124,7 +129,25 @@ port="$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); p
 base="http://127.0.0.1:$port"
 printf 'GRIDSCADA_HTTP=127.0.0.1:%s\n' "$port" | as_root tee "$envfile" >/dev/null
 as_root chmod 600 "$envfile"
+# Where systemd runs (a real machine), the service itself is started, with
+# all of the unit's hardening; elsewhere (containers, CI) its command line.
+use_systemd=""
+if [ -d /run/systemd/system ] && command -v systemctl >/dev/null 2>&1; then
+    use_systemd=1
+fi
 start_server() {
+    if [ -n "$use_systemd" ]; then
+        as_root systemctl restart gridscada
+        for _ in $(seq 1 150); do
+            curl -fsS "$base/healthz" >"$tmp/healthz" 2>/dev/null && {
+                server_pid=$(systemctl show -p MainPID --value gridscada)
+                return 0
+            }
+            sleep 0.2
+        done
+        as_root journalctl -u gridscada -n 30 --no-pager || true
+        fail "the gridscada service did not answer on $base/healthz"
+    fi
     # systemd reads the EnvironmentFile as root; the service gets the values.
     local -a env_args
     mapfile -t env_args < <(as_root grep -E '^[A-Z_]+=' "$envfile")
@@ -142,12 +165,17 @@ start_server() {
     fail "gridscada serve did not answer on $base/healthz"
 }
 stop_server() {
+    if [ -n "$use_systemd" ]; then
+        as_root systemctl stop gridscada
+        server_pid=""
+        return
+    fi
     as_root kill -TERM "$server_pid"
     wait "$server_pid" 2>/dev/null || true
     server_pid=""
 }
 start_server
-log "serve (as the unit's ExecStart, user gridscada): /healthz $(head -c 200 "$tmp/healthz")"
+log "serve (${use_systemd:+the service, }as the unit's ExecStart, user gridscada): /healthz $(head -c 200 "$tmp/healthz")"
 
 body="$(python3 -c 'import json,sys; print(json.dumps({"username": "admin", "password": sys.argv[1]}))' "$password")"
 status=$(curl -sS -o /dev/null -w '%{http_code}' -H 'Content-Type: application/json' \
