@@ -4,7 +4,8 @@
 #     sudo bash scripts/fresh-debian.sh               # the whole of scripts/test-all.sh
 #     sudo bash scripts/fresh-debian.sh --setup-only  # its stages 1-3 only
 #     options: --dir DIR (default /var/tmp/gridscada-fresh), --reuse (keep an
-#     existing chroot there instead of making a new one)
+#     existing chroot there instead of making a new one), --command CMD (run
+#     CMD in /src/gridscada instead of test-all, e.g. one end-to-end test)
 #
 # 1. debootstrap makes a Debian of this machine's release in DIR/root, from
 #    the mirror this machine's apt uses; its apt gets this machine's sources.
@@ -25,11 +26,13 @@ set -euo pipefail
 repo=$(cd "$(dirname "$0")/.." && pwd)
 dir=/var/tmp/gridscada-fresh
 reuse=""
+command=""
 test_args=()
 while [ $# -gt 0 ]; do
     case "$1" in
         --setup-only) test_args=(--setup-only) ;;
         --reuse) reuse=1 ;;
+        --command) command=$2; shift ;;
         --dir) dir=$2; shift ;;
         *) sed -n '2,8p' "$0" >&2; exit 2 ;;
     esac
@@ -127,6 +130,10 @@ pg_lsclusters -h | awk '$3 == 5432 && $4 == "online" { ok = 1 } END { exit !ok }
     || { echo "fresh-debian: Debian's cluster is not online on 5432" >&2; exit 1; }
 grep -E '^(host|local)' /etc/postgresql/"$v"/main/pg_hba.conf >&2
 cd /src/gridscada
+if [ -n "${FRESH_DEBIAN_COMMAND:-}" ]; then
+    echo "fresh-debian: $FRESH_DEBIAN_COMMAND" >&2
+    exec bash -c "$FRESH_DEBIAN_COMMAND"
+fi
 echo "fresh-debian: bash scripts/test-all.sh $*" >&2
 bash scripts/test-all.sh "$@"
 EOF
@@ -151,13 +158,13 @@ p=http://127.0.0.1:3128
 no=127.0.0.1,localhost,::1
 exec chroot "$root" /usr/bin/env -i HOME=/root TERM=dumb LANG=C.UTF-8 CI=true \
     PATH=/root/.cargo/bin:/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin \
-    http_proxy=$p https_proxy=$p HTTP_PROXY=$p HTTPS_PROXY=$p no_proxy=$no NO_PROXY=$no "${ca_vars[@]}" \
+    http_proxy=$p https_proxy=$p HTTP_PROXY=$p HTTPS_PROXY=$p no_proxy=$no NO_PROXY=$no "${ca_vars[@]}" FRESH_DEBIAN_COMMAND="$FRESH_DEBIAN_COMMAND" \
     bash -c "$INNER_CHROOT" fresh-debian "$@"
 EOF
 )
 log "running in the chroot's own namespaces: bash scripts/test-all.sh ${test_args[*]}"
 rc=0
-CA_VARS="${ca_vars[*]}" INNER_CHROOT=$inner_chroot unshare --net --pid --mount --fork --propagation private \
+FRESH_DEBIAN_COMMAND=$command CA_VARS="${ca_vars[*]}" INNER_CHROOT=$inner_chroot unshare --net --pid --mount --fork --propagation private \
     bash -c "$inner_ns" fresh-debian-ns "$root" "$sock" "$repo/scripts/fresh-debian-proxy.py" "$rustup_home" \
     "${test_args[@]}" || rc=$?
 log "finished with exit status $rc (the chroot stays in $root; --reuse runs in it again)"
