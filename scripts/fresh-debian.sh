@@ -162,7 +162,7 @@ exec chroot "$root" /usr/bin/env -i HOME=/root TERM=dumb LANG=C.UTF-8 CI=true \
     bash -c "$INNER_CHROOT" fresh-debian "$@"
 EOF
 )
-log "running in the chroot's own namespaces: bash scripts/test-all.sh ${test_args[*]}"
+log "running in the chroot's own namespaces: ${command:-bash scripts/test-all.sh ${test_args[*]}}"
 rc=0
 FRESH_DEBIAN_COMMAND=$command CA_VARS="${ca_vars[*]}" INNER_CHROOT=$inner_chroot unshare --net --pid --mount --fork --propagation private \
     bash -c "$inner_ns" fresh-debian-ns "$root" "$sock" "$repo/scripts/fresh-debian-proxy.py" "$rustup_home" \
