@@ -74,6 +74,11 @@ else
 fi
 command -v cargo >/dev/null 2>&1 || { echo "test-all: no cargo on PATH (install Rust with rustup, see README)" >&2; exit 1; }
 cargo --version
+cargo_minor=$(cargo --version | sed -n 's/^cargo 1\.\([0-9]*\).*/\1/p')
+if [ "${cargo_minor:-0}" -lt 88 ]; then
+    echo "test-all: $(cargo --version) is too old: the locked dependencies need 1.88 (Debian's own cargo is older; install Rust with rustup, see README)" >&2
+    exit 1
+fi
 cargo fmt --version >/dev/null 2>&1 || { echo "test-all: cargo fmt is missing (rustup component add rustfmt)" >&2; exit 1; }
 cargo clippy --version >/dev/null 2>&1 || { echo "test-all: cargo clippy is missing (rustup component add clippy)" >&2; exit 1; }
 
