@@ -3,7 +3,17 @@
 # It installs what the tests need first (Debian packages, Python test peers,
 # a throwaway PostgreSQL cluster when none runs on 127.0.0.1:5432), then runs
 # formatting and lint checks, every Rust test, and the end-to-end tests.
+#
+#     bash scripts/test-all.sh               # everything
+#     bash scripts/test-all.sh --setup-only  # stages 1-3 (packages, toolchain,
+#                                            # venv, PostgreSQL), then stop
 set -euo pipefail
+setup_only=""
+case "${1:-}" in
+    "") ;;
+    --setup-only) setup_only=1 ;;
+    *) echo "usage: bash scripts/test-all.sh [--setup-only]" >&2; exit 2 ;;
+esac
 cd "$(dirname "$0")/.."
 root=$(pwd)
 export CARGO_TERM_COLOR=never
@@ -14,20 +24,25 @@ step() { printf '\n==> %s\n' "$*"; }
 # with its name instead of eating CI's 90 minutes.
 limit() {
     local secs=$1; shift
-    timeout --kill-after=30 "$secs" "$@"
-    local rc=$?
+    local rc=0
+    # `|| rc=$?`: under set -e a bare failing command would leave the
+    # function before the message below.
+    timeout --kill-after=30 "$secs" "$@" || rc=$?
     if [ "$rc" -eq 124 ] || [ "$rc" -eq 137 ]; then
         echo "test-all: '$*' did not finish within $secs s" >&2
     fi
     return "$rc"
 }
 
-as_root() {
-    if [ "$(id -u)" -eq 0 ]; then "$@"; else sudo "$@"; fi
-}
+# A command as root (sudo when not root), as an array so `limit` can run it.
+root_cmd=()
+[ "$(id -u)" -eq 0 ] || root_cmd=(sudo)
 
 # --- 1. Debian packages the tests use ------------------------------------
-debian_packages=(postgresql socat mbpoll libmodbus-dev pkg-config curl python3-venv)
+# gcc and libc6-dev: the linker and C compiler that rustc and build scripts
+# call; ca-certificates: cargo and pip over HTTPS.
+debian_packages=(postgresql socat mbpoll libmodbus-dev pkg-config curl python3-venv
+    gcc libc6-dev ca-certificates)
 # Debian's nodejs comes without npm (the browser tests install playwright-core with it).
 command -v npm >/dev/null 2>&1 || debian_packages+=(npm)
 missing=()
@@ -36,9 +51,36 @@ for p in "${debian_packages[@]}"; do
 done
 if [ ${#missing[@]} -gt 0 ]; then
     step "installing Debian packages: ${missing[*]}"
-    as_root apt-get update -qq
-    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+    limit 600 "${root_cmd[@]}" apt-get update -qq
+    limit 1200 "${root_cmd[@]}" env DEBIAN_FRONTEND=noninteractive \
+        apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 fi
+
+# --- 1b. the Rust toolchain ------------------------------------------------
+# rustup reads rust-toolchain.toml; a toolchain installed without its
+# rustfmt or clippy gets them added. Without rustup, the cargo on PATH must
+# be 1.88 or newer (Debian's own is older) and bring its own rustfmt/clippy.
+step "Rust toolchain"
+if command -v rustup >/dev/null 2>&1; then
+    installed_components=$(limit 600 rustup component list --installed)
+    for c in rustfmt clippy; do
+        if ! grep -q "^$c" <<<"$installed_components"; then
+            echo "adding the rustup component $c"
+            limit 600 rustup component add "$c"
+        fi
+    done
+else
+    echo "no rustup: using $(command -v cargo || echo 'no cargo'); the toolchain pinned in rust-toolchain.toml is not enforced"
+fi
+command -v cargo >/dev/null 2>&1 || { echo "test-all: no cargo on PATH (install Rust with rustup, see README)" >&2; exit 1; }
+cargo --version
+cargo_minor=$(cargo --version | sed -n 's/^cargo 1\.\([0-9]*\).*/\1/p')
+if [ "${cargo_minor:-0}" -lt 88 ]; then
+    echo "test-all: $(cargo --version) is too old: the locked dependencies need 1.88 (Debian's own cargo is older; install Rust with rustup, see README)" >&2
+    exit 1
+fi
+cargo fmt --version >/dev/null 2>&1 || { echo "test-all: cargo fmt is missing (rustup component add rustfmt)" >&2; exit 1; }
+cargo clippy --version >/dev/null 2>&1 || { echo "test-all: cargo clippy is missing (rustup component add clippy)" >&2; exit 1; }
 
 # --- 2. Python test peers, in a venv of their own -------------------------
 venv="$root/target/test-venv"
@@ -46,7 +88,7 @@ venv="$root/target/test-venv"
 if [ ! -x "$venv/bin/python" ] || ! "$venv/bin/python" -m pip --version >/dev/null 2>&1; then
     step "creating the Python test venv"
     rm -rf "$venv"
-    python3 -m venv "$venv"
+    limit 300 python3 -m venv "$venv"
 fi
 step "installing Python test peers"
 limit 900 "$venv/bin/pip" install -q --disable-pip-version-check -r tests/requirements.txt
@@ -62,6 +104,12 @@ if [ -n "${GRIDSCADA_TEST_PG_STOP:-}" ]; then
     trap 'eval "$GRIDSCADA_TEST_PG_STOP" >/dev/null 2>&1 || true' EXIT
 fi
 export GRIDSCADA_REQUIRE_PG=1
+limit 60 psql -X -w "$GRIDSCADA_TEST_PG_URL" -tAc 'SELECT version()' \
+    || { echo "test-all: cannot connect to $GRIDSCADA_TEST_PG_URL" >&2; exit 1; }
+if [ -n "$setup_only" ]; then
+    step "setup done (--setup-only): packages, toolchain, venv and PostgreSQL ready"
+    exit 0
+fi
 
 # --- 4. Rust: format, lint, tests -----------------------------------------
 step "cargo fmt --check"

@@ -105,6 +105,10 @@ enum Command {
         /// The main configuration file or its folder.
         #[arg(default_value = ".")]
         path: PathBuf,
+        /// The main configuration file, as `serve --config` and `user add
+        /// --config` take it (instead of PATH).
+        #[arg(long, conflicts_with = "path")]
+        config: Option<PathBuf>,
     },
     /// Run the simulated plant alone, as Modbus servers on the configured
     /// addresses, for third-party clients and commissioning.
@@ -229,7 +233,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     logging::init(cli.log_json);
     match cli.command {
-        Command::Check { path } => check(&path),
+        Command::Check { path, config } => check(config.as_deref().unwrap_or(&path)),
         Command::Demo {
             http,
             data,
