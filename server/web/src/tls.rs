@@ -268,6 +268,83 @@ fn redirect(headers: &HeaderMap, uri: &Uri, https_port: u16) -> Response {
 mod tests {
     use super::*;
 
+    /// A self-signed pair in `dir` as `NAME.crt` and `NAME.key`.
+    fn pair(dir: &Path, name: &str) -> (PathBuf, PathBuf) {
+        let key = rcgen::KeyPair::generate().unwrap();
+        let cert = rcgen::CertificateParams::new(vec!["localhost".to_string()])
+            .unwrap()
+            .self_signed(&key)
+            .unwrap();
+        let (c, k) = (
+            dir.join(format!("{name}.crt")),
+            dir.join(format!("{name}.key")),
+        );
+        std::fs::write(&c, cert.pem()).unwrap();
+        std::fs::write(&k, key.serialize_pem()).unwrap();
+        (c, k)
+    }
+
+    fn files(cert: &Path, key: &Path) -> TlsFiles {
+        TlsFiles {
+            cert: cert.to_path_buf(),
+            key: key.to_path_buf(),
+            redirect_http: None,
+            hsts_max_age_s: 0,
+        }
+    }
+
+    #[test]
+    fn problems_name_the_file_and_why() {
+        let dir = tempfile::tempdir().unwrap();
+        let (c1, k1) = pair(dir.path(), "a");
+        let (c2, k2) = pair(dir.path(), "b");
+        server_config(&files(&c1, &k1)).unwrap();
+
+        let e = server_config(&files(&dir.path().join("none.pem"), &k1)).unwrap_err();
+        assert_eq!((e.setting, e.reason.as_str()), (CERT, "no such file"));
+        assert!(e.to_string().contains("none.pem"), "{e}");
+
+        let e = server_config(&files(&c1, &k2)).unwrap_err();
+        assert_eq!((e.setting, &e.file), (KEY, &k2));
+        assert!(
+            e.reason.contains("does not belong to the certificate in"),
+            "{e}"
+        );
+
+        // Swapped: the key file holds no certificate, the cert file no key.
+        let e = server_config(&files(&k1, &c1)).unwrap_err();
+        assert_eq!(e.setting, CERT);
+        assert!(
+            e.reason.contains("no certificate") && e.reason.contains("PRIVATE KEY"),
+            "{e}"
+        );
+        let e = server_config(&files(&c1, &c1)).unwrap_err();
+        assert_eq!(e.setting, KEY);
+        assert!(
+            e.reason.contains("no private key") && e.reason.contains("CERTIFICATE"),
+            "{e}"
+        );
+
+        // Two keys in one file.
+        let both = dir.path().join("both.key");
+        let text = std::fs::read_to_string(&k1).unwrap() + &std::fs::read_to_string(&k2).unwrap();
+        std::fs::write(&both, text).unwrap();
+        let e = server_config(&files(&c1, &both)).unwrap_err();
+        assert!(e.reason.contains("2 private keys"), "{e}");
+
+        // Not PEM at all.
+        let junk = dir.path().join("junk.pem");
+        std::fs::write(&junk, "hello").unwrap();
+        let e = server_config(&files(&junk, &k1)).unwrap_err();
+        assert!(e.reason.contains("holds no PEM section"), "{e}");
+
+        // A chain: the server's certificate first, then another.
+        let chain = dir.path().join("chain.pem");
+        let text = std::fs::read_to_string(&c2).unwrap() + &std::fs::read_to_string(&c1).unwrap();
+        std::fs::write(&chain, text).unwrap();
+        server_config(&files(&chain, &k2)).unwrap();
+    }
+
     #[test]
     fn redirect_keeps_host_path_and_query() {
         let mut h = HeaderMap::new();
