@@ -24,7 +24,17 @@ pub async fn open_store(plant: &Plant, data: &Path) -> anyhow::Result<Store> {
     let url = plant.storage.url.get_ref();
     let store = Store::open(url, &OpenOptions::new(data))
         .await
-        .with_context(|| format!("opening the database {url}"))?;
+        .map_err(|e| {
+            let why = e.to_string();
+            let hint = if why.contains("invalid peer certificate") {
+                "; the database server's TLS certificate was refused: with sslmode=verify-ca or \
+                 verify-full it must be signed by the sslrootcert= certificate (or a public CA), \
+                 and with verify-full name the URL's host"
+            } else {
+                ""
+            };
+            anyhow::Error::new(e).context(format!("opening the database {url}{hint}"))
+        })?;
     store.migrate().await.context("migrating the database")?;
     Ok(store)
 }

@@ -4,9 +4,11 @@
 //! components together ([`runtime`]). It holds no domain logic of its own: each
 //! subcommand hands its work to the crate that owns it.
 
+mod cert;
 mod data;
 mod demo_plant;
 mod dispatch_cmd;
+mod https;
 mod logging;
 mod replay;
 mod runtime;
@@ -126,6 +128,38 @@ enum Command {
     Dispatch {
         #[command(subcommand)]
         command: DispatchCommand,
+    },
+    /// TLS certificates for HTTPS ([server.tls]).
+    Cert {
+        #[command(subcommand)]
+        command: CertCommand,
+    },
+}
+
+#[derive(Subcommand)]
+enum CertCommand {
+    /// Write a self-signed certificate (cert.pem) and its private key
+    /// (key.pem, mode 0600) for a first start over HTTPS, and print the
+    /// [server.tls] lines to add.
+    SelfSigned {
+        /// A host name or IP address the certificate is valid for; repeat
+        /// for more. Default: localhost, 127.0.0.1, ::1 and this machine's
+        /// name.
+        #[arg(long = "host", value_name = "NAME|IP")]
+        hosts: Vec<String>,
+        /// Days of validity.
+        #[arg(long, default_value_t = 365)]
+        days: u32,
+        /// Folder to write to; default: the --config folder, else the
+        /// working directory.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// The configuration (gridscada.toml or its folder) to write beside.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Replace existing cert.pem and key.pem.
+        #[arg(long)]
+        force: bool,
     },
 }
 
@@ -315,6 +349,28 @@ fn main() -> ExitCode {
         Command::Dispatch {
             command: DispatchCommand::Solve { file },
         } => ExitCode::from(dispatch_cmd::run_solve(&file).clamp(0, 255) as u8),
+        Command::Cert {
+            command:
+                CertCommand::SelfSigned {
+                    hosts,
+                    days,
+                    out,
+                    config,
+                    force,
+                },
+        } => match cert::self_signed(cert::SelfSigned {
+            hosts,
+            days,
+            out,
+            config,
+            force,
+        }) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("error: {e:#}");
+                ExitCode::FAILURE
+            }
+        },
     }
 }
 
@@ -333,12 +389,16 @@ fn check(path: &std::path::Path) -> ExitCode {
             for w in &plant.warnings {
                 eprintln!("{w}");
             }
-            let screen_problems = runtime::check_screens(&plant);
-            if !screen_problems.is_empty() {
-                for p in &screen_problems {
+            let mut problems = runtime::check_screens(&plant);
+            // The certificate and key are read as `serve` would.
+            if let Err(e) = https::load(&plant) {
+                problems.push(format!("{e:#}"));
+            }
+            if !problems.is_empty() {
+                for p in &problems {
                     eprintln!("{p}");
                 }
-                eprintln!("{} problem(s) found", screen_problems.len());
+                eprintln!("{} problem(s) found", problems.len());
                 return ExitCode::FAILURE;
             }
             println!(

@@ -519,6 +519,8 @@ async fn run(
     mode: Mode,
     scenario: Option<Box<dyn LiveDriver>>,
 ) -> anyhow::Result<()> {
+    // A wrong certificate or key stops the start before anything runs.
+    let https = crate::https::load(&plant)?;
     let store = open_store(&plant, data).await?;
     let clock: Arc<dyn Clock> = match &scenario {
         Some(live) => live.clock(),
@@ -553,9 +555,11 @@ async fn run(
     // The demo serves loopback only, and its figures are no secret.
     web.auth.metrics_open = mode == Mode::Demo;
     load_screens(&web, mode).await?;
-    let (local, server) = gridscada_web::bind(http, gridscada_web::router(web))
-        .await
-        .with_context(|| format!("cannot listen on {http}"))?;
+    let listening = crate::https::listen(&stack.plant, http, web, https).await?;
+    if let Some(https) = listening.https.clone() {
+        crate::https::reload_on_sighup(https, events_tx.clone(), clock.clone());
+    }
+    let (url, server) = (listening.url, listening.server);
 
     let _ = events_tx
         .send(sinks::system_event(
@@ -566,8 +570,11 @@ async fn run(
         ))
         .await;
     println!("gridscada {} is running.", mode.label());
-    println!("  HMI and API: http://{local}/");
-    println!("  Health:      http://{local}/healthz");
+    println!("  HMI and API: {url}");
+    println!("  Health:      {url}healthz");
+    if let Some(redirect) = listening.redirect {
+        println!("  Redirect:    http://{redirect}/ -> HTTPS");
+    }
     println!("  Data folder: {}", data.display());
     if let Some(creds) = &credentials {
         println!(
@@ -639,8 +646,10 @@ async fn load_screens(web: &gridscada_web::WebState, mode: Mode) -> anyhow::Resu
 /// The web layer's view of a running stack.
 pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
     let policy = gridscada_web::auth::SessionPolicy::from_config(&stack.plant.server.sessions);
-    // Sessions in the store, with their upkeep (activity, re-checks, sweep).
-    let auth = gridscada_web::Auth::new(policy, false, stack.store.clone()).await;
+    // Sessions in the store, with their upkeep (activity, re-checks, sweep);
+    // over HTTPS the session cookie is never sent in clear.
+    let auth =
+        gridscada_web::Auth::new(policy, stack.plant.tls.is_some(), stack.store.clone()).await;
     gridscada_web::WebState {
         db: stack.db.clone(),
         plant: stack.plant.clone(),
@@ -670,6 +679,7 @@ pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
             poll: stack.field.stats_handle(),
             rates: Default::default(),
         })),
+        tls: stack.plant.tls.is_some(),
     }
 }
 

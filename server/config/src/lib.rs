@@ -19,6 +19,6 @@ pub mod screen;
 mod validate;
 
 pub use diag::{Diagnostic, SourceFile};
-pub use load::{load_path, load_with, Plant};
+pub use load::{load_path, load_with, Plant, TlsFiles};
 pub use model::*;
 pub use overrides::{apply_env, has_plaintext_password, EnvVar, Warning, ENV_VARS};

@@ -28,12 +28,28 @@ pub struct Plant {
     /// What works but should not be left so (`gridscada check` prints them,
     /// `serve` logs them), e.g. a plaintext password in the storage URL.
     pub warnings: Vec<Warning>,
+    /// HTTPS, from `[server.tls]` with its file paths resolved like
+    /// `data_dir` (or replaced from the environment); `None`: plain HTTP.
+    pub tls: Option<TlsFiles>,
     pub server: ServerConfig,
     pub storage: StorageConfig,
     pub devices: Vec<DeviceConfig>,
     pub tags: Vec<TagConfig>,
     pub panels: Vec<PanelConfig>,
     pub microgrid: Option<MicrogridConfig>,
+}
+
+/// Where HTTPS takes its certificate and key, and its other settings.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TlsFiles {
+    /// The certificate chain, PEM.
+    pub cert: PathBuf,
+    /// The private key, PEM.
+    pub key: PathBuf,
+    /// The plain-HTTP address that redirects to HTTPS, if any.
+    pub redirect_http: Option<std::net::SocketAddr>,
+    /// HSTS `max-age` in seconds; 0: no HSTS.
+    pub hsts_max_age_s: u64,
 }
 
 impl Plant {
@@ -175,6 +191,16 @@ pub fn load_with(
     Ok(Plant {
         main_path: main.to_path_buf(),
         data_dir: base.join(&main_cfg.server.data_dir),
+        tls: main_cfg.server.tls.as_ref().map(|t| TlsFiles {
+            cert: base.join(t.cert.get_ref()),
+            key: base.join(t.key.get_ref()),
+            // Checked by validate.
+            redirect_http: t
+                .redirect_http
+                .as_ref()
+                .and_then(|a| a.get_ref().parse().ok()),
+            hsts_max_age_s: *t.hsts_max_age_s.get_ref(),
+        }),
         warnings,
         server: main_cfg.server,
         storage: main_cfg.storage,

@@ -1,7 +1,7 @@
 //! Settings given outside the configuration files: the `GRIDSCADA_*`
 //! environment variables, for secrets and for what differs between
 //! machines (the database URL and password, the listen address, the data
-//! folder, the metrics token), and the warning about a plaintext password
+//! folder, the metrics token, the TLS certificate and key), and the warning about a plaintext password
 //! left in the file.
 //!
 //! The environment is read through a lookup function, so this stays pure
@@ -15,7 +15,7 @@ use std::path::PathBuf;
 use serde_spanned::Spanned;
 
 use crate::diag::Diagnostic;
-use crate::load::Plant;
+use crate::load::{Plant, TlsFiles};
 
 /// A `GRIDSCADA_*` environment variable and the setting it replaces.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -46,13 +46,24 @@ pub const ENV_METRICS_TOKEN: EnvVar = EnvVar {
     setting: "[server] metrics_token",
 };
 
+pub const ENV_TLS_CERT: EnvVar = EnvVar {
+    name: "GRIDSCADA_TLS_CERT",
+    setting: "[server.tls] cert",
+};
+pub const ENV_TLS_KEY: EnvVar = EnvVar {
+    name: "GRIDSCADA_TLS_KEY",
+    setting: "[server.tls] key",
+};
+
 /// Every variable [`apply_env`] reads, in the order it applies them.
-pub const ENV_VARS: [EnvVar; 5] = [
+pub const ENV_VARS: [EnvVar; 7] = [
     ENV_STORAGE_URL,
     ENV_STORAGE_PASSWORD,
     ENV_HTTP,
     ENV_DATA_DIR,
     ENV_METRICS_TOKEN,
+    ENV_TLS_CERT,
+    ENV_TLS_KEY,
 ];
 
 /// Replaces the file's settings with the `GRIDSCADA_*` variables that `get`
@@ -121,6 +132,47 @@ pub fn apply_env(
     if let Some(token) = value(ENV_METRICS_TOKEN, &mut fail) {
         plant.server.metrics_token = Some(token);
         applied.push(ENV_METRICS_TOKEN.name);
+    }
+    // The certificate and key: a relative path is taken from the working
+    // directory, like GRIDSCADA_DATA_DIR. Without [server.tls] in the file,
+    // both must be given, and HTTPS starts with the defaults of the rest.
+    let cert = value(ENV_TLS_CERT, &mut fail).map(PathBuf::from);
+    let key = value(ENV_TLS_KEY, &mut fail).map(PathBuf::from);
+    match (&mut plant.tls, cert, key) {
+        (_, None, None) => {}
+        (Some(tls), cert, key) => {
+            if let Some(cert) = cert {
+                tls.cert = cert;
+                applied.push(ENV_TLS_CERT.name);
+            }
+            if let Some(key) = key {
+                tls.key = key;
+                applied.push(ENV_TLS_KEY.name);
+            }
+        }
+        (None, Some(cert), Some(key)) => {
+            plant.tls = Some(TlsFiles {
+                cert,
+                key,
+                redirect_http: None,
+                hsts_max_age_s: crate::model::DEFAULT_HSTS_MAX_AGE_S,
+            });
+            applied.extend([ENV_TLS_CERT.name, ENV_TLS_KEY.name]);
+        }
+        (None, Some(_), None) => fail(
+            ENV_TLS_CERT,
+            format!(
+                "the file has no [server.tls]; set {} too, to the certificate's private key",
+                ENV_TLS_KEY.name
+            ),
+        ),
+        (None, None, Some(_)) => fail(
+            ENV_TLS_KEY,
+            format!(
+                "the file has no [server.tls]; set {} too, to the certificate",
+                ENV_TLS_CERT.name
+            ),
+        ),
     }
     if errors.is_empty() {
         Ok(applied)

@@ -96,6 +96,8 @@ fn every_override_replaces_its_setting() {
             ("GRIDSCADA_HTTP", "0.0.0.0:9443"),
             ("GRIDSCADA_DATA_DIR", "/var/lib/gridscada"),
             ("GRIDSCADA_METRICS_TOKEN", "from-env"),
+            ("GRIDSCADA_TLS_CERT", "/etc/gridscada/cert.pem"),
+            ("GRIDSCADA_TLS_KEY", "/etc/gridscada/key.pem"),
         ]),
     )
     .unwrap();

@@ -16,6 +16,7 @@ mod hmi;
 pub mod metrics;
 pub mod openapi;
 pub mod routes;
+pub mod tls;
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -54,6 +55,9 @@ pub struct WebState {
     pub tag_index: Arc<access::TagIndex>,
     /// Communication figures of the field devices, where field I/O runs.
     pub devices: Option<Arc<dyn api::devices::DeviceSource>>,
+    /// This server itself speaks HTTPS (`[server.tls]`): responses carry
+    /// HSTS. (Cookies are `Secure` through [`Auth::secure_cookies`].)
+    pub tls: bool,
 }
 
 /// The application's routes.

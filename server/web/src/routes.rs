@@ -474,6 +474,7 @@ pub fn build(state: WebState) -> Router {
     }
     let http_metrics = state.http_metrics.clone();
     let hosts = Arc::new(HostPolicy::new(&state.plant.server.allowed_hosts));
+    let hsts = hsts_header(&state);
     router
         .fallback(crate::hmi::serve)
         .layer(middleware::from_fn(json_errors))
@@ -483,7 +484,7 @@ pub fn build(state: WebState) -> Router {
         ))
         .layer(middleware::from_fn_with_state(hosts, check_origin))
         // Outside the checks, so their refusals carry the headers too.
-        .layer(middleware::from_fn(security_headers))
+        .layer(middleware::from_fn_with_state(hsts, security_headers))
         .layer(tower_http::compression::CompressionLayer::new())
         .with_state(state)
 }
@@ -667,9 +668,28 @@ async fn json_errors(req: Request, next: Next) -> Response {
     out
 }
 
+/// `Strict-Transport-Security` when this server speaks HTTPS and
+/// `[server.tls] hsts_max_age_s` is not 0.
+fn hsts_header(state: &WebState) -> Option<HeaderValue> {
+    let max_age = state
+        .plant
+        .tls
+        .as_ref()
+        .map_or(gridscada_config::DEFAULT_HSTS_MAX_AGE_S, |t| {
+            t.hsts_max_age_s
+        });
+    (state.tls && max_age > 0)
+        .then(|| HeaderValue::from_str(&format!("max-age={max_age}")).ok())
+        .flatten()
+}
+
 /// Security headers on every response; API answers are never cached (they
 /// carry plant state and user data).
-async fn security_headers(req: Request, next: Next) -> Response {
+async fn security_headers(
+    State(hsts): State<Option<HeaderValue>>,
+    req: Request,
+    next: Next,
+) -> Response {
     let path = req.uri().path();
     let dynamic = path.starts_with("/api/") || path == "/metrics" || path == "/healthz";
     let mut resp = next.run(req).await;
@@ -690,6 +710,9 @@ async fn security_headers(req: Request, next: Next) -> Response {
     set(h, "x-frame-options", "DENY");
     set(h, "referrer-policy", "same-origin");
     set(h, "cross-origin-opener-policy", "same-origin");
+    if let Some(hsts) = hsts {
+        h.insert(header::STRICT_TRANSPORT_SECURITY, hsts);
+    }
     resp
 }
 

@@ -30,6 +30,37 @@ pub struct ServerConfig {
     /// When sessions end (`[server.sessions]`).
     #[serde(default)]
     pub sessions: SessionsConfig,
+    /// HTTPS (`[server.tls]`); without it the server speaks plain HTTP.
+    #[serde(default)]
+    pub tls: Option<TlsConfig>,
+}
+
+/// `[server.tls]`: serve HTTPS on `[server] http` with a PEM certificate
+/// chain and its private key. The files are read at start and again on
+/// SIGHUP, so a renewed certificate needs no restart.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct TlsConfig {
+    /// The certificate chain (PEM, the server's own first), relative to the
+    /// main file's folder (resolved in [`crate::Plant::tls`]).
+    pub cert: Spanned<String>,
+    /// The private key of the first certificate (PEM: PKCS#8, PKCS#1 or
+    /// SEC1), relative to the main file's folder.
+    pub key: Spanned<String>,
+    /// A plain-HTTP address (e.g. `0.0.0.0:80`) that answers every request
+    /// with a redirect to the HTTPS URL and serves nothing else.
+    #[serde(default)]
+    pub redirect_http: Option<Spanned<String>>,
+    /// `Strict-Transport-Security: max-age`, in seconds; 0: no HSTS header.
+    #[serde(default = "default_hsts_max_age_s")]
+    pub hsts_max_age_s: Spanned<u64>,
+}
+
+/// One year, what HSTS preload lists ask for.
+pub const DEFAULT_HSTS_MAX_AGE_S: u64 = 365 * 24 * 3600;
+
+fn default_hsts_max_age_s() -> Spanned<u64> {
+    Spanned::new(0..0, DEFAULT_HSTS_MAX_AGE_S)
 }
 
 /// When a logged-in session ends. The HMI's live connection counts as
@@ -101,6 +132,7 @@ impl Default for ServerConfig {
             metrics_token: None,
             metrics_allow: vec![],
             sessions: SessionsConfig::default(),
+            tls: None,
         }
     }
 }

@@ -131,6 +131,42 @@ pub(crate) fn check(
     }
 }
 
+/// `[server.tls]` as written; the files themselves are read (and their
+/// certificate matched to their key) when the server starts or `gridscada
+/// check` runs, by the web crate's TLS loader.
+fn check_tls(cx: &mut Ctx<'_>, tls: &TlsConfig, http: &Spanned<String>) {
+    for (key, path) in [("cert", &tls.cert), ("key", &tls.key)] {
+        if path.get_ref().trim().is_empty() {
+            cx.err(
+                0,
+                path.span(),
+                format!("[server.tls] {key}: empty; name a PEM file"),
+            );
+        }
+    }
+    if let Some(addr) = &tls.redirect_http {
+        if addr.get_ref().parse::<SocketAddr>().is_err() {
+            cx.err(
+                0,
+                addr.span(),
+                format!(
+                    "[server.tls] redirect_http: '{}' is not an address like 0.0.0.0:80",
+                    addr.get_ref()
+                ),
+            );
+        } else if addr.get_ref().parse::<SocketAddr>().ok() == http.get_ref().parse().ok() {
+            cx.err(
+                0,
+                addr.span(),
+                format!(
+                    "[server.tls] redirect_http: {} is [server] http itself, where HTTPS is served; give the plain-HTTP address (e.g. port 80)",
+                    addr.get_ref()
+                ),
+            );
+        }
+    }
+}
+
 fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
     let http = &main.server.http;
     if http.get_ref().parse::<SocketAddr>().is_err() {
@@ -142,6 +178,9 @@ fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
                 http.get_ref()
             ),
         );
+    }
+    if let Some(tls) = &main.server.tls {
+        check_tls(cx, tls, &main.server.http);
     }
     let sessions = &main.server.sessions;
     for (role, minutes) in sessions.idle_minutes.get_ref() {

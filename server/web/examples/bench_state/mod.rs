@@ -69,6 +69,7 @@ pub async fn web_state(db: Arc<TagDb>, dir: &Path) -> (WebState, String) {
         screens: Default::default(),
         tag_index: Arc::new(gridscada_web::access::TagIndex::new(&plant_ref)),
         devices: None,
+        tls: false,
     };
     (state, format!("{}={token}", auth::COOKIE))
 }

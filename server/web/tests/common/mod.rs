@@ -353,6 +353,7 @@ impl Harness {
             screens: Default::default(),
             tag_index,
             devices: None,
+            tls: false,
         };
         let h = Harness {
             app: gridscada_web::router(state.clone()),
