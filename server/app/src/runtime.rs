@@ -566,8 +566,10 @@ async fn run(
         ))
         .await;
     println!("gridscada {} is running.", mode.label());
-    println!("  HMI and API: http://{local}/");
-    println!("  Health:      http://{local}/healthz");
+    // Under [server] base_path when served behind a proxy's sub-path.
+    let base = stack.plant.server.base_path();
+    println!("  HMI and API: http://{local}{base}/");
+    println!("  Health:      http://{local}{base}/healthz");
     println!("  Data folder: {}", data.display());
     if let Some(creds) = &credentials {
         println!(

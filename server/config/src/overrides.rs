@@ -46,13 +46,19 @@ pub const ENV_METRICS_TOKEN: EnvVar = EnvVar {
     setting: "[server] metrics_token",
 };
 
+pub const ENV_BASE_PATH: EnvVar = EnvVar {
+    name: "GRIDSCADA_BASE_PATH",
+    setting: "[server] base_path",
+};
+
 /// Every variable [`apply_env`] reads, in the order it applies them.
-pub const ENV_VARS: [EnvVar; 5] = [
+pub const ENV_VARS: [EnvVar; 6] = [
     ENV_STORAGE_URL,
     ENV_STORAGE_PASSWORD,
     ENV_HTTP,
     ENV_DATA_DIR,
     ENV_METRICS_TOKEN,
+    ENV_BASE_PATH,
 ];
 
 /// Replaces the file's settings with the `GRIDSCADA_*` variables that `get`
@@ -121,6 +127,15 @@ pub fn apply_env(
     if let Some(token) = value(ENV_METRICS_TOKEN, &mut fail) {
         plant.server.metrics_token = Some(token);
         applied.push(ENV_METRICS_TOKEN.name);
+    }
+    if let Some(base) = value(ENV_BASE_PATH, &mut fail) {
+        match crate::normal_base_path(&base) {
+            Ok(_) => {
+                plant.server.base_path = Some(Spanned::new(0..0, base));
+                applied.push(ENV_BASE_PATH.name);
+            }
+            Err(why) => fail(ENV_BASE_PATH, why),
+        }
     }
     if errors.is_empty() {
         Ok(applied)

@@ -131,6 +131,31 @@ pub(crate) fn check(
     }
 }
 
+/// `public_origin`, `trusted_proxies` and `base_path` (`model/proxy.rs`).
+fn check_proxy(cx: &mut Ctx<'_>, server: &crate::ServerConfig) {
+    if let Some(o) = &server.public_origin {
+        if let Err(why) = crate::normal_public_origin(o.get_ref()) {
+            cx.err(0, o.span(), format!("[server] public_origin: {why}"));
+        }
+    }
+    for c in &server.trusted_proxies {
+        if let Err(why) = crate::Cidr::parse(c.get_ref()) {
+            cx.err(
+                0,
+                c.span(),
+                format!(
+                    "[server] trusted_proxies: {why} (write a block like 10.0.0.0/8 or ::1/128)"
+                ),
+            );
+        }
+    }
+    if let Some(b) = &server.base_path {
+        if let Err(why) = crate::normal_base_path(b.get_ref()) {
+            cx.err(0, b.span(), format!("[server] base_path: {why}"));
+        }
+    }
+}
+
 fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
     let http = &main.server.http;
     if http.get_ref().parse::<SocketAddr>().is_err() {
@@ -143,6 +168,7 @@ fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
             ),
         );
     }
+    check_proxy(cx, &main.server);
     let sessions = &main.server.sessions;
     for (role, minutes) in sessions.idle_minutes.get_ref() {
         if !(minutes.is_finite() && (0.0..=10_080.0).contains(minutes)) {

@@ -1,6 +1,6 @@
 //! Log in, log out, and who am I.
 
-use axum::extract::{ConnectInfo, State};
+use axum::extract::State;
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
@@ -44,12 +44,13 @@ fn refused() -> ApiError {
     ))]
 pub async fn login(
     State(s): State<WebState>,
-    ConnectInfo(peer): ConnectInfo<std::net::SocketAddr>,
+    Extension(client): Extension<crate::ClientInfo>,
     headers: HeaderMap,
     body: Result<Json<Login>, axum::extract::rejection::JsonRejection>,
 ) -> ApiResult<Response> {
     let Json(login) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
-    let ip = peer.ip();
+    // The real client, behind a trusted proxy too (crate::proxy).
+    let ip = client.ip;
     let name = login.username.trim().to_string();
     if name.is_empty()
         || name.len() > 128
@@ -137,7 +138,11 @@ pub async fn login(
     Ok((
         [(
             header::SET_COOKIE,
-            auth::session_cookie(&token, s.auth.secure_cookies),
+            auth::session_cookie(
+                &token,
+                s.auth.secure_cookies || client.https,
+                &s.plant.server.base_path(),
+            ),
         )],
         Json(body),
     )
@@ -200,6 +205,7 @@ pub async fn current(
 pub async fn logout(
     State(s): State<WebState>,
     Extension(p): Extension<Principal>,
+    Extension(client): Extension<crate::ClientInfo>,
     headers: HeaderMap,
 ) -> Response {
     if let Some(token) =
@@ -221,7 +227,10 @@ pub async fn logout(
         StatusCode::NO_CONTENT,
         [(
             header::SET_COOKIE,
-            auth::clear_cookie(s.auth.secure_cookies),
+            auth::clear_cookie(
+                s.auth.secure_cookies || client.https,
+                &s.plant.server.base_path(),
+            ),
         )],
     )
         .into_response()
