@@ -27,7 +27,7 @@ as_root() {
 }
 
 # --- 1. Debian packages the tests use ------------------------------------
-debian_packages=(postgresql socat mbpoll libmodbus-dev pkg-config curl python3-venv)
+debian_packages=(postgresql socat mbpoll libmodbus-dev pkg-config curl python3-venv nginx)
 # Debian's nodejs comes without npm (the browser tests install playwright-core with it).
 command -v npm >/dev/null 2>&1 || debian_packages+=(npm)
 missing=()
