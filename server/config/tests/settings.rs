@@ -199,7 +199,7 @@ fn a_bad_base_path_from_the_environment_is_refused() {
         .collect();
     assert_eq!(
         errors,
-        ["environment:0:0: error: GRIDSCADA_BASE_PATH (replacing [server] base_path): 'scada' must start with / (like /scada)"]
+        ["environment: error: GRIDSCADA_BASE_PATH (replacing [server] base_path): 'scada' must start with / (like /scada)"]
     );
     assert_eq!(p.server.base_path(), "/scada", "the file's setting stays");
 }
