@@ -10,6 +10,19 @@ export class ApiError extends Error {
   }
 }
 
+/**
+ * Where the HMI is served: this module is at `<base>/js/api.js`, so the base
+ * is one folder up. Behind a reverse proxy the server may sit under a
+ * sub-path (`[server] base_path`, e.g. `/scada/`); every URL the HMI asks
+ * for is made from this base, never from the site's root.
+ */
+export const BASE = new URL('../', import.meta.url);
+
+/** The URL of an API path (`/api/...`) under the HMI's base. */
+export function apiUrl(path) {
+  return new URL(path.replace(/^\//, ''), BASE).href;
+}
+
 let onUnauthorized = () => {};
 /** Called when any request answers 401 (the session ended). */
 export function setUnauthorizedHandler(f) { onUnauthorized = f; }
@@ -32,7 +45,7 @@ export async function api(method, path, body, opts = {}) {
   }
   let resp;
   try {
-    resp = await fetch(path, init);
+    resp = await fetch(apiUrl(path), init);
   } catch (e) {
     throw new ApiError(0, 'network', `cannot reach the server (${e.message})`);
   }

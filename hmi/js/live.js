@@ -3,6 +3,7 @@
 // subscription, and sent again after every reconnect. Values are kept in a
 // cache so a screen mounted later sees them at once.
 
+import { apiUrl } from './api.js';
 import { noteActivity } from './session.js';
 
 const RETRY_MIN_MS = 500;
@@ -79,7 +80,10 @@ export class Live {
 
   connect() {
     if (this.stopped) return;
-    const url = `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/api/live`;
+    // Under the HMI's base (a reverse proxy's sub-path), ws: or wss: as the page.
+    const live = new URL(apiUrl('/api/live'));
+    live.protocol = live.protocol === 'https:' ? 'wss:' : 'ws:';
+    const url = live.href;
     let ws;
     try { ws = new WebSocket(url); } catch { this.scheduleReconnect(); return; }
     this.ws = ws;

@@ -4,7 +4,7 @@
 // reading cursor, Show Tabular with Reload, and CSV export. The server downsamples to about one bucket
 // per pixel, so long ranges stay light.
 
-import { get, qs } from '../api.js';
+import { apiUrl, get, qs } from '../api.js';
 import { h, replace, select, field } from '../dom.js';
 import { fmtNumber, fmtTime, pad } from '../format.js';
 import { live } from '../live.js';
@@ -242,7 +242,7 @@ export default {
     async function load() {
       const { from, to } = range();
       if (!Number.isFinite(from)) { status.textContent = 'Set a valid start date and time.'; return; }
-      csvLink.href = pens.length ? `/api/trends.csv${qs({ tags: pens.map((p) => p.tag).join(','), from, to })}` : '#';
+      csvLink.href = pens.length ? apiUrl(`/api/trends.csv${qs({ tags: pens.map((p) => p.tag).join(','), from, to })}`) : '#';
       if (!pens.length) { data = { from, to, series: [] }; chart.setData([], from, to); drawAxes(); drawTable(); return; }
       const points = Math.max(50, Math.min(2000, Math.round(canvas.clientWidth || 800)));
       const seq = ++loadSeq;

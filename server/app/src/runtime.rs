@@ -570,6 +570,12 @@ async fn run(
         ))
         .await;
     println!("gridscada {} is running.", mode.label());
+    // Under [server] base_path when served behind a proxy's sub-path.
+    let url = format!(
+        "{}{}/",
+        url.trim_end_matches('/'),
+        stack.plant.server.base_path()
+    );
     println!("  HMI and API: {url}");
     println!("  Health:      {url}healthz");
     if let Some(redirect) = listening.redirect {

@@ -11,12 +11,13 @@ use std::time::{Duration, Instant};
 
 const BIN: &str = env!("CARGO_BIN_EXE_gridscada");
 
-const VARS: [&str; 5] = [
+const VARS: [&str; 6] = [
     "GRIDSCADA_STORAGE_URL",
     "GRIDSCADA_STORAGE_PASSWORD",
     "GRIDSCADA_HTTP",
     "GRIDSCADA_DATA_DIR",
     "GRIDSCADA_METRICS_TOKEN",
+    "GRIDSCADA_BASE_PATH",
 ];
 
 /// The binary with none of the test process's own GRIDSCADA_* variables.

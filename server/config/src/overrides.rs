@@ -55,8 +55,13 @@ pub const ENV_TLS_KEY: EnvVar = EnvVar {
     setting: "[server.tls] key",
 };
 
+pub const ENV_BASE_PATH: EnvVar = EnvVar {
+    name: "GRIDSCADA_BASE_PATH",
+    setting: "[server] base_path",
+};
+
 /// Every variable [`apply_env`] reads, in the order it applies them.
-pub const ENV_VARS: [EnvVar; 7] = [
+pub const ENV_VARS: [EnvVar; 8] = [
     ENV_STORAGE_URL,
     ENV_STORAGE_PASSWORD,
     ENV_HTTP,
@@ -64,6 +69,7 @@ pub const ENV_VARS: [EnvVar; 7] = [
     ENV_METRICS_TOKEN,
     ENV_TLS_CERT,
     ENV_TLS_KEY,
+    ENV_BASE_PATH,
 ];
 
 /// Replaces the file's settings with the `GRIDSCADA_*` variables that `get`
@@ -173,6 +179,15 @@ pub fn apply_env(
                 ENV_TLS_CERT.name
             ),
         ),
+    }
+    if let Some(base) = value(ENV_BASE_PATH, &mut fail) {
+        match crate::normal_base_path(&base) {
+            Ok(_) => {
+                plant.server.base_path = Some(Spanned::new(0..0, base));
+                applied.push(ENV_BASE_PATH.name);
+            }
+            Err(why) => fail(ENV_BASE_PATH, why),
+        }
     }
     if errors.is_empty() {
         Ok(applied)

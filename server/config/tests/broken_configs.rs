@@ -508,3 +508,44 @@ fn session_policy_is_checked() {
         "{got:?}"
     );
 }
+
+#[test]
+fn reverse_proxy_settings_are_checked_where_they_stand() {
+    let main = format!(
+        "{MAIN}[server]\npublic_origin = \"https://scada.example.com/scada\"\ntrusted_proxies = [\"127.0.0.1/32\", \"10.0.0.1/8\", \"proxy.lan\"]\nbase_path = \"scada/\"\n"
+    );
+    assert_problems(
+        &main,
+        DEVICE,
+        &[
+            "DIR/gridscada.toml:3:17: error: [server] public_origin: 'https://scada.example.com/scada': an origin is scheme, host and port only ('/' found); a sub-path goes in [server] base_path",
+            "DIR/gridscada.toml:4:36: error: [server] trusted_proxies: '10.0.0.1/8' has address bits set past the /8 (did you mean 10.0.0.0/8?) (write a block like 10.0.0.0/8 or ::1/128)",
+            "DIR/gridscada.toml:4:50: error: [server] trusted_proxies: 'proxy.lan' is not an IP address (write a block like 10.0.0.0/8 or ::1/128)",
+            "DIR/gridscada.toml:5:13: error: [server] base_path: 'scada/' must start with / (like /scada)",
+        ],
+    );
+}
+
+#[test]
+fn good_reverse_proxy_settings_load_in_normal_form() {
+    let dir = tempfile::tempdir().unwrap();
+    fs::write(
+        dir.path().join("gridscada.toml"),
+        format!("{MAIN}[server]\npublic_origin = \"https://SCADA.example.com:443\"\ntrusted_proxies = [\"127.0.0.1/32\", \"::1/128\", \"10.0.0.0/8\"]\nbase_path = \"/scada/\"\n"),
+    )
+    .unwrap();
+    fs::write(dir.path().join("tags.toml"), DEVICE).unwrap();
+    let plant = load_path(dir.path()).unwrap();
+    assert_eq!(
+        plant.server.public_origin().as_deref(),
+        Some("https://scada.example.com")
+    );
+    assert_eq!(plant.server.base_path(), "/scada");
+    let proxies: Vec<String> = plant
+        .server
+        .trusted_proxies()
+        .iter()
+        .map(|c| c.to_string())
+        .collect();
+    assert_eq!(proxies, ["127.0.0.1/32", "::1/128", "10.0.0.0/8"]);
+}

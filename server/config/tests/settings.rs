@@ -98,6 +98,7 @@ fn every_override_replaces_its_setting() {
             ("GRIDSCADA_METRICS_TOKEN", "from-env"),
             ("GRIDSCADA_TLS_CERT", "/etc/gridscada/cert.pem"),
             ("GRIDSCADA_TLS_KEY", "/etc/gridscada/key.pem"),
+            ("GRIDSCADA_BASE_PATH", "/scada/"),
         ]),
     )
     .unwrap();
@@ -109,6 +110,7 @@ fn every_override_replaces_its_setting() {
     assert_eq!(p.server.http.get_ref(), "0.0.0.0:9443");
     assert_eq!(p.data_dir, PathBuf::from("/var/lib/gridscada"));
     assert_eq!(p.server.metrics_token.as_deref(), Some("from-env"));
+    assert_eq!(p.server.base_path(), "/scada");
 
     // The password alone goes into the file's URL (replacing its password).
     let mut p = load(
@@ -186,4 +188,20 @@ fn a_plaintext_password_in_the_file_is_a_located_warning_not_an_error() {
         let p = load(dir.path(), &format!("[storage]\nurl = \"{url}\"\n"));
         assert!(p.warnings.is_empty(), "{url}: {:?}", p.warnings);
     }
+}
+
+#[test]
+fn a_bad_base_path_from_the_environment_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut p = load(dir.path(), "[server]\nbase_path = \"/scada\"\n");
+    let errors: Vec<String> = apply_env(&mut p, &env(&[("GRIDSCADA_BASE_PATH", "scada")]))
+        .unwrap_err()
+        .iter()
+        .map(|d| d.to_string())
+        .collect();
+    assert_eq!(
+        errors,
+        ["environment: error: GRIDSCADA_BASE_PATH (replacing [server] base_path): 'scada' must start with / (like /scada)"]
+    );
+    assert_eq!(p.server.base_path(), "/scada", "the file's setting stays");
 }

@@ -15,6 +15,7 @@ pub mod error;
 mod hmi;
 pub mod metrics;
 pub mod openapi;
+pub mod proxy;
 pub mod routes;
 pub mod tls;
 
@@ -29,6 +30,7 @@ use gridscada_tagdb::{Clock, TagDb, TagWriter};
 
 pub use api::Components;
 pub use auth::Auth;
+pub use proxy::ClientInfo;
 
 /// What the HTTP layer can reach.
 #[derive(Clone)]

@@ -2,7 +2,7 @@
 //! place. The router is built from this table, and the authorization tests are
 //! generated from it, so a route without a rule cannot exist.
 
-use axum::extract::{ConnectInfo, Request, State};
+use axum::extract::{Request, State};
 use axum::http::{header, HeaderMap, HeaderValue, Method, StatusCode};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
@@ -473,20 +473,99 @@ pub fn build(state: WebState) -> Router {
         router = router.route(route.path, handler);
     }
     let http_metrics = state.http_metrics.clone();
-    let hosts = Arc::new(HostPolicy::new(&state.plant.server.allowed_hosts));
+    let server = &state.plant.server;
+    let origins = Arc::new(OriginPolicy::new(server));
+    let proxies = Arc::new(crate::proxy::TrustedProxies::new(server.trusted_proxies()));
+    let base = server.base_path();
     let hsts = hsts_header(&state);
-    router
+    let app = router
         .fallback(crate::hmi::serve)
         .layer(middleware::from_fn(json_errors))
         .layer(middleware::from_fn_with_state(
             http_metrics,
             crate::metrics::count,
         ))
-        .layer(middleware::from_fn_with_state(hosts, check_origin))
+        .layer(middleware::from_fn_with_state(origins, check_origin))
         // Outside the checks, so their refusals carry the headers too.
         .layer(middleware::from_fn_with_state(hsts, security_headers))
         .layer(tower_http::compression::CompressionLayer::new())
-        .with_state(state)
+        .layer(middleware::from_fn_with_state(
+            proxies,
+            crate::proxy::client_info,
+        ))
+        .with_state(state);
+    if base.is_empty() {
+        return app;
+    }
+    // Under `[server] base_path`: the whole application, the prefix taken
+    // off before it routes (so the route table stays as it is).
+    Router::new()
+        .fallback_service(app)
+        .layer(middleware::from_fn_with_state(
+            Arc::<str>::from(base),
+            under_base,
+        ))
+}
+
+/// Serves the application under its base path: `/scada/x` is routed as
+/// `/x`, `/scada` is redirected to `/scada/` (the HMI's relative URLs need
+/// the slash), anything else is not ours.
+async fn under_base(State(base): State<Arc<str>>, mut req: Request, next: Next) -> Response {
+    let path = req.uri().path();
+    if path == &*base {
+        let query = req.uri().query().map_or(String::new(), |q| format!("?{q}"));
+        return (
+            StatusCode::PERMANENT_REDIRECT,
+            [(header::LOCATION, format!("{base}/{query}"))],
+        )
+            .into_response();
+    }
+    let Some(rest) = path.strip_prefix(&*base).filter(|r| r.starts_with('/')) else {
+        return ApiError::not_found(format!("not found; gridscada is served under {base}/"))
+            .into_response();
+    };
+    let rest = match req.uri().query() {
+        Some(q) => format!("{rest}?{q}"),
+        None => rest.to_string(),
+    };
+    let mut parts = req.uri().clone().into_parts();
+    parts.path_and_query = rest.parse().ok();
+    match axum::http::Uri::from_parts(parts) {
+        Ok(uri) => *req.uri_mut() = uri,
+        Err(_) => return ApiError::bad_request("unreadable request path").into_response(),
+    }
+    next.run(req).await
+}
+
+/// What [`check_origin`] holds requests against.
+pub struct OriginPolicy {
+    hosts: HostPolicy,
+    /// `[server] public_origin`, normalised: when set, an unsafe request's
+    /// Origin must be exactly this (the Host header is the proxy's).
+    public_origin: Option<String>,
+}
+
+impl OriginPolicy {
+    pub fn new(server: &gridscada_config::ServerConfig) -> Self {
+        let public_origin = server.public_origin();
+        let mut names = server.allowed_hosts.clone();
+        if let Some(o) = &public_origin {
+            names.push(gridscada_config::origin_host(o).to_string());
+        }
+        OriginPolicy {
+            hosts: HostPolicy::new(&names),
+            public_origin,
+        }
+    }
+
+    /// Whether an `Origin` (or a Referer's origin) is this server's: the
+    /// public origin when one is set, otherwise the request's own host.
+    fn ours(&self, origin: &str, host: &str) -> bool {
+        match &self.public_origin {
+            Some(public) => origin.trim_end_matches('/').eq_ignore_ascii_case(public),
+            None => same_origin(origin, host),
+        }
+    }
 }
 
 /// The host names this server answers to: any IP address, `localhost`, and
@@ -558,17 +637,22 @@ async fn authorize(
 /// Host and CSRF checks, on top of SameSite=Strict cookies:
 /// - the `Host` must be one of ours ([`HostPolicy`]), on every request;
 /// - an unsafe method or a WebSocket upgrade must come from our own origin:
-///   its `Origin`, or without one its `Referer`, must name this host; a
-///   request that carries the session cookie and neither header is refused
-///   (browsers always send one of them; scripts must say where they are).
-async fn check_origin(State(hosts): State<Arc<HostPolicy>>, req: Request, next: Next) -> Response {
+///   its `Origin`, or without one its `Referer`, must name this host (or be
+///   `[server] public_origin`, when set); a request that carries the session
+///   cookie and neither header is refused (browsers always send one of
+///   them; scripts must say where they are).
+async fn check_origin(
+    State(policy): State<Arc<OriginPolicy>>,
+    req: Request,
+    next: Next,
+) -> Response {
     let headers = req.headers();
     let host = headers
         .get(header::HOST)
         .and_then(|h| h.to_str().ok())
         .map(str::to_string)
         .or_else(|| req.uri().authority().map(|a| a.to_string()));
-    let Some(host) = host.filter(|h| hosts.allows(h)) else {
+    let Some(host) = host.filter(|h| policy.hosts.allows(h)) else {
         return ApiError::new(
             StatusCode::MISDIRECTED_REQUEST,
             "unknown_host",
@@ -586,10 +670,10 @@ async fn check_origin(State(hosts): State<Arc<HostPolicy>>, req: Request, next: 
         let with_cookie =
             token_from_cookies(headers.get(header::COOKIE).and_then(|v| v.to_str().ok())).is_some();
         let refusal = match (origin, referer) {
-            (Some(o), _) if !same_origin(o, &host) => {
+            (Some(o), _) if !policy.ours(o, &host) => {
                 Some("cross-site request refused (Origin does not match this server)")
             }
-            (None, Some(r)) if !same_origin(referer_origin(r), &host) => {
+            (None, Some(r)) if !policy.ours(referer_origin(r), &host) => {
                 Some("cross-site request refused (Referer does not match this server)")
             }
             (None, None) if with_cookie => Some(
@@ -714,13 +798,6 @@ async fn security_headers(
         h.insert(header::STRICT_TRANSPORT_SECURITY, hsts);
     }
     resp
-}
-
-/// The client's address, for throttling.
-pub fn client_ip(req_info: Option<&ConnectInfo<std::net::SocketAddr>>) -> std::net::IpAddr {
-    req_info
-        .map(|c| c.0.ip())
-        .unwrap_or(std::net::IpAddr::from([0, 0, 0, 0]))
 }
 
 /// Marks a request the HMI made on its own, not for the user (`1`).

@@ -89,7 +89,8 @@ export class Api {
     const headers = { Accept: 'application/json' };
     if (this.cookie) headers.Cookie = this.cookie;
     // As a browser does: a logged-in change names its origin (the server refuses it otherwise).
-    if (this.cookie && method !== 'GET' && method !== 'HEAD') headers.Origin = BASE;
+    // A browser's Origin: scheme, host and port, never the sub-path.
+    if (this.cookie && method !== 'GET' && method !== 'HEAD') headers.Origin = new URL(BASE).origin;
     if (body !== undefined) headers['Content-Type'] = 'application/json';
     const resp = await fetch(`${BASE}${p}`, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
     const set = resp.headers.get('set-cookie');

@@ -17,6 +17,7 @@ mod alarms;
 mod devices;
 mod microgrid;
 mod panels;
+mod proxy;
 mod server;
 mod tags;
 
@@ -24,6 +25,7 @@ pub use alarms::*;
 pub use devices::*;
 pub use microgrid::*;
 pub use panels::*;
+pub use proxy::*;
 pub use server::*;
 pub use tags::*;
 

@@ -33,6 +33,43 @@ pub struct ServerConfig {
     /// HTTPS (`[server.tls]`); without it the server speaks plain HTTP.
     #[serde(default)]
     pub tls: Option<TlsConfig>,
+    /// The origin browsers reach the HMI by through a reverse proxy
+    /// (`https://scada.example.com`): the Origin check compares against it
+    /// instead of the `Host` header, which proxies rewrite. See
+    /// `docs/REVERSE_PROXY.md`.
+    #[serde(default)]
+    pub public_origin: Option<Spanned<String>>,
+    /// Proxies (CIDRs) whose `Forwarded` / `X-Forwarded-*` headers are
+    /// believed; nobody else's are.
+    #[serde(default)]
+    pub trusted_proxies: Vec<Spanned<String>>,
+    /// The sub-path everything is served under (`/scada`); empty: the root.
+    #[serde(default)]
+    pub base_path: Option<Spanned<String>>,
+}
+
+/// The reverse-proxy settings in their normal forms (values that failed
+/// validation are left out; `serve` does not start with them).
+impl ServerConfig {
+    /// `""` or `/seg…` without a trailing slash.
+    pub fn base_path(&self) -> String {
+        self.base_path
+            .as_ref()
+            .and_then(|b| crate::normal_base_path(b.get_ref()).ok())
+            .unwrap_or_default()
+    }
+    /// `scheme://host[:port]`, the default port left out.
+    pub fn public_origin(&self) -> Option<String> {
+        self.public_origin
+            .as_ref()
+            .and_then(|o| crate::normal_public_origin(o.get_ref()).ok())
+    }
+    pub fn trusted_proxies(&self) -> Vec<crate::Cidr> {
+        self.trusted_proxies
+            .iter()
+            .filter_map(|c| crate::Cidr::parse(c.get_ref()).ok())
+            .collect()
+    }
 }
 
 /// `[server.tls]`: serve HTTPS on `[server] http` with a PEM certificate
@@ -133,6 +170,9 @@ impl Default for ServerConfig {
             metrics_allow: vec![],
             sessions: SessionsConfig::default(),
             tls: None,
+            public_origin: None,
+            trusted_proxies: vec![],
+            base_path: None,
         }
     }
 }

@@ -131,6 +131,31 @@ pub(crate) fn check(
     }
 }
 
+/// `public_origin`, `trusted_proxies` and `base_path` (`model/proxy.rs`).
+fn check_proxy(cx: &mut Ctx<'_>, server: &crate::ServerConfig) {
+    if let Some(o) = &server.public_origin {
+        if let Err(why) = crate::normal_public_origin(o.get_ref()) {
+            cx.err(0, o.span(), format!("[server] public_origin: {why}"));
+        }
+    }
+    for c in &server.trusted_proxies {
+        if let Err(why) = crate::Cidr::parse(c.get_ref()) {
+            cx.err(
+                0,
+                c.span(),
+                format!(
+                    "[server] trusted_proxies: {why} (write a block like 10.0.0.0/8 or ::1/128)"
+                ),
+            );
+        }
+    }
+    if let Some(b) = &server.base_path {
+        if let Err(why) = crate::normal_base_path(b.get_ref()) {
+            cx.err(0, b.span(), format!("[server] base_path: {why}"));
+        }
+    }
+}
+
 /// `[server.tls]` as written; the files themselves are read (and their
 /// certificate matched to their key) when the server starts or `gridscada
 /// check` runs, by the web crate's TLS loader.
@@ -182,6 +207,7 @@ fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
     if let Some(tls) = &main.server.tls {
         check_tls(cx, tls, &main.server.http);
     }
+    check_proxy(cx, &main.server);
     let sessions = &main.server.sessions;
     for (role, minutes) in sessions.idle_minutes.get_ref() {
         if !(minutes.is_finite() && (0.0..=10_080.0).contains(minutes)) {

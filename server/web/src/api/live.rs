@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use std::time::Duration;
 
 use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade};
-use axum::extract::{ConnectInfo, State};
+use axum::extract::State;
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::Extension;
@@ -34,12 +34,12 @@ const FLUSH: Duration = Duration::from_millis(100);
 pub async fn upgrade(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
-    ConnectInfo(peer): ConnectInfo<std::net::SocketAddr>,
+    Extension(client): Extension<crate::ClientInfo>,
     headers: HeaderMap,
     ws: WebSocketUpgrade,
 ) -> Response {
     let token = token_from_cookies(headers.get(header::COOKIE).and_then(|v| v.to_str().ok()));
-    let ip = peer.ip();
+    let ip = client.ip;
     // Places are taken before the upgrade and freed when the socket ends.
     let slot = match s.auth.sockets.open(token.as_deref(), ip) {
         Ok(slot) => slot,

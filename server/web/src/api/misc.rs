@@ -1,6 +1,6 @@
 //! Health, metrics and the OpenAPI document.
 
-use axum::extract::{ConnectInfo, State};
+use axum::extract::State;
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::IntoResponse;
 use axum::Json;
@@ -111,10 +111,10 @@ pub async fn healthz(State(s): State<WebState>) -> Json<Health> {
     responses((status = 200, description = "Prometheus text", body = String, content_type = "text/plain")))]
 pub async fn metrics(
     State(s): State<WebState>,
-    ConnectInfo(peer): ConnectInfo<std::net::SocketAddr>,
+    axum::Extension(client): axum::Extension<crate::ClientInfo>,
     headers: HeaderMap,
 ) -> Result<impl IntoResponse, ApiError> {
-    metrics_allowed(&s, Some(peer.ip()), &headers)?;
+    metrics_allowed(&s, Some(client.ip), &headers)?;
     let mut out = crate::metrics::Prom::default();
     out.gauge(
         "gridscada_uptime_seconds",
@@ -184,9 +184,15 @@ pub async fn metrics(
 /// The OpenAPI document of the API, generated (see [`crate::openapi`]).
 #[utoipa::path(get, path = "/api/openapi.json", tag = "server", summary = "This document",
     responses((status = 200, description = "OK", body = Object)))]
-pub async fn openapi() -> impl IntoResponse {
-    (
-        [(header::CONTENT_TYPE, "application/json")],
-        crate::openapi::document_text(),
-    )
+pub async fn openapi(State(s): State<WebState>) -> impl IntoResponse {
+    let base = s.plant.server.base_path();
+    let text = if base.is_empty() {
+        crate::openapi::document_text().to_string()
+    } else {
+        // Served under [server] base_path: the API is there.
+        let mut doc = crate::openapi::document().clone();
+        doc["servers"] = serde_json::json!([{ "url": format!("{base}/") }]);
+        doc.to_string()
+    };
+    ([(header::CONTENT_TYPE, "application/json")], text)
 }

@@ -1,6 +1,6 @@
 //! Log in, log out, and who am I.
 
-use axum::extract::{ConnectInfo, State};
+use axum::extract::State;
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
@@ -44,12 +44,13 @@ fn refused() -> ApiError {
     ))]
 pub async fn login(
     State(s): State<WebState>,
-    ConnectInfo(peer): ConnectInfo<std::net::SocketAddr>,
+    Extension(client): Extension<crate::ClientInfo>,
     headers: HeaderMap,
     body: Result<Json<Login>, axum::extract::rejection::JsonRejection>,
 ) -> ApiResult<Response> {
     let Json(login) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
-    let ip = peer.ip();
+    // The real client, behind a trusted proxy too (crate::proxy).
+    let ip = client.ip;
     let name = login.username.trim().to_string();
     if name.is_empty()
         || name.len() > 128
@@ -115,7 +116,7 @@ pub async fn login(
     let previous =
         auth::token_from_cookies(headers.get(header::COOKIE).and_then(|v| v.to_str().ok()));
     // Stored before the cookie is sent, so the session outlives a restart.
-    let client = auth::Client {
+    let recorded = auth::Client {
         address: Some(ip.to_string()),
         user_agent: headers
             .get(header::USER_AGENT)
@@ -125,7 +126,7 @@ pub async fn login(
     let token = s
         .auth
         .sessions
-        .create(&user.name, user.role, previous.as_deref(), client)
+        .create(&user.name, user.role, previous.as_deref(), recorded)
         .await?;
     let screens = s.screens_of(&user.group, user.role).await;
     let who = Principal {
@@ -146,7 +147,11 @@ pub async fn login(
     Ok((
         [(
             header::SET_COOKIE,
-            auth::session_cookie(&token, s.auth.secure_cookies),
+            auth::session_cookie(
+                &token,
+                s.auth.secure_cookies || client.https,
+                &s.plant.server.base_path(),
+            ),
         )],
         Json(body),
     )
@@ -209,6 +214,7 @@ pub async fn current(
 pub async fn logout(
     State(s): State<WebState>,
     Extension(p): Extension<Principal>,
+    Extension(client): Extension<crate::ClientInfo>,
     headers: HeaderMap,
 ) -> Response {
     if let Some(token) =
@@ -230,7 +236,10 @@ pub async fn logout(
         StatusCode::NO_CONTENT,
         [(
             header::SET_COOKIE,
-            auth::clear_cookie(s.auth.secure_cookies),
+            auth::clear_cookie(
+                s.auth.secure_cookies || client.https,
+                &s.plant.server.base_path(),
+            ),
         )],
     )
         .into_response()

@@ -101,20 +101,32 @@ impl Auth {
 
 pub const COOKIE: &str = "gridscada_session";
 
-/// The `Set-Cookie` value for a new session token.
-pub fn session_cookie(token: &str, secure: bool) -> String {
+/// The `Set-Cookie` value for a new session token. `base_path`: `[server]
+/// base_path` (`""` for the root), so the cookie goes only to this server's
+/// paths behind a proxy that serves others too.
+pub fn session_cookie(token: &str, secure: bool, base_path: &str) -> String {
     format!(
-        "{COOKIE}={token}; Path=/; HttpOnly; SameSite=Strict{}",
+        "{COOKIE}={token}; Path={}; HttpOnly; SameSite=Strict{}",
+        cookie_path(base_path),
         if secure { "; Secure" } else { "" }
     )
 }
 
 /// The `Set-Cookie` value that clears the session cookie.
-pub fn clear_cookie(secure: bool) -> String {
+pub fn clear_cookie(secure: bool, base_path: &str) -> String {
     format!(
-        "{COOKIE}=; Path=/; HttpOnly; SameSite=Strict; Max-Age=0{}",
+        "{COOKIE}=; Path={}; HttpOnly; SameSite=Strict; Max-Age=0{}",
+        cookie_path(base_path),
         if secure { "; Secure" } else { "" }
     )
+}
+
+fn cookie_path(base_path: &str) -> &str {
+    if base_path.is_empty() {
+        "/"
+    } else {
+        base_path
+    }
 }
 
 /// The session token in a request's Cookie header, if any.

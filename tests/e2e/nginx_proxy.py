@@ -1,0 +1,357 @@
+"""gridscada behind Debian's nginx, under a sub-path (tests/e2e/nginx.sh).
+
+The demo plant is served with base_path = "/scada", trusted_proxies =
+["127.0.0.1/32"] and public_origin = nginx's origin; nginx (started from a
+temp dir) proxies /scada/ to it, rewriting Host and adding X-Forwarded-For,
+X-Forwarded-Proto and the WebSocket upgrade headers. Through nginx: the HMI
+loads under /scada/, a login with the browser's Origin works, live pushes
+arrive over the WebSocket, a tag write is confirmed, and failed logins lock
+out only the real client (curl --interface 127.0.0.2 vs 127.0.0.3). Straight
+to gridscada from an untrusted address, a forged X-Forwarded-For is ignored.
+
+Usage: nginx_proxy.py GRIDSCADA_BIN REPO_ROOT. Prints one PASS/FAIL line per
+check and "N passed, M failed" last.
+"""
+
+import asyncio
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+
+import websockets
+
+BIN, ROOT = sys.argv[1], sys.argv[2]
+results = []
+
+
+def check(name, ok, detail=""):
+    results.append(bool(ok))
+    print(("PASS " if ok else "FAIL ") + name + ("" if ok else f": {detail}"), flush=True)
+    return ok
+
+
+def free_port():
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+def curl(url, *, method="GET", body=None, iface=None, headers=(), cookie=None):
+    """One request with Debian's curl; (status, headers lower-cased, body)."""
+    args = ["curl", "-sS", "--max-time", "30", "-D", "-", "-o", "-", "-X", method, url]
+    if iface:
+        args += ["--interface", iface]
+    for h in headers:
+        args += ["-H", h]
+    if cookie:
+        args += ["-H", f"Cookie: {cookie}"]
+    if body is not None:
+        args += ["-H", "Content-Type: application/json", "--data-binary", json.dumps(body)]
+    out = subprocess.run(args, capture_output=True, timeout=40).stdout
+    head, _, payload = out.partition(b"\r\n\r\n")
+    lines = head.decode("latin-1").split("\r\n")
+    status = int(lines[0].split()[1]) if lines and lines[0].startswith("HTTP/") else 0
+    hdrs = {}
+    for line in lines[1:]:
+        k, _, v = line.partition(":")
+        hdrs.setdefault(k.strip().lower(), []).append(v.strip())
+    return status, hdrs, payload
+
+
+def wait_http(url, proc, what, seconds=60):
+    deadline = time.time() + seconds
+    while time.time() < deadline:
+        if proc.poll() is not None:
+            return False
+        try:
+            if curl(url)[0] == 200:
+                return True
+        except subprocess.TimeoutExpired:
+            pass
+        time.sleep(0.2)
+    return False
+
+
+NGINX_CONF = """
+worker_processes 1;
+daemon off;
+pid {tmp}/nginx.pid;
+error_log {tmp}/nginx-error.log info;
+events {{ worker_connections 256; }}
+http {{
+    access_log {tmp}/nginx-access.log;
+    client_body_temp_path {tmp}/nginx-body;
+    proxy_temp_path {tmp}/nginx-proxy;
+    fastcgi_temp_path {tmp}/nginx-fastcgi;
+    uwsgi_temp_path {tmp}/nginx-uwsgi;
+    scgi_temp_path {tmp}/nginx-scgi;
+    map $http_upgrade $connection_upgrade {{
+        default upgrade;
+        ''      close;
+    }}
+    server {{
+        listen 127.0.0.1:{nginx_port};
+        location /scada/ {{
+            proxy_pass http://127.0.0.1:{gs_port};
+            proxy_http_version 1.1;
+            # A Host gridscada cannot compare an Origin with.
+            proxy_set_header Host backend.internal;
+            proxy_set_header X-Forwarded-For $proxy_add_x_forwarded_for;
+            proxy_set_header X-Forwarded-Proto $scheme;
+            proxy_set_header Upgrade $http_upgrade;
+            proxy_set_header Connection $connection_upgrade;
+            proxy_read_timeout 1h;
+            # Started as root, the workers run as nobody: no temp files.
+            proxy_max_temp_file_size 0;
+        }}
+    }}
+}}
+"""
+
+
+def main():
+    tmp = tempfile.mkdtemp(prefix="gridscada-nginx-")
+    os.chmod(tmp, 0o755)
+    procs = []
+    try:
+        run(tmp, procs)
+    finally:
+        for p in reversed(procs):
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+                try:
+                    p.wait(20)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+        if not all(results) or not results:
+            for log in ("server.log", "nginx-error.log"):
+                path = os.path.join(tmp, log)
+                if os.path.exists(path):
+                    print(f"--- {log} (last lines)")
+                    with open(path, errors="replace") as f:
+                        print("".join(f.readlines()[-30:]))
+        shutil.rmtree(tmp, ignore_errors=True)
+    passed = sum(results)
+    failed = len(results) - passed
+    if not results:
+        failed = 1
+    print(f"{passed} passed, {failed} failed")
+    sys.exit(1 if failed else 0)
+
+
+def run(tmp, procs):
+    nginx = shutil.which("nginx") or "/usr/sbin/nginx"
+    if not os.path.exists(nginx):
+        check("setup: Debian's nginx is installed", False, "no nginx (apt-get install nginx)")
+        return
+    gs_port, nginx_port = free_port(), free_port()
+    public = f"http://127.0.0.1:{nginx_port}"
+    # The demo plant, with the reverse-proxy settings.
+    plant = os.path.join(tmp, "plant")
+    shutil.copytree(os.path.join(ROOT, "tags"), plant)
+    main_file = os.path.join(plant, "gridscada.toml")
+    with open(main_file) as f:
+        text = f.read()
+    settings = (
+        "[server]\n"
+        f'public_origin = "{public}"\n'
+        'trusted_proxies = ["127.0.0.1/32"]\n'
+        'base_path = "/scada"\n'
+        'allowed_hosts = ["backend.internal"]\n'
+    )
+    assert "[server]\n" in text
+    with open(main_file, "w") as f:
+        f.write(text.replace("[server]\n", settings, 1))
+    data = os.path.join(tmp, "data")
+    log = open(os.path.join(tmp, "server.log"), "w")
+    # Loopback only: the untrusted clients below are 127.0.0.2 and up.
+    gs = subprocess.Popen(
+        [BIN, "demo", "--config", plant, "--http", f"127.0.0.1:{gs_port}", "--data", data],
+        stdout=log, stderr=subprocess.STDOUT,
+    )
+    procs.append(gs)
+    direct = f"http://127.0.0.1:{gs_port}/scada"
+    if not check("setup: gridscada demo answers under /scada", wait_http(f"{direct}/healthz", gs, "gridscada")):
+        return
+    with open(os.path.join(tmp, "nginx.conf"), "w") as f:
+        f.write(NGINX_CONF.format(tmp=tmp, nginx_port=nginx_port, gs_port=gs_port))
+    ng = subprocess.Popen(
+        [nginx, "-p", tmp, "-c", os.path.join(tmp, "nginx.conf")],
+        stdout=subprocess.DEVNULL, stderr=open(os.path.join(tmp, "nginx-stderr.log"), "w"),
+    )
+    procs.append(ng)
+    via = f"{public}/scada"
+    if not check("setup: nginx proxies /scada/", wait_http(f"{via}/healthz", ng, "nginx")):
+        return
+    accounts = {}
+    with open(os.path.join(data, "credentials.txt")) as f:
+        for line in f:
+            parts = line.split()
+            if len(parts) == 3:
+                accounts[parts[0]] = (parts[1], parts[2])
+    op_user, op_pass = accounts["operator"]
+    admin_user, admin_pass = accounts["administrator"]
+    origin = f"Origin: {public}"
+
+    # The HMI under the sub-path.
+    st, h, body = curl(f"{via}/")
+    check("the HMI page loads under /scada/ through nginx", st == 200 and b'src="js/app.js"' in body, st)
+    st, _, body = curl(f"{via}/js/api.js")
+    check("its modules load under /scada/", st == 200 and b"import.meta.url" in body, st)
+    st, h, _ = curl(direct)
+    check("/scada is redirected to /scada/", st == 308 and h.get("location") == ["/scada/"], (st, h.get("location")))
+    st, _, _ = curl(f"http://127.0.0.1:{gs_port}/api/session")
+    check("nothing is served outside the base path", st == 404, st)
+    st, _, body = curl(f"{via}/api/openapi.json")
+    check("the OpenAPI document names the base path", st == 200 and json.loads(body)["servers"] == [{"url": "/scada/"}], body[:200])
+
+    # Log in as a browser on the public origin would.
+    st, h, body = curl(f"{via}/api/session", method="POST", body={"username": op_user, "password": op_pass},
+                       iface="127.0.0.2", headers=[origin])
+    cookies = h.get("set-cookie", [])
+    check("login through nginx with the public Origin", st == 200 and cookies, (st, body[:200]))
+    if not cookies:
+        return
+    cookie = cookies[0].split(";")[0]
+    attrs = [a.strip() for a in cookies[0].split(";")]
+    check("the session cookie's Path is the base path", "Path=/scada" in attrs, cookies[0])
+    check("no Secure flag over plain http", "Secure" not in attrs, cookies[0])
+    st, _, body = curl(f"{via}/api/session", cookie=cookie)
+    check("the session works through nginx", st == 200 and json.loads(body).get("user") == op_user, body[:200])
+    st, _, body = curl(f"{via}/api/session", method="POST", body={"username": op_user, "password": op_pass},
+                       headers=[f"Origin: http://backend.internal"])
+    check("an Origin other than the public origin is refused", st == 403, (st, body[:200]))
+
+    # Live push and a confirmed write through nginx.
+    asyncio.run(live_and_write(via, public, cookie))
+
+    # Throttling per real client: 127.0.0.2 locked out, 127.0.0.3 not.
+    url = f"{via}/api/session"
+    locked = fail_logins(url, op_user, iface="127.0.0.2", headers=[origin])
+    check("failed logins through nginx lock out their client (127.0.0.2)", locked, "never throttled")
+    st, _, _ = curl(url, method="POST", body={"username": op_user, "password": op_pass}, iface="127.0.0.2", headers=[origin])
+    check("127.0.0.2 cannot log in while locked, even with the right password", st == 429, st)
+    st, _, _ = curl(url, method="POST", body={"username": op_user, "password": op_pass}, iface="127.0.0.3", headers=[origin])
+    check("127.0.0.3 behind the same proxy still logs in", st == 200, st)
+
+    # A client cannot pose as another by sending its own X-Forwarded-For:
+    # through nginx, the hop nginx appends is the one believed ...
+    forged = iter(f"X-Forwarded-For: 10.66.0.{i}" for i in range(1, 250))
+    locked = fail_logins(url, admin_user, iface="127.0.0.7", headers=[origin], forged=forged)
+    check("a forged X-Forwarded-For through nginx does not escape the lockout", locked, "never throttled")
+    # ... and straight to gridscada from an untrusted address, it is ignored.
+    durl = f"{direct}/api/session"
+    locked = fail_logins(durl, admin_user, iface="127.0.0.5", headers=[origin], forged=forged)
+    check("a forged X-Forwarded-For straight from 127.0.0.5 is ignored", locked, "never throttled")
+    st, _, _ = curl(durl, method="POST", body={"username": admin_user, "password": admin_pass},
+                    iface="127.0.0.5", headers=[origin, next(forged)])
+    check("127.0.0.5 stays locked whatever address it claims", st == 429, st)
+    st, h, _ = curl(durl, method="POST", body={"username": op_user, "password": op_pass},
+                    iface="127.0.0.6", headers=[origin, "X-Forwarded-Proto: https"])
+    sc = h.get("set-cookie", [""])[0]
+    check("X-Forwarded-Proto from an untrusted client gives no Secure cookie", st == 200 and "Secure" not in sc, (st, sc))
+    st, h, _ = curl(durl, method="POST", body={"username": op_user, "password": op_pass},
+                    headers=[origin, "X-Forwarded-Proto: https", "X-Forwarded-For: 127.0.0.8"])
+    sc = h.get("set-cookie", [""])[0]
+    check("proto=https from the trusted proxy gives a Secure cookie", st == 200 and "; Secure" in sc, (st, sc))
+
+    # The audit trail names the real clients, never the proxy.
+    st, h, body = curl(f"{via}/api/session", method="POST", body={"username": admin_user, "password": admin_pass},
+                       iface="127.0.0.9", headers=[origin])
+    admin_cookie = h.get("set-cookie", [""])[0].split(";")[0]
+    st, _, body = curl(f"{via}/api/events?limit=500", cookie=admin_cookie)
+    texts = [e.get("message", "") for e in json.loads(body).get("events", [])] if st == 200 else []
+    logins = [t for t in texts if "login" in t or "logged in" in t]
+    check("events record the real client behind nginx",
+          any("from 127.0.0.2" in t for t in logins) and any("logged in from 127.0.0.3" in t for t in logins),
+          logins[:5] or (st, body[:200]))
+    check("events record the untrusted peer, not its forged address",
+          any("from 127.0.0.5" in t for t in logins) and not any("10.66.0." in t for t in logins), logins[:8])
+    check("no login is recorded as from the proxy", not any("from 127.0.0.1:" in t or t.endswith("from 127.0.0.1") for t in logins), logins[:8])
+
+
+def fail_logins(url, user, *, iface, headers, forged=None, failures=7):
+    """Wrong passwords from `iface` until `failures` are counted (each lock
+    waited out), so the lock is then seconds long; whether any was refused
+    as throttled (429)."""
+    counted, throttled = 0, False
+    deadline = time.time() + 90
+    while counted < failures and time.time() < deadline:
+        extra = [next(forged)] if forged else []
+        st, _, _ = curl(url, method="POST", body={"username": user, "password": "wrong-password"},
+                        iface=iface, headers=headers + extra)
+        if st == 401:
+            counted += 1
+        elif st == 429:
+            throttled = True
+            time.sleep(0.3)
+        else:
+            return False
+    return throttled and counted >= failures
+
+
+async def live_and_write(via, public, cookie):
+    ws_url = via.replace("http://", "ws://") + "/api/live"
+    tag = "SS1.Zone4.Cmd"
+    try:
+        async with websockets.connect(ws_url, origin=public, additional_headers={"Cookie": cookie},
+                                      open_timeout=15) as ws:
+            hello = json.loads(await asyncio.wait_for(ws.recv(), 10))
+            check("the live WebSocket opens through nginx", hello.get("type") == "hello", hello)
+            await ws.send(json.dumps({"subscribe": {"tags": [tag]}, "visible": True}))
+            seen = await next_value(ws, tag, None)
+            check(f"a live push of {tag} arrives through nginx", seen is not None, "no push within 15 s")
+            beats = 0
+            deadline = time.time() + 5
+            while beats < 2 and time.time() < deadline:
+                m = json.loads(await asyncio.wait_for(ws.recv(), 5))
+                beats += m.get("type") == "heartbeat"
+            check("heartbeats keep coming over the proxied socket", beats >= 2, beats)
+            new = not seen if isinstance(seen, bool) else False
+            st, _, body = await asyncio.to_thread(
+                curl, f"{via}/api/tags/{tag}/write", method="POST", body={"value": new},
+                iface="127.0.0.2", headers=[f"Origin: {public}"], cookie=cookie)
+            out = json.loads(body) if st == 200 else {}
+            check(f"writing {tag} = {new} through nginx is confirmed", st == 200 and out.get("value") == new, (st, body[:300]))
+            pushed = await next_value(ws, tag, new)
+            check("the confirmed value is pushed over the WebSocket", pushed == new, pushed)
+            # Put it back as it was.
+            await asyncio.to_thread(
+                curl, f"{via}/api/tags/{tag}/write", method="POST", body={"value": seen},
+                iface="127.0.0.2", headers=[f"Origin: {public}"], cookie=cookie)
+    except Exception as e:  # noqa: BLE001 - reported as a failed check
+        check("live push and write through nginx", False, repr(e))
+    try:
+        async with websockets.connect(ws_url, origin="http://evil.example", additional_headers={"Cookie": cookie},
+                                      open_timeout=15) as ws:
+            await ws.recv()
+        check("a WebSocket from another origin is refused", False, "it opened")
+    except websockets.exceptions.InvalidStatus as e:
+        check("a WebSocket from another origin is refused", e.response.status_code == 403, e.response.status_code)
+
+
+async def next_value(ws, tag, want):
+    """The next pushed value of `tag` (equal to `want` unless None)."""
+    deadline = time.time() + 15
+    while time.time() < deadline:
+        try:
+            m = json.loads(await asyncio.wait_for(ws.recv(), max(0.1, deadline - time.time())))
+        except asyncio.TimeoutError:
+            break
+        if m.get("type") == "tags":
+            for v in m.get("values", []):
+                if v.get("name") == tag and (want is None or v.get("value") == want):
+                    return v.get("value")
+    return None
+
+
+if __name__ == "__main__":
+    main()
