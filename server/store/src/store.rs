@@ -137,6 +137,11 @@ const SQLITE_MIGRATIONS: &[(i64, &str, &str)] = &[
         "alarm causes",
         include_str!("../migrations/sqlite/0005_alarm_cause.sql"),
     ),
+    (
+        6,
+        "audit ids",
+        include_str!("../migrations/sqlite/0006_audit_ids.sql"),
+    ),
 ];
 const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
     (
@@ -163,6 +168,11 @@ const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
         5,
         "alarm causes",
         include_str!("../migrations/postgres/0005_alarm_cause.sql"),
+    ),
+    (
+        6,
+        "audit ids",
+        include_str!("../migrations/postgres/0006_audit_ids.sql"),
     ),
 ];
 
