@@ -49,6 +49,7 @@ pub async fn web_state(db: Arc<TagDb>, dir: &Path) -> (WebState, String) {
         db,
         plant: Arc::new(plant),
         store,
+        audit: None,
         auth: Auth {
             sessions,
             ..Auth::new(SessionPolicy::default(), false).await

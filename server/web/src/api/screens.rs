@@ -122,6 +122,8 @@ pub async fn save(
     Path(id): Path<String>,
     body: Result<Json<Screen>, axum::extract::rejection::JsonRejection>,
 ) -> ApiResult<Json<Screen>> {
+    // The change is audited through the audit trail: not unless durable.
+    crate::api::audit_ready(&s).await?;
     let Json(screen) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
     if screen.id != id {
         return Err(ApiError::bad_request(format!(
@@ -185,6 +187,8 @@ pub async fn remove(
     Extension(who): Extension<Principal>,
     Path(id): Path<String>,
 ) -> ApiResult<StatusCode> {
+    // The change is audited through the audit trail: not unless durable.
+    crate::api::audit_ready(&s).await?;
     if !screen::valid_id(&id) {
         return Err(no_such(&id));
     }

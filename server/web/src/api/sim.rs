@@ -67,6 +67,7 @@ pub async fn inject_fault(
     body: Result<Json<FaultBody>, axum::extract::rejection::JsonRejection>,
 ) -> ApiResult<(StatusCode, Json<FaultBody>)> {
     let Json(b) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
+    crate::api::audit_ready(&s).await?;
     sim(&s)?
         .inject_fault(&b.panel, b.zone, b.kind)
         .map_err(refused)?;
@@ -99,6 +100,7 @@ pub async fn repair(
     Extension(who): Extension<Principal>,
     Path((panel, zone)): Path<(String, u8)>,
 ) -> ApiResult<StatusCode> {
+    crate::api::audit_ready(&s).await?;
     sim(&s)?.repair(&panel, zone).map_err(refused)?;
     audit(
         &s,
@@ -117,6 +119,7 @@ async fn set_offline(
     device: String,
     offline: bool,
 ) -> ApiResult<Json<DeviceState>> {
+    crate::api::audit_ready(&s).await?;
     sim(&s)?.set_offline(&device, offline).map_err(refused)?;
     let what = if offline { "offline" } else { "online" };
     audit(

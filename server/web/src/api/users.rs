@@ -106,6 +106,8 @@ pub async fn create(
     Extension(who): Extension<Principal>,
     b: JsonBody<NewUserBody>,
 ) -> ApiResult<(StatusCode, Json<CreatedUser>)> {
+    // The change is audited through the audit trail: not unless durable.
+    crate::api::audit_ready(&s).await?;
     let b = body(b)?;
     check_user_name(&b.name)?;
     let group = b.group.unwrap_or_else(|| b.role.label().to_string());
@@ -223,6 +225,8 @@ pub async fn update(
     Path(name): Path<String>,
     b: JsonBody<UpdateBody>,
 ) -> ApiResult<Json<OneUser>> {
+    // The change is audited through the audit trail: not unless durable.
+    crate::api::audit_ready(&s).await?;
     let b = body(b)?;
     existing_user(&s, &name).await?;
     // Validate everything before changing anything: no partial updates.
@@ -301,6 +305,8 @@ pub async fn remove(
     Path(name): Path<String>,
     b: JsonBody<DeleteBody>,
 ) -> ApiResult<StatusCode> {
+    // The change is audited through the audit trail: not unless durable.
+    crate::api::audit_ready(&s).await?;
     let b = body(b).map_err(|_| {
         ApiError::bad_request(format!(
             "deleting a user needs confirmation: send {{\"confirm\": \"{name}\"}}"
@@ -352,6 +358,8 @@ pub async fn password(
     headers: axum::http::HeaderMap,
     b: JsonBody<PasswordBody>,
 ) -> ApiResult<StatusCode> {
+    // The change is audited through the audit trail: not unless durable.
+    crate::api::audit_ready(&s).await?;
     let b = body(b)?;
     let own = who.user.as_deref() == Some(name.as_str());
     if !own && who.role < Role::Administrator {
@@ -464,6 +472,8 @@ pub async fn set_group_screens(
     Path(group): Path<String>,
     b: JsonBody<ScreensBody>,
 ) -> ApiResult<Json<GroupScreensSet>> {
+    // The change is audited through the audit trail: not unless durable.
+    crate::api::audit_ready(&s).await?;
     let b = body(b)?;
     check_group_name(&group)?;
     if let Some(bad) = b

@@ -296,6 +296,7 @@ impl Harness {
             db,
             plant: Arc::new(plant),
             store,
+            audit: None,
             auth: Auth::new(opts.policy, false).await,
             clock: Arc::new(SystemClock),
             writer: Some(writer.clone() as Arc<dyn TagWriter>),
