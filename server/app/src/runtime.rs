@@ -25,6 +25,8 @@ use crate::settings::diagnostics;
 use crate::{demo_plant, settings, sinks, users};
 
 #[cfg(test)]
+mod audit_tests;
+#[cfg(test)]
 mod shutdown_tests;
 mod sources;
 
