@@ -116,6 +116,8 @@ struct Shared {
 
 type Ack = oneshot::Sender<Result<(), AuditError>>;
 
+// Nearly every message is a record; boxing it would only add an allocation.
+#[allow(clippy::large_enum_variant)]
 enum Msg {
     Record(AuditBody, Option<Ack>),
     /// Can a record be made durable now?
