@@ -11,6 +11,8 @@ use gridscada_store::{
 };
 use gridscada_tagdb::Timestamp;
 
+mod common;
+
 async fn open(dir: &Path) -> Store {
     Store::open("sqlite://audit.db", &OpenOptions::new(dir))
         .await
@@ -229,5 +231,92 @@ async fn retention_prunes_old_rows_in_batches() {
     assert_eq!(messages(&store).await, expected(8..=10));
     for t in [AuditTable::AlarmHistory, AuditTable::Dispatches] {
         assert_eq!(store.prune_audit(t, before, 3).await.unwrap(), 0);
+    }
+}
+
+/// The audit SQL on both backends: an idempotent insert by audit id (events
+/// and alarm transitions), the last id, and batched retention.
+#[tokio::test]
+async fn audit_rows_on_both_backends() {
+    for engine in [common::Engine::Sqlite, common::Engine::Postgres] {
+        let Some(db) = common::TestDb::new(engine, "audit_rows").await else {
+            continue;
+        };
+        let store = &db.store;
+        let mut records: Vec<AuditRecord> = (1..=6)
+            .map(|n| AuditRecord {
+                seq: n,
+                body: AuditBody::Event(event(n)),
+            })
+            .collect();
+        records.push(AuditRecord {
+            seq: 7,
+            body: AuditBody::Transition(gridscada_store::AlarmTransition {
+                ts: Timestamp::from_millis(1_000_007),
+                alarm_key: "flood:1".into(),
+                tag: String::new(),
+                kind: "system".into(),
+                from_state: "normal".into(),
+                to_state: "unack_active".into(),
+                cause: Some("activate".into()),
+                activation: true,
+                value: None,
+                limit: None,
+                user: None,
+                message: "Flood".into(),
+                priority: 500,
+                selection: "SYSTEM".into(),
+            }),
+        });
+        store.insert_audit(&records).await.unwrap();
+        store.insert_audit(&records).await.unwrap();
+        assert_eq!(messages(store).await, expected(1..=6), "{engine:?}");
+        let history = store
+            .alarm_history(&gridscada_store::AlarmHistoryFilter {
+                limit: 100,
+                ..Default::default()
+            })
+            .await
+            .unwrap();
+        assert_eq!(history.len(), 1, "{engine:?}");
+        assert_eq!(store.max_audit_id().await.unwrap(), 7, "{engine:?}");
+        let before = Timestamp::from_millis(1_000_005);
+        assert_eq!(
+            store
+                .prune_audit(AuditTable::Events, before, 2)
+                .await
+                .unwrap(),
+            2
+        );
+        assert_eq!(
+            store
+                .prune_audit(AuditTable::Events, before, 2)
+                .await
+                .unwrap(),
+            2
+        );
+        assert_eq!(
+            store
+                .prune_audit(AuditTable::Events, before, 2)
+                .await
+                .unwrap(),
+            0
+        );
+        assert_eq!(messages(store).await, expected(5..=6), "{engine:?}");
+        let later = Timestamp::from_millis(2_000_000);
+        assert_eq!(
+            store
+                .prune_audit(AuditTable::AlarmHistory, later, 10)
+                .await
+                .unwrap(),
+            1
+        );
+        assert_eq!(
+            store
+                .prune_audit(AuditTable::Dispatches, later, 10)
+                .await
+                .unwrap(),
+            0
+        );
     }
 }
