@@ -60,7 +60,7 @@ pub struct FaultBody {
     summary = "Inject a zone fault (demo and replay only)",
     request_body = FaultBody,
     responses((status = 201, description = "Injected", body = inline(FaultBody)),
-        (status = 400), (status = 404)))]
+        (status = 400), (status = 404), (status = 503, description = "Its audit record could be neither stored nor spooled")))]
 pub async fn inject_fault(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
@@ -94,7 +94,7 @@ pub async fn inject_fault(
 #[utoipa::path(delete, path = "/api/sim/faults/{panel}/{zone}", tag = "simulation",
     summary = "Repair a zone fault",
     params(("panel" = String, Path, min_length = 1), ("zone" = u8, Path)),
-    responses((status = 204, description = "Repaired"), (status = 400), (status = 404)))]
+    responses((status = 204, description = "Repaired"), (status = 400), (status = 404), (status = 503, description = "Its audit record could be neither stored nor spooled")))]
 pub async fn repair(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
@@ -144,7 +144,7 @@ pub struct DeviceState {
 #[utoipa::path(post, path = "/api/sim/devices/{device}/offline", tag = "simulation",
     summary = "Take a simulated device offline",
     params(("device" = String, Path, min_length = 1)),
-    responses((status = 200, description = "OK", body = inline(DeviceState)), (status = 400), (status = 404)))]
+    responses((status = 200, description = "OK", body = inline(DeviceState)), (status = 400), (status = 404), (status = 503, description = "Its audit record could be neither stored nor spooled")))]
 pub async fn offline(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
@@ -156,7 +156,7 @@ pub async fn offline(
 #[utoipa::path(post, path = "/api/sim/devices/{device}/online", tag = "simulation",
     summary = "Take a simulated device online",
     params(("device" = String, Path, min_length = 1)),
-    responses((status = 200, description = "OK", body = inline(DeviceState)), (status = 400), (status = 404)))]
+    responses((status = 200, description = "OK", body = inline(DeviceState)), (status = 400), (status = 404), (status = 503, description = "Its audit record could be neither stored nor spooled")))]
 pub async fn online(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,

@@ -100,7 +100,7 @@ fn check_group_name(group: &str) -> ApiResult<()> {
 #[utoipa::path(post, path = "/api/users", tag = "users", summary = "Create a user",
     request_body = NewUserBody,
     responses((status = 201, description = "Created", body = inline(CreatedUser)),
-        (status = 400), (status = 409)))]
+        (status = 400), (status = 409), (status = 503, description = "Its audit record could be neither stored nor spooled")))]
 pub async fn create(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
@@ -218,7 +218,7 @@ fn unchanged(u: &gridscada_store::User) -> After {
     params(("name" = String, Path, description = "User name", min_length = 1)),
     request_body = UpdateBody,
     responses((status = 200, description = "OK", body = inline(OneUser)),
-        (status = 400), (status = 404), (status = 409)))]
+        (status = 400), (status = 404), (status = 409), (status = 503, description = "Its audit record could be neither stored nor spooled")))]
 pub async fn update(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
@@ -298,7 +298,7 @@ pub struct DeleteBody {
     summary = "Delete a user (confirm by repeating the name)",
     params(("name" = String, Path, description = "User name", min_length = 1)),
     request_body = DeleteBody,
-    responses((status = 204, description = "Deleted"), (status = 400), (status = 404), (status = 409)))]
+    responses((status = 204, description = "Deleted"), (status = 400), (status = 404), (status = 409), (status = 503, description = "Its audit record could be neither stored nor spooled")))]
 pub async fn remove(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
@@ -350,7 +350,7 @@ pub struct PasswordBody {
     summary = "Change a password (own: with current_password; others': administrators)",
     params(("name" = String, Path, description = "User name", min_length = 1)),
     request_body = PasswordBody,
-    responses((status = 204, description = "Changed"), (status = 400), (status = 404)))]
+    responses((status = 204, description = "Changed"), (status = 400), (status = 404), (status = 503, description = "Its audit record could be neither stored nor spooled")))]
 pub async fn password(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
@@ -465,7 +465,7 @@ pub struct GroupScreensSet {
     params(("group" = String, Path, min_length = 1)),
     request_body = ScreensBody,
     responses((status = 200, description = "OK", body = inline(GroupScreensSet)), (status = 400),
-        (status = 409, description = "Conflict: the change would leave no administrator able to manage users")))]
+        (status = 409, description = "Conflict: the change would leave no administrator able to manage users"), (status = 503, description = "Its audit record could be neither stored nor spooled")))]
 pub async fn set_group_screens(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
