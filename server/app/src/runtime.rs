@@ -25,6 +25,8 @@ use crate::settings::diagnostics;
 use crate::{demo_plant, settings, sinks, users};
 
 #[cfg(test)]
+mod audit_tests;
+#[cfg(test)]
 mod shutdown_tests;
 mod sources;
 
@@ -245,6 +247,8 @@ pub struct Stack {
     pub events: mpsc::Sender<NewEvent>,
     field: gridscada_modbus::FieldIo,
     historian: gridscada_store::Historian,
+    /// Events and alarm transitions on their way to the store (or spool).
+    audit: gridscada_store::AuditTrail,
     /// The task feeding tag changes to the historian, and its stop signal.
     historian_feed: (watch::Sender<bool>, tokio::task::JoinHandle<()>),
     /// The control loops (panel sequences, dispatch): producers of tag
@@ -266,6 +270,8 @@ pub struct StackOptions {
     /// lockout) from the store. Off for replay: a scenario starts from its
     /// own initial state, whatever an earlier run left in the data folder.
     pub restore_panels: bool,
+    /// The data folder in use: the audit spool lives in it.
+    pub data_dir: PathBuf,
 }
 
 impl Stack {
@@ -277,9 +283,23 @@ impl Stack {
         let clock = opts.clock;
         let mut tasks = JoinSet::new();
 
-        // Events from every part go through one sink into the store.
+        // Events and alarm transitions go through the audit trail into the
+        // store, or into its spool while the store is away (replaying a
+        // spool an earlier run left first).
+        let audit = gridscada_store::AuditTrail::start(
+            store.clone(),
+            gridscada_store::AuditConfig::new(&opts.data_dir),
+        )
+        .await
+        .context("starting the audit trail (its spool is in the data folder)")?;
+        tasks.spawn(sinks::audit_retention(
+            store.clone(),
+            plant.storage.retention.clone(),
+            clock.clone(),
+        ));
+        // Events from every part go through one sink into the audit trail.
         let (events_tx, events_rx) = mpsc::channel::<NewEvent>(4096);
-        tasks.spawn(sinks::events(store.clone(), events_rx));
+        tasks.spawn(sinks::events(audit.handle(), events_rx));
 
         // Simulators first, so the poller finds its devices.
         let simulator = if opts.simulate {
@@ -305,7 +325,7 @@ impl Stack {
         let (transitions_tx, transitions_rx) = mpsc::channel(4096);
         let (alarm_events_tx, alarm_events_rx) = mpsc::channel(1024);
         let (states_tx, states_rx) = mpsc::channel(4096);
-        tasks.spawn(sinks::alarm_transitions(store.clone(), transitions_rx));
+        tasks.spawn(sinks::alarm_transitions(audit.handle(), transitions_rx));
         tasks.spawn(sinks::alarm_events(alarm_events_rx, events_tx.clone()));
         tasks.spawn(sinks::alarm_states(store.clone(), states_rx));
         let alarms = gridscada_alarms::AlarmEngine::new(
@@ -349,6 +369,7 @@ impl Stack {
             }
         }
         tasks.spawn(alarms.clone().run());
+        tasks.spawn(sinks::audit_spool_alarm(audit.handle(), alarms.clone()));
 
         // The historian.
         let historian = gridscada_store::Historian::spawn(store.clone(), Default::default());
@@ -460,6 +481,7 @@ impl Stack {
             events: events_tx,
             field,
             historian,
+            audit,
             historian_feed: (feed_stop, historian_feed),
             loops,
             tasks,
@@ -500,6 +522,16 @@ impl Stack {
         // Give the sinks a moment to drain their channels into the store.
         tokio::time::sleep(std::time::Duration::from_millis(300)).await;
         self.tasks.abort_all();
+        while self.tasks.join_next().await.is_some() {}
+        // What the sinks handed over is stored, or spooled for the next start.
+        let audit = self.audit.shutdown().await;
+        if audit.pending > 0 || audit.lost > 0 {
+            tracing::warn!(
+                pending = audit.pending,
+                lost = audit.lost,
+                "audit trail stopped"
+            );
+        }
         self.store.close().await;
         // Read last, so the figure counts any sample lost on the way.
         let written = handle.metrics();
@@ -535,6 +567,7 @@ async fn run(
             dispatch_policy: Default::default(),
             // A scenario starts from its own initial state.
             restore_panels: scenario.is_none(),
+            data_dir: data.to_path_buf(),
         },
     )
     .await?;
@@ -660,6 +693,7 @@ pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
         db: stack.db.clone(),
         plant: stack.plant.clone(),
         store: stack.store.clone(),
+        audit: Some(stack.audit.handle()),
         auth,
         clock: stack.clock.clone(),
         writer: Some(stack.writer.clone()),
@@ -676,6 +710,7 @@ pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
         metrics: Some(Arc::new(StackMetrics {
             poll: stack.field.stats_handle(),
             historian: stack.historian.handle(),
+            audit: stack.audit.handle(),
         })),
         screens: Default::default(),
         tag_index: Arc::new(gridscada_web::access::TagIndex::new(&stack.plant)),

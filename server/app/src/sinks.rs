@@ -12,7 +12,8 @@ use gridscada_config::Plant;
 use gridscada_control::dispatch::{self, DispatchMode, DispatchNotice, DispatchStatus};
 use gridscada_control::fault_isolation::{self, PanelNotice, PanelStatus, Retained};
 use gridscada_store::{
-    HistorianHandle, NewDispatch, NewEvent, RecordPolicy, Recorder, RetentionPolicy, Store,
+    AuditBody, AuditHandle, AuditTable, HistorianHandle, NewDispatch, NewEvent, RecordPolicy,
+    Recorder, RetentionPolicy, Store,
 };
 use gridscada_tagdb::{Clock, TagDb};
 use tokio::sync::{mpsc, watch};
@@ -30,14 +31,11 @@ pub fn system_event(clock: &dyn Clock, kind: &str, source: &str, message: String
     }
 }
 
-/// Writes events to the store in batches.
-pub async fn events(store: Store, mut rx: mpsc::Receiver<NewEvent>) {
-    let mut batch = Vec::new();
-    while rx.recv_many(&mut batch, 256).await > 0 {
-        if let Err(e) = store.insert_events(&batch).await {
-            tracing::error!(error = %e, lost = batch.len(), "could not record events");
-        }
-        batch.clear();
+/// Events into the audit trail (which batches them into the store, or
+/// spools them while the store is away).
+pub async fn events(audit: AuditHandle, mut rx: mpsc::Receiver<NewEvent>) {
+    while let Some(e) = rx.recv().await {
+        audit.record(AuditBody::Event(e)).await;
     }
 }
 
@@ -60,18 +58,99 @@ pub async fn alarm_events(
     }
 }
 
-/// Alarm history, in batches.
+/// Alarm history into the audit trail, in the order the engine made it.
 pub async fn alarm_transitions(
-    store: Store,
+    audit: AuditHandle,
     mut rx: mpsc::Receiver<gridscada_alarms::AlarmTransition>,
 ) {
-    let mut batch = Vec::new();
-    while rx.recv_many(&mut batch, 512).await > 0 {
-        let rows: Vec<gridscada_store::AlarmTransition> = batch.iter().map(Into::into).collect();
-        if let Err(e) = store.insert_alarm_transitions(&rows).await {
-            tracing::error!(error = %e, lost = rows.len(), "could not record alarm transitions");
+    while let Some(t) = rx.recv().await {
+        audit.record(AuditBody::Transition((&t).into())).await;
+    }
+}
+
+/// Raises a system alarm while the audit trail spools (the store cannot
+/// take its records), and clears it once the spool is replayed.
+pub async fn audit_spool_alarm(audit: AuditHandle, alarms: Arc<AlarmEngine>) {
+    let mut spooling = audit.spooling();
+    let mut raised = false;
+    loop {
+        let on = *spooling.borrow_and_update();
+        if on != raised {
+            let m = audit.metrics();
+            let message = format!(
+                "Database unavailable: audit records are spooled in the data folder ({} waiting); they are replayed when it is back",
+                m.pending
+            );
+            system_alarm(&alarms, AUDIT_SPOOL_ALARM, on, 800, "SYSTEM", &message);
+            raised = on;
         }
-        batch.clear();
+        if spooling.changed().await.is_err() {
+            return;
+        }
+    }
+}
+
+/// The key of the system alarm that stands while the audit trail spools.
+pub const AUDIT_SPOOL_ALARM: &str = "audit:spool";
+
+/// Prunes the event log, the alarm history and the dispatch records past
+/// their retention, once a day (and at start), a batch at a time with a
+/// pause between, so ingest never waits long behind it.
+pub async fn audit_retention(
+    store: Store,
+    retention: gridscada_config::AuditRetention,
+    clock: Arc<dyn Clock>,
+) {
+    const DAY_MS: i64 = 86_400_000;
+    const BATCH: u32 = 5_000;
+    let days = |t: AuditTable| match t {
+        AuditTable::Events => *retention.events_days.get_ref(),
+        AuditTable::AlarmHistory => *retention.alarm_history_days.get_ref(),
+        AuditTable::Dispatches => *retention.dispatch_days.get_ref(),
+    };
+    let mut tick = tokio::time::interval(Duration::from_secs(3600));
+    let mut last_day = None;
+    loop {
+        tick.tick().await;
+        let now = clock.now();
+        let day = now.as_millis() / DAY_MS;
+        if last_day == Some(day) {
+            continue;
+        }
+        last_day = Some(day);
+        for table in AuditTable::ALL {
+            let d = days(table);
+            if d == 0 {
+                continue; // kept for ever
+            }
+            let before = gridscada_tagdb::Timestamp::from_millis(
+                now.as_millis().saturating_sub(i64::from(d) * DAY_MS),
+            );
+            let mut deleted = 0;
+            loop {
+                match store.prune_audit(table, before, BATCH).await {
+                    Ok(n) => {
+                        deleted += n;
+                        if n < u64::from(BATCH) {
+                            break;
+                        }
+                    }
+                    Err(e) => {
+                        tracing::error!(table = table.name(), error = %e, "audit retention");
+                        break;
+                    }
+                }
+                tokio::time::sleep(Duration::from_millis(100)).await;
+            }
+            if deleted > 0 {
+                tracing::info!(
+                    table = table.name(),
+                    deleted,
+                    days = d,
+                    "audit retention applied"
+                );
+            }
+        }
     }
 }
 

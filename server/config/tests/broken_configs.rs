@@ -549,3 +549,16 @@ fn good_reverse_proxy_settings_load_in_normal_form() {
         .collect();
     assert_eq!(proxies, ["127.0.0.1/32", "::1/128", "10.0.0.0/8"]);
 }
+
+#[test]
+fn audit_retention_is_checked_and_located() {
+    let main = "tag_files = [\"tags.toml\"]\n[storage.retention]\nevents_days = 40000\ndispatch_days = 0\n";
+    let tags = format!("{DEVICE}\n[[tag]]\nname = \"A.V\"\ndevice = \"D1\"\nkind = \"input_register\"\naddress = 0\n");
+    assert_eq!(
+        problems(main, &tags),
+        ["DIR/gridscada.toml:3:15: error: [storage.retention] events_days: 40000 days is more than 100 years; 0 keeps for ever"]
+    );
+    let main = "tag_files = [\"tags.toml\"]\n[storage.retention]\nevent_days = 30\n";
+    let got = problems(main, &tags);
+    assert!(got[0].contains("event_days"), "{got:?}");
+}

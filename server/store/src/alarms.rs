@@ -7,7 +7,7 @@
 //! strings here, and which transitions are activations is the caller's call.
 
 use gridscada_tagdb::{Timestamp, Value};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::error::db;
 use crate::events::{check_text, like_pattern, MAX_LIST};
@@ -18,7 +18,7 @@ use crate::{Result, Store, StoreError};
 pub use gridscada_alarms::AlarmStateRecord;
 
 /// One alarm state transition to record.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct AlarmTransition {
     pub ts: Timestamp,
     pub alarm_key: String,

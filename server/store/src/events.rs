@@ -5,13 +5,13 @@
 //! callers do.
 
 use gridscada_tagdb::Timestamp;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::error::db;
 use crate::{Result, Store, StoreError};
 
 /// An event to record.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct NewEvent {
     pub ts: Timestamp,
     /// The user who caused it; `None` for the system.
@@ -95,7 +95,7 @@ pub(crate) fn escape_control_chars(s: &str) -> std::borrow::Cow<'_, str> {
     )
 }
 
-fn escape_controls(e: &NewEvent) -> NewEvent {
+pub(crate) fn escape_controls(e: &NewEvent) -> NewEvent {
     NewEvent {
         ts: e.ts,
         user: e

@@ -5,7 +5,8 @@
 //! and every query: historian samples, the event log, alarm states and alarm
 //! history, users and screen access, login sessions, dispatch records. Also the historian's
 //! logging policy ([`Recorder`], pure) and its bounded writer task
-//! ([`Historian`]).
+//! ([`Historian`]), and the audit trail's writer with its spool
+//! ([`AuditTrail`]).
 //!
 //! **Must not touch:** plant logic (alarm state machine, fault isolation,
 //! dispatch), sockets other than the database's, and the tag database's live
@@ -41,6 +42,7 @@ macro_rules! on_backend {
 }
 
 mod alarms;
+mod audit;
 mod csv;
 mod dispatch;
 mod error;
@@ -51,6 +53,7 @@ mod recorder;
 mod screens;
 #[macro_use]
 mod sessions;
+mod spool;
 mod store;
 mod users;
 mod writer;
@@ -58,6 +61,7 @@ mod writer;
 pub use alarms::{
     ActivationCount, AlarmHistoryFilter, AlarmStateRecord, AlarmTransition, AlarmTransitionRecord,
 };
+pub use audit::{AuditBody, AuditRecord, AuditTable};
 pub use dispatch::{DispatchRecord, NewDispatch};
 pub use error::StoreError;
 pub use events::{Event, EventFilter, NewEvent};
@@ -68,6 +72,10 @@ pub use historian::{
 pub use recorder::{RecordPolicy, Recorder};
 pub use screens::{ScreenRecord, MAX_SCREEN_BYTES};
 pub use sessions::{SessionKey, SessionRecord};
+pub use spool::{
+    read_spool, AuditConfig, AuditError, AuditHandle, AuditMetrics, AuditTrail, SpoolContents,
+    SPOOL_FILE,
+};
 pub use store::{BackendKind, OpenOptions, SqliteSync, Store};
 pub use users::{NewUser, User, UserSummary};
 pub use writer::{Historian, HistorianConfig, HistorianHandle, HistorianMetrics};

@@ -142,6 +142,11 @@ const SQLITE_MIGRATIONS: &[(i64, &str, &str)] = &[
         "sessions",
         include_str!("../migrations/sqlite/0006_sessions.sql"),
     ),
+    (
+        7,
+        "audit ids",
+        include_str!("../migrations/sqlite/0007_audit_ids.sql"),
+    ),
 ];
 const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
     (
@@ -173,6 +178,11 @@ const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
         6,
         "sessions",
         include_str!("../migrations/postgres/0006_sessions.sql"),
+    ),
+    (
+        7,
+        "audit ids",
+        include_str!("../migrations/postgres/0007_audit_ids.sql"),
     ),
 ];
 

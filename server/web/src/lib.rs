@@ -38,6 +38,9 @@ pub struct WebState {
     pub db: Arc<TagDb>,
     pub plant: Arc<Plant>,
     pub store: Store,
+    /// The audit trail (stored, or spooled while the store is away);
+    /// `None` writes audit records straight to the store.
+    pub audit: Option<gridscada_store::AuditHandle>,
     pub auth: Auth,
     pub clock: Arc<dyn Clock>,
     /// Commands to the field; `None` when no field I/O runs.

@@ -116,6 +116,7 @@ async fn run_stack(
             simulate: true,
             dispatch_policy: policy,
             restore_panels: false,
+            data_dir: data.to_path_buf(),
         },
     )
     .await?;

@@ -59,6 +59,7 @@ async fn orderly_shutdown_writes_every_sample_offered_and_drops_none() {
             simulate: true,
             dispatch_policy: Default::default(),
             restore_panels: false,
+            data_dir: dir.path().to_path_buf(),
         },
     )
     .await

@@ -133,14 +133,65 @@ impl gridscada_web::api::devices::DeviceSource for StackDevices {
     }
 }
 
-/// The poller's and the historian's figures for `/metrics`.
+/// The poller's, the historian's and the audit trail's figures for `/metrics`.
 pub(super) struct StackMetrics {
     pub(super) poll: gridscada_modbus::StatsHandle,
     pub(super) historian: gridscada_store::HistorianHandle,
+    pub(super) audit: gridscada_store::AuditHandle,
+}
+
+impl StackMetrics {
+    /// The audit trail: records stored, spooled while the store was away,
+    /// replayed from the spool, waiting in it, and lost.
+    fn render_audit(&self, out: &mut gridscada_web::metrics::Prom) {
+        let a = self.audit.metrics();
+        for (name, help, value) in [
+            (
+                "gridscada_audit_stored_total",
+                "Audit records (events, alarm transitions) stored straight away.",
+                a.stored,
+            ),
+            (
+                "gridscada_audit_spooled_total",
+                "Audit records spooled while the store could not take them.",
+                a.spooled,
+            ),
+            (
+                "gridscada_audit_replayed_total",
+                "Audit records replayed from the spool into the store.",
+                a.replayed,
+            ),
+            (
+                "gridscada_audit_lost_total",
+                "Audit records neither stored nor spooled.",
+                a.lost,
+            ),
+            (
+                "gridscada_audit_spool_bad_lines_total",
+                "Torn or unreadable audit spool lines found.",
+                a.torn_lines,
+            ),
+        ] {
+            out.counter(name, help, &[], value as f64);
+        }
+        out.gauge(
+            "gridscada_audit_spool_pending",
+            "Audit records in the spool, waiting for the store.",
+            &[],
+            a.pending as f64,
+        );
+        out.gauge(
+            "gridscada_audit_spooling",
+            "1 while the audit spool is in use.",
+            &[],
+            f64::from(u8::from(a.spooling)),
+        );
+    }
 }
 
 impl gridscada_web::metrics::MetricsSource for StackMetrics {
     fn render(&self, out: &mut gridscada_web::metrics::Prom) {
+        self.render_audit(out);
         let poll = self.poll.stats();
         for d in &poll.devices {
             let l = [("device", d.device.as_str())];

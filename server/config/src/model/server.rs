@@ -194,6 +194,41 @@ pub struct StorageConfig {
     /// Global historian retention, in days; a tag's own setting wins.
     #[serde(default = "default_retention_days")]
     pub retention_days: u32,
+    /// `[storage.retention]`: how long the audit trail is kept.
+    #[serde(default)]
+    pub retention: AuditRetention,
+}
+
+/// How long the event log, the alarm history and the dispatch records are
+/// kept, in days; 0 keeps them for ever. Pruned daily, in small batches.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct AuditRetention {
+    #[serde(default = "default_audit_days")]
+    pub events_days: Spanned<u32>,
+    #[serde(default = "default_audit_days")]
+    pub alarm_history_days: Spanned<u32>,
+    #[serde(default = "default_dispatch_days")]
+    pub dispatch_days: Spanned<u32>,
+}
+
+impl Default for AuditRetention {
+    fn default() -> Self {
+        AuditRetention {
+            events_days: default_audit_days(),
+            alarm_history_days: default_audit_days(),
+            dispatch_days: default_dispatch_days(),
+        }
+    }
+}
+
+/// Two years: an incident is often investigated, or audited, a year later.
+fn default_audit_days() -> Spanned<u32> {
+    Spanned::new(0..0, 730)
+}
+/// A dispatch record every period adds up fast, and is of use for weeks.
+fn default_dispatch_days() -> Spanned<u32> {
+    Spanned::new(0..0, 90)
 }
 
 impl Default for StorageConfig {
@@ -201,6 +236,7 @@ impl Default for StorageConfig {
         StorageConfig {
             url: default_storage_url(),
             retention_days: default_retention_days(),
+            retention: AuditRetention::default(),
         }
     }
 }

@@ -246,6 +246,23 @@ fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
             format!("[storage] url: '{u}' must start with sqlite:, postgres:// or postgresql://"),
         );
     }
+    let r = &main.storage.retention;
+    for (key, days) in [
+        ("events_days", &r.events_days),
+        ("alarm_history_days", &r.alarm_history_days),
+        ("dispatch_days", &r.dispatch_days),
+    ] {
+        if *days.get_ref() > 36_500 {
+            cx.err(
+                0,
+                days.span(),
+                format!(
+                    "[storage.retention] {key}: {} days is more than 100 years; 0 keeps for ever",
+                    days.get_ref()
+                ),
+            );
+        }
+    }
     if main.tag_files.is_empty() {
         cx.err(
             0,

@@ -59,6 +59,7 @@ pub async fn web_state(db: Arc<TagDb>, dir: &Path) -> (WebState, String) {
         plant: Arc::new(plant),
         store,
         auth,
+        audit: None,
         clock: Arc::new(SystemClock),
         writer: None,
         started: Instant::now(),

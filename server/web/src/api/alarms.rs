@@ -151,6 +151,8 @@ pub async fn ack(
 ) -> ApiResult<Json<Acked>> {
     let Json(b) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
     let e = engine(&s)?;
+    // The engine records it through the audit trail: not unless durable.
+    crate::api::audit_ready(&s).await?;
     let user = who.audit_name();
     let filter = b.filter.unwrap_or_default().to_filter()?;
     let acked: Vec<AlarmId> = match (b.ids, b.top, b.all) {
@@ -202,6 +204,8 @@ pub async fn shelve(
 ) -> ApiResult<Json<Shelved>> {
     let Json(b) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
     let e = engine(&s)?;
+    // The engine records it through the audit trail: not unless durable.
+    crate::api::audit_ready(&s).await?;
     let until = e
         .shelve(AlarmId(id), &who.audit_name(), b.minutes, &b.reason)
         .map_err(alarm_error)?;
@@ -221,6 +225,8 @@ pub async fn unshelve(
     Path(id): Path<u32>,
 ) -> ApiResult<StatusCode> {
     let e = engine(&s)?;
+    // The engine records it through the audit trail: not unless durable.
+    crate::api::audit_ready(&s).await?;
     e.unshelve(AlarmId(id), &who.audit_name())
         .map_err(alarm_error)?;
     persist(&s, e, &[AlarmId(id)]).await?;

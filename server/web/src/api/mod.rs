@@ -30,19 +30,77 @@ pub struct Components {
     pub dispatch: Option<tokio::sync::watch::Receiver<gridscada_control::dispatch::DispatchStatus>>,
 }
 
-/// Records an operator action in the event log. An audit record that cannot be
-/// written is logged loudly; the action itself has already happened.
-pub async fn audit(state: &WebState, who: &Principal, kind: &str, source: &str, message: String) {
-    let event = NewEvent {
+fn audit_event(
+    state: &WebState,
+    who: &Principal,
+    kind: &str,
+    source: &str,
+    message: String,
+) -> NewEvent {
+    NewEvent {
         ts: state.clock.now(),
         user: who.user.clone(),
         source: source.to_string(),
         kind: kind.to_string(),
         message,
-    };
-    if let Err(e) = state.store.insert_event(&event).await {
-        tracing::error!(error = %e, ?event, "could not record an audit event");
     }
+}
+
+/// Records what came of an operator action (or a login) in the event log,
+/// through the audit trail. A record that can be neither stored nor spooled
+/// is logged loudly (and counted); the action itself has already happened.
+pub async fn audit(state: &WebState, who: &Principal, kind: &str, source: &str, message: String) {
+    let event = audit_event(state, who, kind, source, message);
+    if let Err(e) = durable(state, event).await {
+        tracing::error!(error = %e, "could not record an audit event");
+    }
+}
+
+/// Records an operator command in the event log and waits until the record
+/// is durable (in the store, or fsync'd in the audit spool). Call it before
+/// the command goes out: when it fails (503), the command must not.
+pub async fn audit_first(
+    state: &WebState,
+    who: &Principal,
+    kind: &str,
+    source: &str,
+    message: String,
+) -> Result<(), crate::error::ApiError> {
+    let event = audit_event(state, who, kind, source, message);
+    durable(state, event).await.map_err(refused_unaudited)
+}
+
+async fn durable(state: &WebState, event: NewEvent) -> Result<(), String> {
+    match &state.audit {
+        Some(a) => a
+            .record_durable(gridscada_store::AuditBody::Event(event))
+            .await
+            .map_err(|e| e.to_string()),
+        None => state
+            .store
+            .insert_event(&event)
+            .await
+            .map(|_| ())
+            .map_err(|e| e.to_string()),
+    }
+}
+
+/// Before a command whose audit record the component itself makes through
+/// the audit trail (a panel sequence, the alarm engine): refuses it (503)
+/// when that record could be neither stored nor spooled now.
+pub async fn audit_ready(state: &WebState) -> Result<(), crate::error::ApiError> {
+    let r = match &state.audit {
+        Some(a) => a.probe().await.map_err(|e| e.to_string()),
+        None => state.store.ping().await.map_err(|e| e.to_string()),
+    };
+    r.map_err(refused_unaudited)
+}
+
+fn refused_unaudited(why: String) -> crate::error::ApiError {
+    tracing::error!(%why, "command refused: its audit record cannot be made durable");
+    crate::error::ApiError::unavailable(format!(
+        "command refused: its audit record can be neither stored nor spooled, and no command goes out unrecorded ({why})"
+    ))
 }
 
 /// Parses a time given as milliseconds since the epoch.

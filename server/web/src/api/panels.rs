@@ -97,6 +97,9 @@ pub async fn one(
 async fn send(s: &WebState, who: &Principal, id: &str, kind: PanelCommandKind) -> ApiResult<()> {
     let p = find(s, id)?;
     may_view(who, id)?;
+    // The sequence records the command through the audit trail: it goes
+    // out only if that record can be made durable.
+    crate::api::audit_ready(s).await?;
     let (reply, answer) = oneshot::channel();
     let cmd = PanelCommand {
         user: who.audit_name(),

@@ -115,13 +115,15 @@ pub fn check(s: &WebState, screen: &Screen) -> Result<(), Vec<String>> {
     params(("id" = String, Path, description = SCREEN_ID, min_length = 1)),
     request_body = shapes::UserScreen,
     responses((status = 200, description = "OK", body = shapes::UserScreen), (status = 400),
-        (status = 409, description = "Conflict: someone else changed it first, or the change would lock administrators out")))]
+        (status = 409, description = "Conflict: someone else changed it first, or the change would lock administrators out"), (status = 503, description = "Its audit record could be neither stored nor spooled")))]
 pub async fn save(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
     Path(id): Path<String>,
     body: Result<Json<Screen>, axum::extract::rejection::JsonRejection>,
 ) -> ApiResult<Json<Screen>> {
+    // The change is audited through the audit trail: not unless durable.
+    crate::api::audit_ready(&s).await?;
     let Json(screen) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
     if screen.id != id {
         return Err(ApiError::bad_request(format!(
@@ -179,12 +181,14 @@ pub async fn store_screen(s: &WebState, screen: &Screen, by: &str) -> ApiResult<
 #[utoipa::path(delete, path = "/api/screens/{id}", tag = "screens",
     summary = "Delete a screen (and its access grants)",
     params(("id" = String, Path, description = SCREEN_ID, min_length = 1)),
-    responses((status = 204, description = "Deleted"), (status = 404, description = "No such thing")))]
+    responses((status = 204, description = "Deleted"), (status = 404, description = "No such thing"), (status = 503, description = "Its audit record could be neither stored nor spooled")))]
 pub async fn remove(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
     Path(id): Path<String>,
 ) -> ApiResult<StatusCode> {
+    // The change is audited through the audit trail: not unless durable.
+    crate::api::audit_ready(&s).await?;
     if !screen::valid_id(&id) {
         return Err(no_such(&id));
     }

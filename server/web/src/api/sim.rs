@@ -60,13 +60,14 @@ pub struct FaultBody {
     summary = "Inject a zone fault (demo and replay only)",
     request_body = FaultBody,
     responses((status = 201, description = "Injected", body = inline(FaultBody)),
-        (status = 400), (status = 404)))]
+        (status = 400), (status = 404), (status = 503, description = "Its audit record could be neither stored nor spooled")))]
 pub async fn inject_fault(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
     body: Result<Json<FaultBody>, axum::extract::rejection::JsonRejection>,
 ) -> ApiResult<(StatusCode, Json<FaultBody>)> {
     let Json(b) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
+    crate::api::audit_ready(&s).await?;
     sim(&s)?
         .inject_fault(&b.panel, b.zone, b.kind)
         .map_err(refused)?;
@@ -93,12 +94,13 @@ pub async fn inject_fault(
 #[utoipa::path(delete, path = "/api/sim/faults/{panel}/{zone}", tag = "simulation",
     summary = "Repair a zone fault",
     params(("panel" = String, Path, min_length = 1), ("zone" = u8, Path)),
-    responses((status = 204, description = "Repaired"), (status = 400), (status = 404)))]
+    responses((status = 204, description = "Repaired"), (status = 400), (status = 404), (status = 503, description = "Its audit record could be neither stored nor spooled")))]
 pub async fn repair(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
     Path((panel, zone)): Path<(String, u8)>,
 ) -> ApiResult<StatusCode> {
+    crate::api::audit_ready(&s).await?;
     sim(&s)?.repair(&panel, zone).map_err(refused)?;
     audit(
         &s,
@@ -117,6 +119,7 @@ async fn set_offline(
     device: String,
     offline: bool,
 ) -> ApiResult<Json<DeviceState>> {
+    crate::api::audit_ready(&s).await?;
     sim(&s)?.set_offline(&device, offline).map_err(refused)?;
     let what = if offline { "offline" } else { "online" };
     audit(
@@ -141,7 +144,7 @@ pub struct DeviceState {
 #[utoipa::path(post, path = "/api/sim/devices/{device}/offline", tag = "simulation",
     summary = "Take a simulated device offline",
     params(("device" = String, Path, min_length = 1)),
-    responses((status = 200, description = "OK", body = inline(DeviceState)), (status = 400), (status = 404)))]
+    responses((status = 200, description = "OK", body = inline(DeviceState)), (status = 400), (status = 404), (status = 503, description = "Its audit record could be neither stored nor spooled")))]
 pub async fn offline(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
@@ -153,7 +156,7 @@ pub async fn offline(
 #[utoipa::path(post, path = "/api/sim/devices/{device}/online", tag = "simulation",
     summary = "Take a simulated device online",
     params(("device" = String, Path, min_length = 1)),
-    responses((status = 200, description = "OK", body = inline(DeviceState)), (status = 400), (status = 404)))]
+    responses((status = 200, description = "OK", body = inline(DeviceState)), (status = 400), (status = 404), (status = 503, description = "Its audit record could be neither stored nor spooled")))]
 pub async fn online(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,

@@ -8,7 +8,7 @@ use gridscada_tagdb::{Sample, TagId, TagMeta, Value, WriteError};
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
-use crate::api::audit;
+use crate::api::{audit, audit_first};
 use crate::auth::Principal;
 use crate::error::{ApiError, ApiResult};
 use crate::openapi::shapes;
@@ -365,6 +365,15 @@ pub async fn write(
         s.db.get(id)
             .map(|o| o.value.to_string())
             .unwrap_or_default();
+    // The request is on record before it goes to the device.
+    audit_first(
+        &s,
+        &who,
+        "write_request",
+        &name,
+        format!("{} requests {name}: {old} -> {value}", who.audit_name()),
+    )
+    .await?;
     match writer.write(&name, value.clone()).await {
         Ok(confirmed) => {
             // The device may hold the value at its own resolution (a scaled

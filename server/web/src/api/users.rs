@@ -100,12 +100,14 @@ fn check_group_name(group: &str) -> ApiResult<()> {
 #[utoipa::path(post, path = "/api/users", tag = "users", summary = "Create a user",
     request_body = NewUserBody,
     responses((status = 201, description = "Created", body = inline(CreatedUser)),
-        (status = 400), (status = 409)))]
+        (status = 400), (status = 409), (status = 503, description = "Its audit record could be neither stored nor spooled")))]
 pub async fn create(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
     b: JsonBody<NewUserBody>,
 ) -> ApiResult<(StatusCode, Json<CreatedUser>)> {
+    // The change is audited through the audit trail: not unless durable.
+    crate::api::audit_ready(&s).await?;
     let b = body(b)?;
     check_user_name(&b.name)?;
     let group = b.group.unwrap_or_else(|| b.role.label().to_string());
@@ -216,13 +218,15 @@ fn unchanged(u: &gridscada_store::User) -> After {
     params(("name" = String, Path, description = "User name", min_length = 1)),
     request_body = UpdateBody,
     responses((status = 200, description = "OK", body = inline(OneUser)),
-        (status = 400), (status = 404), (status = 409)))]
+        (status = 400), (status = 404), (status = 409), (status = 503, description = "Its audit record could be neither stored nor spooled")))]
 pub async fn update(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
     Path(name): Path<String>,
     b: JsonBody<UpdateBody>,
 ) -> ApiResult<Json<OneUser>> {
+    // The change is audited through the audit trail: not unless durable.
+    crate::api::audit_ready(&s).await?;
     let b = body(b)?;
     existing_user(&s, &name).await?;
     // Validate everything before changing anything: no partial updates.
@@ -295,13 +299,15 @@ pub struct DeleteBody {
     summary = "Delete a user (confirm by repeating the name)",
     params(("name" = String, Path, description = "User name", min_length = 1)),
     request_body = DeleteBody,
-    responses((status = 204, description = "Deleted"), (status = 400), (status = 404), (status = 409)))]
+    responses((status = 204, description = "Deleted"), (status = 400), (status = 404), (status = 409), (status = 503, description = "Its audit record could be neither stored nor spooled")))]
 pub async fn remove(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
     Path(name): Path<String>,
     b: JsonBody<DeleteBody>,
 ) -> ApiResult<StatusCode> {
+    // The change is audited through the audit trail: not unless durable.
+    crate::api::audit_ready(&s).await?;
     let b = body(b).map_err(|_| {
         ApiError::bad_request(format!(
             "deleting a user needs confirmation: send {{\"confirm\": \"{name}\"}}"
@@ -345,7 +351,7 @@ pub struct PasswordBody {
     summary = "Change a password (own: with current_password; others': administrators)",
     params(("name" = String, Path, description = "User name", min_length = 1)),
     request_body = PasswordBody,
-    responses((status = 204, description = "Changed"), (status = 400), (status = 404)))]
+    responses((status = 204, description = "Changed"), (status = 400), (status = 404), (status = 503, description = "Its audit record could be neither stored nor spooled")))]
 pub async fn password(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
@@ -353,6 +359,8 @@ pub async fn password(
     headers: axum::http::HeaderMap,
     b: JsonBody<PasswordBody>,
 ) -> ApiResult<StatusCode> {
+    // The change is audited through the audit trail: not unless durable.
+    crate::api::audit_ready(&s).await?;
     let b = body(b)?;
     let own = who.user.as_deref() == Some(name.as_str());
     if !own && who.role < Role::Administrator {
@@ -460,13 +468,15 @@ pub struct GroupScreensSet {
     params(("group" = String, Path, min_length = 1)),
     request_body = ScreensBody,
     responses((status = 200, description = "OK", body = inline(GroupScreensSet)), (status = 400),
-        (status = 409, description = "Conflict: the change would leave no administrator able to manage users")))]
+        (status = 409, description = "Conflict: the change would leave no administrator able to manage users"), (status = 503, description = "Its audit record could be neither stored nor spooled")))]
 pub async fn set_group_screens(
     State(s): State<WebState>,
     Extension(who): Extension<Principal>,
     Path(group): Path<String>,
     b: JsonBody<ScreensBody>,
 ) -> ApiResult<Json<GroupScreensSet>> {
+    // The change is audited through the audit trail: not unless durable.
+    crate::api::audit_ready(&s).await?;
     let b = body(b)?;
     check_group_name(&group)?;
     if let Some(bad) = b

@@ -340,6 +340,7 @@ impl Harness {
             plant: Arc::new(plant),
             auth: Auth::new(opts.policy.clone(), false, store.clone()).await,
             store,
+            audit: None,
             clock: Arc::new(SystemClock),
             writer: Some(writer.clone() as Arc<dyn TagWriter>),
             started: Instant::now(),
