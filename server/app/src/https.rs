@@ -89,8 +89,15 @@ pub async fn listen(
 
 /// On each SIGHUP, reads the certificate and key again. New connections use
 /// the new pair; a pair that does not load is refused (logged, and recorded
-/// as an event) and the one in use keeps serving.
-pub fn reload_on_sighup(https: Https, events: mpsc::Sender<NewEvent>, clock: Arc<dyn Clock>) {
+/// as an event) and the one in use keeps serving. Without TLS the signal is
+/// still caught: `systemctl reload` must never stop a plain-HTTP server
+/// (SIGHUP's default action ends the process, and systemd counts that as a
+/// clean exit, so it would not restart it).
+pub fn reload_on_sighup(
+    https: Option<Https>,
+    events: mpsc::Sender<NewEvent>,
+    clock: Arc<dyn Clock>,
+) {
     #[cfg(unix)]
     {
         use tokio::signal::unix::{signal, SignalKind};
@@ -103,6 +110,19 @@ pub fn reload_on_sighup(https: Https, events: mpsc::Sender<NewEvent>, clock: Arc
         };
         tokio::spawn(async move {
             while hup.recv().await.is_some() {
+                let Some(https) = &https else {
+                    tracing::info!("SIGHUP: nothing to reload (no [server.tls])");
+                    let _ = events
+                        .send(sinks::system_event(
+                            clock.as_ref(),
+                            "server",
+                            "reload",
+                            "reload asked (SIGHUP): nothing to reload without [server.tls]"
+                                .to_string(),
+                        ))
+                        .await;
+                    continue;
+                };
                 let cert = https.files().cert.display().to_string();
                 let message = match https.reload() {
                     Ok(()) => {

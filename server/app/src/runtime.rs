@@ -589,9 +589,7 @@ async fn run(
     web.auth.metrics_open = mode == Mode::Demo;
     load_screens(&web, mode).await?;
     let listening = crate::https::listen(&stack.plant, http, web, https).await?;
-    if let Some(https) = listening.https.clone() {
-        crate::https::reload_on_sighup(https, events_tx.clone(), clock.clone());
-    }
+    crate::https::reload_on_sighup(listening.https.clone(), events_tx.clone(), clock.clone());
     let (url, server) = (listening.url, listening.server);
 
     let _ = events_tx

@@ -829,22 +829,35 @@ impl WebState {
             // once, before the store's revocation reaches the cache.
             Ok(Some(u)) if !u.blocked && u.role == session.role => {
                 let screens = self.screens_of(&u.group, u.role).await;
-                Principal {
+                let who = Principal {
                     user: Some(u.name),
                     role: u.role,
                     group: Some(u.group),
                     screens,
-                }
+                };
+                self.auth
+                    .last_known
+                    .lock()
+                    .insert(session.user.clone(), who.clone());
+                who
             }
             Ok(_) => {
                 // Deleted, blocked or given another role since login: the
                 // session ends now.
+                self.auth.last_known.lock().remove(&session.user);
                 self.auth.sessions.end(&token).await;
                 Principal::anonymous()
             }
             Err(e) => {
-                tracing::error!(error = %e, "reading the session's user");
-                Principal::anonymous()
+                // The database does not answer: the session (live in this
+                // server's cache) keeps what the store last said of its
+                // user, so the control room can still work; what they do
+                // is audited through the spool.
+                tracing::warn!(error = %e, "reading the session's user; using what the store last said");
+                match self.auth.last_known.lock().get(&session.user) {
+                    Some(who) if who.role == session.role => who.clone(),
+                    _ => Principal::anonymous(),
+                }
             }
         }
     }

@@ -135,6 +135,11 @@ pub async fn login(
         group: Some(user.group.clone()),
         screens,
     };
+    // What the store says of the user now, for a database outage (Auth::last_known).
+    s.auth
+        .last_known
+        .lock()
+        .insert(user.name.clone(), who.clone());
     audit(
         &s,
         &who,

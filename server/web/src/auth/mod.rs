@@ -78,6 +78,12 @@ pub struct Auth {
     pub sockets: Arc<SocketCounts>,
     /// `/metrics` answers anyone (the demo, on loopback).
     pub metrics_open: bool,
+    /// Each logged-in user as the store last described them (role, group,
+    /// screens), by name: while the database does not answer, a live
+    /// session keeps the rights it had rather than turning anonymous, so
+    /// operators can still act (their commands' audit records go to the
+    /// spool). Never wider than the store's last word.
+    pub last_known: Arc<parking_lot::Mutex<std::collections::HashMap<String, Principal>>>,
 }
 
 impl Auth {
@@ -95,6 +101,7 @@ impl Auth {
             admin_guard: Default::default(),
             sockets: Default::default(),
             metrics_open: false,
+            last_known: Default::default(),
         }
     }
 }
