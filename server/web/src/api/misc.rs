@@ -189,12 +189,12 @@ pub async fn healthz(State(s): State<WebState>) -> (StatusCode, Json<Health>) {
 
 /// Readiness for a load balancer: 200 `ready` once the server serves (it
 /// answers only after the whole stack has started) and its store answers;
-/// 503 otherwise. Field devices do not count: a server with a device down
-/// still serves the plant.
+/// 503 otherwise (the API's JSON error, like every refusal). Field devices
+/// do not count: a server with a device down still serves the plant.
 #[utoipa::path(get, path = "/readyz", tag = "server", summary = "Readiness",
     responses(
         (status = 200, description = "Ready", body = String, content_type = "text/plain"),
-        (status = 503, description = "Not ready: the store does not answer", body = String, content_type = "text/plain")))]
+        (status = 503)))]
 pub async fn readyz(
     State(s): State<WebState>,
 ) -> (
@@ -209,10 +209,11 @@ pub async fn readyz(
     if store_answers(&s).await {
         (StatusCode::OK, headers, "ready\n")
     } else {
+        // Turned into the API's JSON error by `routes::json_errors`.
         (
             StatusCode::SERVICE_UNAVAILABLE,
             headers,
-            "not ready: the store does not answer\n",
+            "not ready: the store does not answer",
         )
     }
 }
