@@ -22,6 +22,7 @@ pub mod decode;
 mod frame;
 mod link;
 pub mod plan;
+mod round_trip;
 mod transport;
 
 use std::collections::HashMap;
@@ -38,6 +39,7 @@ use tokio::sync::{mpsc, oneshot, watch};
 use tokio::task::JoinHandle;
 
 pub use frame::exception_text;
+pub use round_trip::{RoundTripHistogram, ROUND_TRIP_BOUNDS};
 pub use transport::inter_frame_silence;
 
 use link::{ClassRt, Counters, DeviceRt, Link, LinkCounters, LinkTag, StatusIds, WriteCmd};
@@ -145,6 +147,8 @@ pub struct DeviceStats {
     pub overruns: u64,
     /// Round trip of the last answered request, wall time.
     pub last_response_ms: f64,
+    /// Round trips of every answered request, wall time.
+    pub round_trip: RoundTripHistogram,
 }
 
 /// Counters of one connection or serial port.
@@ -591,6 +595,7 @@ impl StatsHandle {
                         late_scans: get(&c.late_scans),
                         overruns: get(&c.overruns),
                         last_response_ms: get(&c.response_us) as f64 / 1000.0,
+                        round_trip: c.round_trips.snapshot(),
                     }
                 })
                 .collect(),

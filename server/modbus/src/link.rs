@@ -81,6 +81,7 @@ pub(crate) struct Counters {
     /// Reads repeated at once after no answer (the device's `retries`).
     pub retries: AtomicU64,
     pub response_us: AtomicU64,
+    pub round_trips: crate::round_trip::RoundTrips,
     pub connected: AtomicBool,
 }
 
@@ -399,6 +400,7 @@ impl Link {
                 dev.counters
                     .response_us
                     .store(elapsed.as_micros() as u64, Ordering::Relaxed);
+                dev.counters.round_trips.observe(elapsed);
                 if let Err(code) = answer {
                     bump(&dev.counters.errors);
                     bump(&dev.counters.exceptions);

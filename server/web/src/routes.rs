@@ -144,6 +144,13 @@ pub fn table() -> Vec<Route> {
         ),
         r(
             Method::GET,
+            "/readyz",
+            Perm::Public,
+            || get(api::misc::readyz),
+            doc::<api::misc::__path_readyz>,
+        ),
+        r(
+            Method::GET,
             "/metrics",
             Perm::Public,
             || get(api::misc::metrics),
@@ -466,10 +473,16 @@ pub fn build(state: WebState) -> Router {
             continue;
         }
         let perm = route.perm;
-        let handler = (route.handler)().route_layer(middleware::from_fn_with_state(
-            state.clone(),
-            move |s: State<WebState>, req: Request, next: Next| authorize(s, perm, req, next),
-        ));
+        let template = route.path;
+        let handler = (route.handler)()
+            .route_layer(middleware::from_fn_with_state(
+                state.clone(),
+                move |s: State<WebState>, req: Request, next: Next| authorize(s, perm, req, next),
+            ))
+            // Outside the check, so refused requests are timed by route too.
+            .route_layer(middleware::from_fn(move |req: Request, next: Next| {
+                crate::metrics::mark_route(template, req, next)
+            }));
         router = router.route(route.path, handler);
     }
     let http_metrics = state.http_metrics.clone();
@@ -775,7 +788,8 @@ async fn security_headers(
     next: Next,
 ) -> Response {
     let path = req.uri().path();
-    let dynamic = path.starts_with("/api/") || path == "/metrics" || path == "/healthz";
+    let dynamic =
+        path.starts_with("/api/") || path == "/metrics" || path == "/healthz" || path == "/readyz";
     let mut resp = next.run(req).await;
     let failed = resp.status().is_client_error() || resp.status().is_server_error();
     let h = resp.headers_mut();

@@ -255,6 +255,16 @@ impl gridscada_web::metrics::MetricsSource for StackMetrics {
                 &l,
                 d.last_response_ms / 1000.0,
             );
+            let buckets: Vec<(f64, u64)> = d.round_trip.buckets().collect();
+            out.histogram(
+                "gridscada_poll_round_trip_seconds",
+                "Round trips of answered Modbus requests (timeouts excluded).",
+                &l,
+                &gridscada_web::metrics::HistogramSample {
+                    buckets: &buckets,
+                    sum: d.round_trip.sum_s,
+                },
+            );
         }
         for k in &poll.links {
             let l = [("link", k.link.as_str())];
@@ -320,5 +330,28 @@ impl gridscada_web::metrics::MetricsSource for StackMetrics {
             &[],
             h.last_write_ms / 1000.0,
         );
+    }
+
+    fn health(&self) -> gridscada_web::metrics::StackHealth {
+        use gridscada_web::metrics::{FieldIoHealth, HistorianHealth, StackHealth};
+        let poll = self.poll.stats();
+        let h = self.historian.metrics();
+        StackHealth {
+            field_io: Some(FieldIoHealth {
+                total: poll.devices.len(),
+                not_good: poll
+                    .devices
+                    .iter()
+                    .filter(|d| !d.connected)
+                    .map(|d| d.device.clone())
+                    .collect(),
+            }),
+            historian: Some(HistorianHealth {
+                queued: h.buffered as u64,
+                capacity: h.capacity as u64,
+                dropped: h.dropped,
+                overflow: h.overflow,
+            }),
+        }
     }
 }
