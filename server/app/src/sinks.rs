@@ -155,20 +155,59 @@ pub async fn audit_retention(
 }
 
 /// Alarm states, upserted so acknowledgements and shelving survive a restart.
-/// Only the newest state of each alarm in a batch is written.
+/// Only the newest state of each alarm is written. A write the store refuses
+/// (it is down) is kept and retried with back-off, newer states replacing
+/// older ones meanwhile, so the store catches up once it is back: a state is
+/// the latest word on its alarm, so nothing but the newest needs to wait.
 pub async fn alarm_states(
     store: Store,
     mut rx: mpsc::Receiver<gridscada_alarms::AlarmStateRecord>,
 ) {
+    const FIRST_RETRY: Duration = Duration::from_millis(200);
+    const LAST_RETRY: Duration = Duration::from_secs(5);
+    let mut pending: HashMap<String, gridscada_alarms::AlarmStateRecord> = HashMap::new();
     let mut batch = Vec::new();
-    while rx.recv_many(&mut batch, 512).await > 0 {
-        let mut newest: HashMap<String, gridscada_alarms::AlarmStateRecord> = HashMap::new();
-        for r in batch.drain(..) {
-            newest.insert(r.key.clone(), r);
+    let mut retry = FIRST_RETRY;
+    let mut closed = false;
+    loop {
+        if pending.is_empty() {
+            if rx.recv_many(&mut batch, 512).await == 0 {
+                return;
+            }
+        } else if !closed {
+            // recv_many is cancel safe: a timeout loses nothing.
+            if let Ok(0) = tokio::time::timeout(retry, rx.recv_many(&mut batch, 512)).await {
+                closed = true;
+            }
         }
-        let rows: Vec<_> = newest.into_values().collect();
-        if let Err(e) = store.upsert_alarm_states(&rows).await {
-            tracing::error!(error = %e, "could not save alarm states");
+        for r in batch.drain(..) {
+            pending.insert(r.key.clone(), r);
+        }
+        let rows: Vec<_> = pending.values().cloned().collect();
+        match store.upsert_alarm_states(&rows).await {
+            Ok(()) => {
+                if retry > FIRST_RETRY {
+                    tracing::info!(
+                        states = rows.len(),
+                        "alarm states saved after the store came back"
+                    );
+                }
+                pending.clear();
+                retry = FIRST_RETRY;
+            }
+            Err(e) if closed => {
+                tracing::error!(error = %e, states = rows.len(), "alarm states not saved at shutdown: the store is unavailable");
+                return;
+            }
+            Err(e) => {
+                if retry == FIRST_RETRY {
+                    tracing::error!(error = %e, "could not save alarm states; retrying until the store is back");
+                }
+                retry = (retry * 2).min(LAST_RETRY);
+            }
+        }
+        if closed && pending.is_empty() {
+            return;
         }
     }
 }

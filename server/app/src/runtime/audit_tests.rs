@@ -265,6 +265,22 @@ async fn postgres_down_during_fault_isolation_and_an_alarm_flood_loses_nothing()
         &format!("http://{http}/api/tags/{written}/write"),
     ]);
     assert_eq!(code, 200, "a write during the outage: {body}");
+    // And acknowledges every alarm: the operator is told it worked, and the
+    // alarm states reach the store once it is back (the state sink retries).
+    let (code, body) = curl(&[
+        "-b",
+        jar,
+        "-H",
+        &origin,
+        "-H",
+        "Content-Type: application/json",
+        "-d",
+        "{\"all\":true}",
+        &format!("http://{http}/api/alarms/ack"),
+    ]);
+    assert_eq!(code, 200, "an acknowledgement during the outage: {body}");
+    let acked: serde_json::Value = serde_json::from_str(&body).unwrap();
+    assert!(acked["count"].as_u64().unwrap() > 0, "{body}");
     // The sequence runs on through the outage (about 10 s).
     tokio::time::sleep(Duration::from_secs(8)).await;
     relay.restore();
@@ -277,6 +293,39 @@ async fn postgres_down_during_fault_isolation_and_an_alarm_flood_loses_nothing()
         !spool_alarm()
     })
     .await;
+    // The alarm states the store holds caught up with the engine's, the
+    // acknowledgements made during the outage among them.
+    let caught_up = Instant::now();
+    loop {
+        let engine: std::collections::HashMap<String, (bool, bool)> = stack
+            .alarms
+            .persisted_states()
+            .into_iter()
+            .map(|r| (r.key, (r.active, r.acked)))
+            .collect();
+        let stored: std::collections::HashMap<String, (bool, bool)> = store
+            .alarm_states()
+            .await
+            .unwrap_or_default()
+            .into_iter()
+            .map(|r| (r.key, (r.active, r.acked)))
+            .collect();
+        let behind: Vec<_> = engine
+            .iter()
+            // A normal alarm never stored has nothing to catch up.
+            .filter(|(k, v)| {
+                (**v != (false, true) || stored.contains_key(*k)) && stored.get(*k) != Some(*v)
+            })
+            .collect();
+        if behind.is_empty() {
+            break;
+        }
+        assert!(
+            caught_up.elapsed() < Duration::from_secs(30),
+            "alarm states not stored after the outage: {behind:?}"
+        );
+        tokio::time::sleep(Duration::from_millis(250)).await;
+    }
     let m = audit.metrics();
     eprintln!("audit trail after the outage: {m:?}");
     assert!(m.spooled > (2 * FLOOD) as u64, "{m:?}");
@@ -307,11 +356,21 @@ async fn postgres_down_during_fault_isolation_and_an_alarm_flood_loses_nothing()
         })
         .await
         .unwrap();
-    let flood_keys: Vec<(String, Option<String>)> = history
+    let flood_all: Vec<(String, Option<String>)> = history
         .iter()
         .filter(|t| t.transition.alarm_key.starts_with("flood:"))
         .map(|t| (t.transition.alarm_key.clone(), t.transition.cause.clone()))
         .collect();
+    // The acknowledgements of the outage come after (ack all), one each.
+    let (flood_keys, acks): (Vec<_>, Vec<_>) = flood_all
+        .into_iter()
+        .partition(|(_, cause)| matches!(cause.as_deref(), Some("activate" | "return")));
+    assert_eq!(
+        acks.len(),
+        FLOOD,
+        "one acknowledgement per flood alarm: {:?}",
+        &acks[..acks.len().min(5)]
+    );
     let mut want: Vec<(String, Option<String>)> = (0..FLOOD)
         .map(|i| (format!("flood:{i:03}"), Some("activate".to_string())))
         .collect();

@@ -30,7 +30,10 @@ fn engine(s: &WebState) -> ApiResult<&Arc<AlarmEngine>> {
 /// Writes the new state of `ids` to the store before the API answers, so
 /// an acknowledgement or shelving the operator was told about survives even
 /// an immediate crash. (The engine's own state sink writes the same records
-/// later; the store keeps whichever is newest.)
+/// later; the store keeps whichever is newest.) While the store is down the
+/// operation still stands: the engine has done it, its transition is in the
+/// audit trail (spooled), and the state sink saves the state once the store
+/// is back; the operator is not told it failed.
 async fn persist(s: &WebState, e: &AlarmEngine, ids: &[AlarmId]) -> ApiResult<()> {
     let keys: Vec<String> = ids
         .iter()
@@ -43,7 +46,9 @@ async fn persist(s: &WebState, e: &AlarmEngine, ids: &[AlarmId]) -> ApiResult<()
         .filter(|r| keys.contains(&r.key))
         .collect();
     if !records.is_empty() {
-        s.store.upsert_alarm_states(&records).await?;
+        if let Err(e) = s.store.upsert_alarm_states(&records).await {
+            tracing::warn!(error = %e, "alarm state not saved now; the state sink retries it");
+        }
     }
     Ok(())
 }
