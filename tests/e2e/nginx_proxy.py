@@ -8,6 +8,9 @@ loads under /scada/, a login with the browser's Origin works, live pushes
 arrive over the WebSocket, a tag write is confirmed, and failed logins lock
 out only the real client (curl --interface 127.0.0.2 vs 127.0.0.3). Straight
 to gridscada from an untrusted address, a forged X-Forwarded-For is ignored.
+nginx also terminates HTTPS, with a certificate from `gridscada cert
+self-signed`, on the public origin: over it, a login gets a Secure cookie,
+the live socket (wss) pushes, and a write is confirmed.
 
 Usage: nginx_proxy.py GRIDSCADA_BIN REPO_ROOT. Prints one PASS/FAIL line per
 check and "N passed, M failed" last.
@@ -19,6 +22,7 @@ import os
 import shutil
 import signal
 import socket
+import ssl
 import subprocess
 import sys
 import tempfile
@@ -44,9 +48,11 @@ def free_port():
     return port
 
 
-def curl(url, *, method="GET", body=None, iface=None, headers=(), cookie=None):
+def curl(url, *, method="GET", body=None, iface=None, headers=(), cookie=None, cacert=None):
     """One request with Debian's curl; (status, headers lower-cased, body)."""
     args = ["curl", "-sS", "--max-time", "30", "-D", "-", "-o", "-", "-X", method, url]
+    if cacert:
+        args += ["--cacert", cacert]
     if iface:
         args += ["--interface", iface]
     for h in headers:
@@ -113,6 +119,26 @@ http {{
             proxy_max_temp_file_size 0;
         }}
     }}
+    # The public origin: nginx terminates HTTPS and tells gridscada so
+    # (X-Forwarded-Proto https).
+    server {{
+        listen 127.0.0.1:{tls_port} ssl;
+        ssl_certificate {cert};
+        ssl_certificate_key {key};
+        location /scada/ {{
+            proxy_pass http://127.0.0.1:{gs_port};
+            proxy_http_version 1.1;
+            # A Host gridscada cannot compare an Origin with.
+            proxy_set_header Host backend.internal;
+            proxy_set_header X-Forwarded-For $proxy_add_x_forwarded_for;
+            proxy_set_header X-Forwarded-Proto $scheme;
+            proxy_set_header Upgrade $http_upgrade;
+            proxy_set_header Connection $connection_upgrade;
+            proxy_read_timeout 1h;
+            # Started as root, the workers run as nobody: no temp files.
+            proxy_max_temp_file_size 0;
+        }}
+    }}
 }}
 """
 
@@ -152,8 +178,17 @@ def run(tmp, procs):
     if not os.path.exists(nginx):
         check("setup: Debian's nginx is installed", False, "no nginx (apt-get install nginx)")
         return
-    gs_port, nginx_port = free_port(), free_port()
-    public = f"http://127.0.0.1:{nginx_port}"
+    gs_port, nginx_port, tls_port = free_port(), free_port(), free_port()
+    # Browsers come by HTTPS (the public origin); the plain listener is for
+    # the checks that need no TLS.
+    public = f"https://127.0.0.1:{tls_port}"
+    plain = f"http://127.0.0.1:{nginx_port}"
+    certs = os.path.join(tmp, "certs")
+    made = subprocess.run([BIN, "cert", "self-signed", "--host", "127.0.0.1", "--out", certs],
+                          capture_output=True, text=True, timeout=60)
+    if not check("setup: gridscada cert self-signed", made.returncode == 0, made.stderr):
+        return
+    cert, key = os.path.join(certs, "cert.pem"), os.path.join(certs, "key.pem")
     # The demo plant, with the reverse-proxy settings.
     plant = os.path.join(tmp, "plant")
     shutil.copytree(os.path.join(ROOT, "tags"), plant)
@@ -182,13 +217,14 @@ def run(tmp, procs):
     if not check("setup: gridscada demo answers under /scada", wait_http(f"{direct}/healthz", gs, "gridscada")):
         return
     with open(os.path.join(tmp, "nginx.conf"), "w") as f:
-        f.write(NGINX_CONF.format(tmp=tmp, nginx_port=nginx_port, gs_port=gs_port))
+        f.write(NGINX_CONF.format(tmp=tmp, nginx_port=nginx_port, gs_port=gs_port,
+                                  tls_port=tls_port, cert=cert, key=key))
     ng = subprocess.Popen(
         [nginx, "-p", tmp, "-c", os.path.join(tmp, "nginx.conf")],
         stdout=subprocess.DEVNULL, stderr=open(os.path.join(tmp, "nginx-stderr.log"), "w"),
     )
     procs.append(ng)
-    via = f"{public}/scada"
+    via = f"{plain}/scada"
     if not check("setup: nginx proxies /scada/", wait_http(f"{via}/healthz", ng, "nginx")):
         return
     accounts = {}
@@ -276,6 +312,50 @@ def run(tmp, procs):
     check("events record the untrusted peer, not its forged address",
           any("from 127.0.0.5" in t for t in logins) and not any("10.66.0." in t for t in logins), logins[:8])
     check("no login is recorded as from the proxy", not any("from 127.0.0.1:" in t or t.endswith("from 127.0.0.1") for t in logins), logins[:8])
+
+    # HTTPS at nginx, as a site runs it: the public origin.
+    https_checks(f"{public}/scada", public, cert, op_user, op_pass)
+
+
+def https_checks(via, public, cert, user, password):
+    st, _, body = curl(f"{via}/api/session", method="POST", body={"username": user, "password": password},
+                       iface="127.0.0.3", headers=[f"Origin: {public}"], cacert=cert)
+    check("HTTPS through nginx: login", st == 200, (st, body[:200]))
+    st, h, _ = curl(f"{via}/api/session", method="POST", body={"username": user, "password": password},
+                    iface="127.0.0.4", headers=[f"Origin: {public}"], cacert=cert)
+    sc = h.get("set-cookie", [""])[0]
+    attrs = [a.strip() for a in sc.split(";")]
+    check("HTTPS through nginx: the session cookie is Secure, Path /scada", st == 200 and "Secure" in attrs and "Path=/scada" in attrs, sc)
+    cookie = sc.split(";")[0]
+    st, _, _ = curl(f"{via}/api/session", cacert=None)
+    check("HTTPS through nginx: a client that does not trust the certificate is refused", st == 0, st)
+    asyncio.run(https_live_and_write(via, public, cert, cookie))
+
+
+async def https_live_and_write(via, public, cert, cookie):
+    tag = "SS1.Zone4.Cmd"
+    tls = ssl.create_default_context(cafile=cert)
+    try:
+        async with websockets.connect(via.replace("https://", "wss://") + "/api/live", origin=public, ssl=tls,
+                                      additional_headers={"Cookie": cookie}, open_timeout=15) as ws:
+            hello = json.loads(await asyncio.wait_for(ws.recv(), 10))
+            check("HTTPS through nginx: the live socket opens (wss)", hello.get("type") == "hello", hello)
+            await ws.send(json.dumps({"subscribe": {"tags": [tag]}, "visible": True}))
+            seen = await next_value(ws, tag, None)
+            check(f"HTTPS through nginx: a live push of {tag}", seen is not None, "no push within 15 s")
+            new = not seen if isinstance(seen, bool) else False
+            st, _, body = await asyncio.to_thread(
+                curl, f"{via}/api/tags/{tag}/write", method="POST", body={"value": new},
+                iface="127.0.0.4", headers=[f"Origin: {public}"], cookie=cookie, cacert=cert)
+            out = json.loads(body) if st == 200 else {}
+            check(f"HTTPS through nginx: writing {tag} = {new} is confirmed", st == 200 and out.get("value") == new, (st, body[:300]))
+            pushed = await next_value(ws, tag, new)
+            check("HTTPS through nginx: the confirmed value is pushed (wss)", pushed == new, pushed)
+            await asyncio.to_thread(
+                curl, f"{via}/api/tags/{tag}/write", method="POST", body={"value": seen},
+                iface="127.0.0.4", headers=[f"Origin: {public}"], cookie=cookie, cacert=cert)
+    except Exception as e:  # noqa: BLE001 - reported as a failed check
+        check("HTTPS through nginx: live push and write", False, repr(e))
 
 
 def fail_logins(url, user, *, iface, headers, forged=None, failures=7):

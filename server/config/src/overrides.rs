@@ -1,8 +1,9 @@
 //! Settings given outside the configuration files: the `GRIDSCADA_*`
 //! environment variables, for secrets and for what differs between
 //! machines (the database URL and password, the listen address, the data
-//! folder, the metrics token, the TLS certificate and key), and the warning about a plaintext password
-//! left in the file.
+//! folder, the metrics token, the TLS certificate and key, the public origin
+//! and base path behind a reverse proxy), and the warning about a plaintext
+//! password left in the file.
 //!
 //! The environment is read through a lookup function, so this stays pure
 //! (the binary passes `std::env::var`, tests a map). A value that is not
@@ -59,9 +60,13 @@ pub const ENV_BASE_PATH: EnvVar = EnvVar {
     name: "GRIDSCADA_BASE_PATH",
     setting: "[server] base_path",
 };
+pub const ENV_PUBLIC_ORIGIN: EnvVar = EnvVar {
+    name: "GRIDSCADA_PUBLIC_ORIGIN",
+    setting: "[server] public_origin",
+};
 
 /// Every variable [`apply_env`] reads, in the order it applies them.
-pub const ENV_VARS: [EnvVar; 8] = [
+pub const ENV_VARS: [EnvVar; 9] = [
     ENV_STORAGE_URL,
     ENV_STORAGE_PASSWORD,
     ENV_HTTP,
@@ -70,6 +75,7 @@ pub const ENV_VARS: [EnvVar; 8] = [
     ENV_TLS_CERT,
     ENV_TLS_KEY,
     ENV_BASE_PATH,
+    ENV_PUBLIC_ORIGIN,
 ];
 
 /// Replaces the file's settings with the `GRIDSCADA_*` variables that `get`
@@ -187,6 +193,15 @@ pub fn apply_env(
                 applied.push(ENV_BASE_PATH.name);
             }
             Err(why) => fail(ENV_BASE_PATH, why),
+        }
+    }
+    if let Some(origin) = value(ENV_PUBLIC_ORIGIN, &mut fail) {
+        match crate::normal_public_origin(&origin) {
+            Ok(_) => {
+                plant.server.public_origin = Some(Spanned::new(0..0, origin));
+                applied.push(ENV_PUBLIC_ORIGIN.name);
+            }
+            Err(why) => fail(ENV_PUBLIC_ORIGIN, why),
         }
     }
     if errors.is_empty() {

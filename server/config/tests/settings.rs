@@ -99,6 +99,7 @@ fn every_override_replaces_its_setting() {
             ("GRIDSCADA_TLS_CERT", "/etc/gridscada/cert.pem"),
             ("GRIDSCADA_TLS_KEY", "/etc/gridscada/key.pem"),
             ("GRIDSCADA_BASE_PATH", "/scada/"),
+            ("GRIDSCADA_PUBLIC_ORIGIN", "https://SCADA.example.com:443"),
         ]),
     )
     .unwrap();
@@ -111,6 +112,10 @@ fn every_override_replaces_its_setting() {
     assert_eq!(p.data_dir, PathBuf::from("/var/lib/gridscada"));
     assert_eq!(p.server.metrics_token.as_deref(), Some("from-env"));
     assert_eq!(p.server.base_path(), "/scada");
+    assert_eq!(
+        p.server.public_origin().as_deref(),
+        Some("https://scada.example.com")
+    );
 
     // The password alone goes into the file's URL (replacing its password).
     let mut p = load(
