@@ -103,7 +103,8 @@ if listening "$PORT"; then
         psql_peer >&2 <<SQL
 SELECT format('CREATE ROLE %I LOGIN', '$TEST_ROLE')
     WHERE NOT EXISTS (SELECT 1 FROM pg_roles WHERE rolname = '$TEST_ROLE') \gexec
-ALTER ROLE $TEST_ROLE LOGIN PASSWORD '$pw';
+-- CREATEDB: some tests make a database of their own and drop it.
+ALTER ROLE $TEST_ROLE LOGIN CREATEDB PASSWORD '$pw';
 SELECT format('CREATE DATABASE %I OWNER %I', '$DB', '$TEST_ROLE')
     WHERE NOT EXISTS (SELECT 1 FROM pg_database WHERE datname = '$DB') \gexec
 SQL
