@@ -25,6 +25,20 @@ if [ -z "${GRIDSCADA_BIN:-}" ]; then
 fi
 [ -x "$bin" ] || { echo "browser.sh: no gridscada binary at $bin"; exit 1; }
 
+# playwright-core needs Node.js 20 or later; Debian 12's nodejs is 18. Then
+# Node.js 22 comes from the npm registry (the `node` package, a binary for
+# this platform), under target/, first on PATH for these tests only.
+node_major=$(node -p 'process.versions.node.split(".")[0]' 2>/dev/null || echo 0)
+if [ "$node_major" -lt 20 ] || [ -n "${GRIDSCADA_TEST_NODE_FROM_NPM:-}" ]; then
+  node_dir="$root/target/test-node"
+  if [ ! -x "$node_dir/node_modules/.bin/node" ]; then
+    echo "browser.sh: Node.js $(node -v 2>/dev/null || echo none) is too old for playwright-core; installing Node.js 22 from npm into $node_dir"
+    npm install --prefix "$node_dir" --no-audit --no-fund --loglevel=error node@22 >/dev/null
+  fi
+  export PATH="$node_dir/node_modules/.bin:$PATH"
+  echo "browser.sh: using Node.js $(node -v)"
+fi
+
 cd "$here/browser"
 if [ -f package-lock.json ]; then npm ci --no-audit --no-fund --loglevel=error; else npm install --no-audit --no-fund --loglevel=error; fi
 
