@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{Client, BIN};
+use common::{gridscada, Client};
 use serde_json::json;
 
 const PASSWORD: &str = "a-long-enough-password";
@@ -33,16 +33,6 @@ fn plant(dir: &Path, storage: Option<&str>) -> PathBuf {
     )
     .unwrap();
     dir.join("gridscada.toml")
-}
-
-fn gridscada() -> Command {
-    let mut c = Command::new(BIN);
-    for (k, _) in std::env::vars() {
-        if k.starts_with("GRIDSCADA_") {
-            c.env_remove(k);
-        }
-    }
-    c
 }
 
 /// `gridscada user add NAME` with the password piped in.

@@ -9,18 +9,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-const BIN: &str = env!("CARGO_BIN_EXE_gridscada");
+mod common;
 
-/// The binary with none of the test process's own GRIDSCADA_* variables.
-fn gridscada() -> Command {
-    let mut c = Command::new(BIN);
-    for (k, _) in std::env::vars() {
-        if k.starts_with("GRIDSCADA_") {
-            c.env_remove(k);
-        }
-    }
-    c
-}
+use common::gridscada;
 
 /// A small plant in `dir/conf/`: one device nobody answers for, one tag;
 /// `server` and `storage` are appended to the main file.

@@ -18,6 +18,18 @@ use serde_json::Value;
 
 pub const BIN: &str = env!("CARGO_BIN_EXE_gridscada");
 
+/// The binary with none of the test process's own `GRIDSCADA_*` variables,
+/// so a test's settings come only from what it passes.
+pub fn gridscada() -> Command {
+    let mut c = Command::new(BIN);
+    for (k, _) in std::env::vars() {
+        if k.starts_with("GRIDSCADA_") {
+            c.env_remove(k);
+        }
+    }
+    c
+}
+
 /// A running `gridscada demo`. Dropping it kills the process (SIGKILL).
 pub struct Demo {
     child: Option<Child>,
