@@ -37,6 +37,12 @@ pub struct Plant {
     pub tags: Vec<TagConfig>,
     pub panels: Vec<PanelConfig>,
     pub microgrid: Option<MicrogridConfig>,
+    /// `[mqtt]`: the Sparkplug B northbound, if configured.
+    pub mqtt: Option<MqttConfig>,
+    /// `[opcua]`: the OPC UA server, if configured.
+    pub opcua: Option<OpcUaConfig>,
+    /// `[redundancy]`: one of a redundant pair, if configured.
+    pub redundancy: Option<RedundancyConfig>,
 }
 
 /// Where HTTPS takes its certificate and key, and its other settings.
@@ -208,6 +214,9 @@ pub fn load_with(
         tags: tags.into_iter().map(|(_, t)| t).collect(),
         panels: main_cfg.panels,
         microgrid: main_cfg.microgrid,
+        mqtt: main_cfg.mqtt,
+        opcua: main_cfg.opcua,
+        redundancy: main_cfg.redundancy,
     })
 }
 
@@ -304,6 +313,9 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
     let mut storage = StorageConfig::default();
     let mut panels = vec![];
     let mut microgrid = None;
+    let mut mqtt = None;
+    let mut opcua = None;
+    let mut redundancy = None;
     let before = diags.len();
     for (key, value) in root.iter() {
         match key.get_ref().as_ref() {
@@ -312,10 +324,13 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
             "storage" => storage = de(file, value, "[storage]", diags).unwrap_or_default(),
             "panel" => panels = de_each(file, value, "panel", diags),
             "microgrid" => microgrid = de(file, value, "[microgrid]", diags),
+            "mqtt" => mqtt = de(file, value, "[mqtt]", diags),
+            "opcua" => opcua = de(file, value, "[opcua]", diags),
+            "redundancy" => redundancy = de(file, value, "[redundancy]", diags),
             other => diags.push(file.error_at(
                 key.span(),
                 format!(
-                    "unknown key '{other}' in the main file; expected one of tag_files, server, storage, panel, microgrid"
+                    "unknown key '{other}' in the main file; expected one of tag_files, server, storage, panel, microgrid, mqtt, opcua, redundancy"
                 ),
             )),
         }
@@ -332,6 +347,9 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
         storage,
         panels,
         microgrid,
+        mqtt,
+        opcua,
+        redundancy,
     })
 }
 

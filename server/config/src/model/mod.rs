@@ -8,7 +8,9 @@
 //! defaults their parts share; each part has its own file, all re-exported
 //! here: the server, storage, sessions and roles `server.rs`, devices
 //! `devices.rs`, tags `tags.rs`, a tag's alarms and history `alarms.rs`,
-//! panels `panels.rs`, the microgrid `microgrid.rs`.
+//! panels `panels.rs`, the microgrid `microgrid.rs`, the MQTT Sparkplug B
+//! northbound `mqtt.rs`, the OPC UA server `opcua.rs`, the redundant pair
+//! `redundancy.rs`.
 
 use serde::Deserialize;
 use serde_spanned::Spanned;
@@ -16,16 +18,22 @@ use serde_spanned::Spanned;
 mod alarms;
 mod devices;
 mod microgrid;
+mod mqtt;
+mod opcua;
 mod panels;
 mod proxy;
+mod redundancy;
 mod server;
 mod tags;
 
 pub use alarms::*;
 pub use devices::*;
 pub use microgrid::*;
+pub use mqtt::*;
+pub use opcua::*;
 pub use panels::*;
 pub use proxy::*;
+pub use redundancy::*;
 pub use server::*;
 pub use tags::*;
 
@@ -42,6 +50,9 @@ pub struct MainFile {
     #[serde(default, rename = "panel")]
     pub panels: Vec<PanelConfig>,
     pub microgrid: Option<MicrogridConfig>,
+    pub mqtt: Option<MqttConfig>,
+    pub opcua: Option<OpcUaConfig>,
+    pub redundancy: Option<RedundancyConfig>,
 }
 
 /// A tag file: devices and the tags read from them.
