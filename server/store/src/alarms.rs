@@ -173,6 +173,40 @@ fn decode_value(text: &str) -> Option<Value> {
     })
 }
 
+/// One transition's INSERT into `alarm_history`, bound: one statement for
+/// the direct path (`audit_id` NULL) and the audit trail's (its record id),
+/// so the two cannot drift apart. Yields the new row's id, or no row when a
+/// record with the same audit id is already stored (a spool replay).
+macro_rules! insert_alarm_transition {
+    ($t:expr, $audit_id:expr) => {{
+        let t = $t;
+        sqlx::query_scalar::<_, i64>(
+            "INSERT INTO alarm_history (ts, alarm_key, tag, kind, from_state, to_state, \
+               cause, activation, value, limit_value, user_name, message, priority, \
+               selection, audit_id) \
+             VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15) \
+             ON CONFLICT (audit_id) DO NOTHING \
+             RETURNING id",
+        )
+        .bind(t.ts.as_millis())
+        .bind(&t.alarm_key)
+        .bind(&t.tag)
+        .bind(&t.kind)
+        .bind(&t.from_state)
+        .bind(&t.to_state)
+        .bind(t.cause.as_deref())
+        .bind(t.activation)
+        .bind(t.value.filter(|v| v.is_finite()))
+        .bind(t.limit.filter(|v| v.is_finite()))
+        .bind(t.user.as_deref())
+        .bind(&t.message)
+        .bind(t.priority)
+        .bind(&t.selection)
+        .bind($audit_id)
+    }};
+}
+pub(crate) use insert_alarm_transition;
+
 impl Store {
     /// Inserts or replaces the persisted state of alarms, in one transaction.
     /// A record older (by `last_change`) than the stored one is ignored, so two
@@ -356,30 +390,10 @@ impl Store {
             let mut tx = p.begin().await.map_err(db("recording alarm transitions"))?;
             let mut ids = Vec::with_capacity(transitions.len());
             for t in transitions {
-                let id: i64 = sqlx::query_scalar(
-                    "INSERT INTO alarm_history (ts, alarm_key, tag, kind, from_state, to_state, \
-                       cause, activation, value, limit_value, user_name, message, priority, \
-                       selection) \
-                     VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14) \
-                     RETURNING id",
-                )
-                .bind(t.ts.as_millis())
-                .bind(&t.alarm_key)
-                .bind(&t.tag)
-                .bind(&t.kind)
-                .bind(&t.from_state)
-                .bind(&t.to_state)
-                .bind(t.cause.as_deref())
-                .bind(t.activation)
-                .bind(t.value.filter(|v| v.is_finite()))
-                .bind(t.limit.filter(|v| v.is_finite()))
-                .bind(t.user.as_deref())
-                .bind(&t.message)
-                .bind(t.priority)
-                .bind(&t.selection)
-                .fetch_one(&mut *tx)
-                .await
-                .map_err(db("recording alarm transitions"))?;
+                let id: i64 = insert_alarm_transition!(t, None::<i64>)
+                    .fetch_one(&mut *tx)
+                    .await
+                    .map_err(db("recording alarm transitions"))?;
                 ids.push(id);
             }
             tx.commit()

@@ -117,32 +117,10 @@ impl Store {
                         .map_err(db("recording events"))?;
                     }
                     AuditBody::Transition(t) => {
-                        sqlx::query(
-                            "INSERT INTO alarm_history (ts, alarm_key, tag, kind, from_state, \
-                               to_state, cause, activation, value, limit_value, user_name, \
-                               message, priority, selection, audit_id) \
-                             VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, \
-                               $14, $15) \
-                             ON CONFLICT (audit_id) DO NOTHING",
-                        )
-                        .bind(t.ts.as_millis())
-                        .bind(&t.alarm_key)
-                        .bind(&t.tag)
-                        .bind(&t.kind)
-                        .bind(&t.from_state)
-                        .bind(&t.to_state)
-                        .bind(t.cause.as_deref())
-                        .bind(t.activation)
-                        .bind(t.value.filter(|v| v.is_finite()))
-                        .bind(t.limit.filter(|v| v.is_finite()))
-                        .bind(t.user.as_deref())
-                        .bind(&t.message)
-                        .bind(t.priority)
-                        .bind(&t.selection)
-                        .bind(r.seq)
-                        .execute(&mut *tx)
-                        .await
-                        .map_err(db("recording alarm transitions"))?;
+                        crate::alarms::insert_alarm_transition!(t, r.seq)
+                            .fetch_optional(&mut *tx)
+                            .await
+                            .map_err(db("recording alarm transitions"))?;
                     }
                 }
             }
