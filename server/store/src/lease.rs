@@ -209,3 +209,41 @@ impl Lease {
         Ok(())
     }
 }
+
+impl Lease {
+    /// Reports this server alive (with its URL and whether it is active)
+    /// and reads when each server of the site last did: `(server, url,
+    /// active, milliseconds ago)`.
+    pub async fn beat(
+        &mut self,
+        url: &str,
+        active: bool,
+    ) -> Result<Vec<(String, String, bool, u64)>> {
+        let (site, server) = (self.site.clone(), self.server.clone());
+        let c = self.conn().await?;
+        sqlx::query(&format!(
+            "INSERT INTO pair_servers (site, server, url, active, seen_ms) \
+             VALUES ($1, $2, $3, $4, {NOW_MS}) ON CONFLICT (site, server) DO UPDATE SET \
+             url = excluded.url, active = excluded.active, seen_ms = excluded.seen_ms"
+        ))
+        .bind(&site)
+        .bind(&server)
+        .bind(url)
+        .bind(active)
+        .execute(&mut *c)
+        .await
+        .map_err(db("reporting this server alive"))?;
+        let rows: Vec<(String, String, bool, i64)> = sqlx::query_as(&format!(
+            "SELECT server, url, active, GREATEST({NOW_MS} - seen_ms, 0) \
+             FROM pair_servers WHERE site = $1 ORDER BY server"
+        ))
+        .bind(&site)
+        .fetch_all(&mut *c)
+        .await
+        .map_err(db("reading the pair's servers"))?;
+        Ok(rows
+            .into_iter()
+            .map(|(s, u, a, ago)| (s, u, a, u64::try_from(ago).unwrap_or(0)))
+            .collect())
+    }
+}

@@ -101,6 +101,11 @@ impl Leadership {
         }))
     }
 
+    /// Whether this server is one of a pair (not [`Leadership::sole`]).
+    pub fn is_pair(&self) -> bool {
+        !matches!(*self.0.grant.lock(), Grant::Sole)
+    }
+
     /// This server's name in the pair (empty when alone).
     pub fn server(&self) -> &str {
         &self.0.server

@@ -11,3 +11,14 @@ CREATE TABLE IF NOT EXISTS leadership (
     expires_ms BIGINT NOT NULL,
     taken_ms   BIGINT NOT NULL
 );
+
+-- Each server of a pair reports itself here with every lease claim, so the
+-- HMI can show whether the pair is whole (seen_ms: database clock).
+CREATE TABLE IF NOT EXISTS pair_servers (
+    site    TEXT NOT NULL,
+    server  TEXT NOT NULL,
+    url     TEXT NOT NULL,
+    active  BOOLEAN NOT NULL,
+    seen_ms BIGINT NOT NULL,
+    PRIMARY KEY (site, server)
+);
