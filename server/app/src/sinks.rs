@@ -469,6 +469,7 @@ pub fn recorder(plant: &Plant, db: &TagDb) -> Recorder {
 /// handle: the stack stops it after the producers of tag changes and before
 /// the historian's writer, so an orderly shutdown offers every sample before
 /// the writer's final flush and none after it.
+#[allow(clippy::too_many_arguments)] // each is a separate part of the stack
 pub async fn historian_feed(
     plant: Arc<Plant>,
     db: Arc<TagDb>,
