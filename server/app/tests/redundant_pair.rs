@@ -634,7 +634,15 @@ fn the_pair_keeps_isolating_faults_through_kills_freezes_and_a_cut_database() {
         for (panel, zone) in faults {
             sim.cmd(&format!("fault {panel} {zone} permanent"));
         }
-        std::thread::sleep(Duration::from_millis(rng.below(7000)));
+        // Even rounds: a kill in the middle of the sequences; odd rounds:
+        // mostly after a panel has isolated its zone, so the new active
+        // server takes over a zone known faulty.
+        let delay = if round % 2 == 0 {
+            rng.below(6000)
+        } else {
+            6000 + rng.below(8000)
+        };
+        std::thread::sleep(Duration::from_millis(delay));
         // What the active server knows as faulty just before the kill.
         for (panel, zone) in faults {
             if let Ok((200, p)) = op.try_request("GET", &format!("/api/panels/{panel}"), None) {
