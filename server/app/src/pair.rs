@@ -510,3 +510,76 @@ pub fn render_metrics(p: &PairHandle, out: &mut gridscada_web::metrics::Prom) {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cfg() -> RedundancyConfig {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(
+            dir.path().join("gridscada.toml"),
+            "tag_files = [\"tags.toml\"]\n[storage]\nurl = \"postgres://db/x\"\n\
+             [redundancy]\nname = \"a\"\n\
+             [[redundancy.server]]\nname = \"a\"\nurl = \"http://10.0.0.1:8080\"\n\
+             [[redundancy.server]]\nname = \"b\"\nurl = \"http://10.0.0.2:8080\"\n",
+        )
+        .unwrap();
+        std::fs::write(
+            dir.path().join("tags.toml"),
+            "[[device]]\nname = \"D1\"\nprotocol = \"tcp\"\naddress = \"127.0.0.1:9\"\n",
+        )
+        .unwrap();
+        gridscada_config::load_path(dir.path())
+            .unwrap()
+            .redundancy
+            .unwrap()
+    }
+
+    #[test]
+    fn the_pair_is_healthy_only_with_an_active_server_and_every_server_seen() {
+        let c = cfg();
+        let seen = |b_ms| {
+            vec![
+                ("a".to_string(), "http://10.0.0.1:8080".to_string(), true, 0),
+                (
+                    "b".to_string(),
+                    "http://10.0.0.2:8080".to_string(),
+                    false,
+                    b_ms,
+                ),
+            ]
+        };
+        let v = pair_view(&c, "main", "a", Some(4), Some("a"), &seen(400), 1);
+        assert!(v.healthy);
+        assert_eq!(v.role, "active");
+        assert_eq!(v.active_url.as_deref(), Some("http://10.0.0.1:8080"));
+        assert!(v.servers[0].active && !v.servers[1].active);
+        // b has not reported for longer than the lease.
+        let v = pair_view(&c, "main", "a", Some(4), Some("a"), &seen(3_500), 1);
+        assert!(!v.healthy);
+        // Nobody holds the lease.
+        let v = pair_view(&c, "main", "b", None, None, &seen(0), 2);
+        assert!(!v.healthy);
+        assert_eq!(v.role, "standby");
+        assert_eq!(described(&c, "a"), "a (http://10.0.0.1:8080)");
+    }
+
+    #[tokio::test]
+    async fn a_standby_passes_no_records_on() {
+        let l = Leadership::standby("a");
+        let (tx, rx) = mpsc::channel(8);
+        let mut out = gate(rx, &l);
+        tx.send(1).await.unwrap();
+        // The gate decides as it takes each record.
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+        l.grant(1, Instant::now() + std::time::Duration::from_secs(60));
+        tx.send(2).await.unwrap();
+        assert_eq!(out.recv().await, Some(2), "only what came while active");
+        // A server alone passes everything, without a task between.
+        let (tx, rx) = mpsc::channel(8);
+        let mut out = gate(rx, &Leadership::sole());
+        tx.send(3).await.unwrap();
+        assert_eq!(out.recv().await, Some(3));
+    }
+}
