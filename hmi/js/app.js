@@ -5,6 +5,7 @@ import { api, get, del, post, setUnauthorizedHandler, enc, qs } from './api.js';
 import { h, replace } from './dom.js';
 import { fmtTime } from './format.js';
 import { live } from './live.js';
+import { watchPair } from './pair.js';
 import { visibleEveryMs, watchExpiry } from './session.js';
 import { toast, attempt, formDialog } from './ui.js';
 import { AlarmFooter } from './components/alarmfooter.js';
@@ -54,6 +55,7 @@ const state = {
   current: null,
   footer: null,
   offComm: null,
+  offPair: null,
   modeTimer: null,
   disconnectedAt: null,
 };
@@ -118,6 +120,8 @@ function renderFrame() {
   clearInterval(state.modeTimer);
   state.modeTimer = null;
   $('mode-light').hidden = true;
+  if (state.offPair) { state.offPair(); state.offPair = null; }
+  $('pair-light').hidden = true;
   const footer = $('alarm-footer');
   if (s.authenticated) {
     live.start();
@@ -125,6 +129,7 @@ function renderFrame() {
     state.footer = new AlarmFooter(footer, s);
     startCommLight();
     watchPanelModes();
+    state.offPair = watchPair($('pair-light'));
   } else {
     live.stop();
     beeper.setUser(null); // a log out ends the horn's mute: it belonged to the session

@@ -389,6 +389,21 @@ impl AlarmEngine {
     }
 
     /// Every alarm's persistent state (for a full save, e.g. at shutdown).
+    /// Takes over the states another server of a redundant pair persisted
+    /// (acknowledgements, shelving, what stands), as at a start: the server
+    /// becoming active continues from the record the active one left, and
+    /// the next evaluation moves on from there.
+    pub fn adopt(&self, records: &[AlarmStateRecord]) {
+        let report = self.set.lock().restore(records);
+        tracing::info!(
+            restored = report.restored,
+            skipped = report.skipped.len(),
+            "alarm states taken over"
+        );
+        self.version.send_modify(|v| *v += 1);
+        self.wake.notify_one();
+    }
+
     pub fn persisted_states(&self) -> Vec<AlarmStateRecord> {
         self.set.lock().records()
     }

@@ -10,6 +10,7 @@ mod demo_plant;
 mod dispatch_cmd;
 mod https;
 mod logging;
+mod pair;
 mod replay;
 mod runtime;
 mod settings;

@@ -245,6 +245,11 @@ pub struct Stack {
     pub dispatch: Option<watch::Receiver<DispatchStatus>>,
     pub simulator: Option<gridscada_sim::Simulator>,
     pub events: mpsc::Sender<NewEvent>,
+    /// This server's part in a redundant pair (`[redundancy]`), if any.
+    pub pair: Option<crate::pair::PairHandle>,
+    /// The lease keeper's stop signal and task: stopped first, so the
+    /// standby takes over at once.
+    pair_keeper: Option<(watch::Sender<bool>, tokio::task::JoinHandle<()>)>,
     field: gridscada_modbus::FieldIo,
     historian: gridscada_store::Historian,
     /// Events and alarm transitions on their way to the store (or spool).
@@ -282,6 +287,20 @@ impl Stack {
     ) -> anyhow::Result<Stack> {
         let clock = opts.clock;
         let mut tasks = JoinSet::new();
+
+        // One of a redundant pair: the lease on the shared PostgreSQL
+        // database decides whether this server commands (`pair.rs`).
+        let site = plant.server.site().to_string();
+        let (leadership, lease) = match &plant.redundancy {
+            Some(r) => {
+                let name = r.name.get_ref();
+                let lease = store.lease(&site, name).with_context(|| {
+                    format!("[redundancy]: server '{name}' cannot keep a lease in this store")
+                })?;
+                (gridscada_tagdb::Leadership::standby(name), Some(lease))
+            }
+            None => (gridscada_tagdb::Leadership::sole(), None),
+        };
 
         // Events and alarm transitions go through the audit trail into the
         // store, or into its spool while the store is away (replaying a
@@ -325,6 +344,10 @@ impl Stack {
         let (transitions_tx, transitions_rx) = mpsc::channel(4096);
         let (alarm_events_tx, alarm_events_rx) = mpsc::channel(1024);
         let (states_tx, states_rx) = mpsc::channel(4096);
+        // On a standby the engine runs warm; the active server records.
+        let transitions_rx = crate::pair::gate(transitions_rx, &leadership);
+        let alarm_events_rx = crate::pair::gate(alarm_events_rx, &leadership);
+        let states_rx = crate::pair::gate(states_rx, &leadership);
         tasks.spawn(sinks::alarm_transitions(audit.handle(), transitions_rx));
         tasks.spawn(sinks::alarm_events(alarm_events_rx, events_tx.clone()));
         tasks.spawn(sinks::alarm_states(store.clone(), states_rx));
@@ -382,11 +405,51 @@ impl Stack {
             alarms.clone(),
             clock.clone(),
             feed_stop_rx,
+            leadership.clone(),
         ));
         let mut loops = JoinSet::new();
 
-        let field = gridscada_modbus::FieldIo::start(&plant, db.clone(), clock.clone())
-            .context("starting field I/O")?;
+        let field = gridscada_modbus::FieldIo::start_fenced(
+            &plant,
+            db.clone(),
+            clock.clone(),
+            leadership.clone(),
+        )
+        .context("starting field I/O")?;
+
+        // The lease keeper and the announcements of role changes.
+        let (pair, pair_keeper) = match (lease, &plant.redundancy) {
+            (Some(lease), Some(cfg)) => {
+                let (view_tx, view_rx) = watch::channel(Default::default());
+                let role_changes = Arc::new(std::sync::atomic::AtomicU64::new(0));
+                let (stop_tx, stop_rx) = watch::channel(false);
+                let keeper = tokio::spawn(crate::pair::keep_lease(
+                    lease,
+                    cfg.clone(),
+                    site.clone(),
+                    leadership.clone(),
+                    view_tx,
+                    role_changes.clone(),
+                    stop_rx,
+                ));
+                tasks.spawn(crate::pair::announce(
+                    leadership.clone(),
+                    view_rx.clone(),
+                    store.clone(),
+                    alarms.clone(),
+                    events_tx.clone(),
+                    clock.clone(),
+                    role_changes.clone(),
+                ));
+                let handle = crate::pair::PairHandle {
+                    leadership: leadership.clone(),
+                    view: view_rx,
+                    role_changes,
+                };
+                (Some(handle), Some((stop_tx, keeper)))
+            }
+            _ => (None, None),
+        };
         let writer = field.writer();
 
         // One fault-isolation sequence per panel.
@@ -409,6 +472,30 @@ impl Stack {
             let (cmd_tx, cmd_rx) = mpsc::channel(16);
             let (status_tx, status_rx) = watch::channel(PanelStatus::initial(panel));
             let id = panel.id.get_ref().clone();
+            if pair.is_some() {
+                // Runs only while this server is active, restored from the
+                // store at each activation.
+                loops.spawn(crate::pair::panel_host(
+                    crate::pair::PanelHost {
+                        panel: panel.clone(),
+                        db: db.clone(),
+                        writer: writer.clone(),
+                        clock: clock.clone(),
+                        store: store.clone(),
+                        site: site.clone(),
+                        leadership: leadership.clone(),
+                        notices: panel_notices_tx.clone(),
+                    },
+                    cmd_rx,
+                    status_tx,
+                ));
+                panels.push(PanelHandle {
+                    id,
+                    status: status_rx,
+                    commands: cmd_tx,
+                });
+                continue;
+            }
             let driver = fault_isolation::run_panel(
                 panel.clone(),
                 db.clone(),
@@ -424,6 +511,7 @@ impl Stack {
                 id.clone(),
                 status_rx.clone(),
                 clock.clone(),
+                None,
             ));
             let label = id.clone();
             loops.spawn(async move {
@@ -443,15 +531,28 @@ impl Stack {
             Some(mg) => {
                 let (status_tx, status_rx) = watch::channel(DispatchStatus::default());
                 let (notices_tx, notices_rx) = mpsc::channel(256);
-                loops.spawn(dispatch::run_dispatch_with(
-                    mg.clone(),
-                    db.clone(),
-                    writer.clone(),
-                    clock.clone(),
-                    status_tx,
-                    notices_tx,
-                    opts.dispatch_policy,
-                ));
+                if pair.is_some() {
+                    loops.spawn(crate::pair::dispatch_host(
+                        mg.clone(),
+                        db.clone(),
+                        writer.clone(),
+                        clock.clone(),
+                        status_tx,
+                        notices_tx,
+                        opts.dispatch_policy,
+                        leadership.clone(),
+                    ));
+                } else {
+                    loops.spawn(dispatch::run_dispatch_with(
+                        mg.clone(),
+                        db.clone(),
+                        writer.clone(),
+                        clock.clone(),
+                        status_tx,
+                        notices_tx,
+                        opts.dispatch_policy,
+                    ));
+                }
                 tasks.spawn(sinks::dispatch_notices(
                     notices_rx,
                     events_tx.clone(),
@@ -479,6 +580,8 @@ impl Stack {
             dispatch: dispatch_rx,
             simulator,
             events: events_tx,
+            pair,
+            pair_keeper,
             field,
             historian,
             audit,
@@ -505,6 +608,12 @@ impl Stack {
     /// writer (which writes everything offered). Returns the historian's
     /// final figures, the ones it logs.
     pub async fn shutdown(mut self) -> gridscada_store::HistorianMetrics {
+        // A pair's active server stops commanding and gives the lease up
+        // first, so the standby takes over without waiting for it to expire.
+        if let Some((stop, keeper)) = self.pair_keeper.take() {
+            stop.send_replace(true);
+            let _ = keeper.await;
+        }
         self.field.shutdown().await;
         if let Some(sim) = self.simulator.take() {
             sim.shutdown().await;
@@ -700,6 +809,10 @@ pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
             panels: stack.panels.clone(),
             alarms: Some(stack.alarms.clone()),
             dispatch: stack.dispatch.clone(),
+            pair: stack.pair.as_ref().map(|p| gridscada_web::api::pair::Pair {
+                leadership: p.leadership.clone(),
+                view: p.view.clone(),
+            }),
         },
         sim: stack.simulator.as_ref().map(|s| {
             Arc::new(SimAdapter(s.handle())) as Arc<dyn gridscada_web::api::sim::SimControl>
@@ -709,6 +822,7 @@ pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
             poll: stack.field.stats_handle(),
             historian: stack.historian.handle(),
             audit: stack.audit.handle(),
+            pair: stack.pair.clone(),
         })),
         screens: Default::default(),
         tag_index: Arc::new(gridscada_web::access::TagIndex::new(&stack.plant)),

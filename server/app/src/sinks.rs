@@ -239,6 +239,7 @@ pub async fn panel_retained(
     panel: String,
     mut status: watch::Receiver<PanelStatus>,
     clock: Arc<dyn Clock>,
+    fence: Option<gridscada_store::Fence>,
 ) {
     // The channel's first value is a placeholder from before the sequence
     // started (it would overwrite what was saved): only changes are saved.
@@ -247,7 +248,23 @@ pub async fn panel_retained(
         let r = status.borrow_and_update().retained.clone();
         if saved.as_ref() != Some(&r) {
             let json = serde_json::to_value(&r).unwrap_or_default();
-            match store.save_panel_state(&panel, &json, clock.now()).await {
+            // In a pair, only under the lease this server holds: a deposed
+            // server's late save is dropped by the database.
+            let result = match &fence {
+                None => store.save_panel_state(&panel, &json, clock.now()).await,
+                Some(f) => match store
+                    .save_panel_state_fenced(&panel, &json, clock.now(), f)
+                    .await
+                {
+                    Ok(true) => Ok(()),
+                    Ok(false) => {
+                        tracing::warn!(%panel, epoch = f.epoch, "panel state not saved: this server no longer holds the lease");
+                        return;
+                    }
+                    Err(e) => Err(e),
+                },
+            };
+            match result {
                 Ok(()) => saved = Some(r),
                 Err(e) => tracing::error!(%panel, error = %e, "could not save the panel's state"),
             }
@@ -452,6 +469,7 @@ pub fn recorder(plant: &Plant, db: &TagDb) -> Recorder {
 /// handle: the stack stops it after the producers of tag changes and before
 /// the historian's writer, so an orderly shutdown offers every sample before
 /// the writer's final flush and none after it.
+#[allow(clippy::too_many_arguments)] // each is a separate part of the stack
 pub async fn historian_feed(
     plant: Arc<Plant>,
     db: Arc<TagDb>,
@@ -460,7 +478,11 @@ pub async fn historian_feed(
     alarms: Arc<AlarmEngine>,
     clock: Arc<dyn Clock>,
     mut stop: watch::Receiver<bool>,
+    leadership: gridscada_tagdb::Leadership,
 ) {
+    // In a pair the active server writes the history; a standby's recorder
+    // runs warm (its deadbands follow) but hands nothing on.
+    let recording = || leadership.permit().is_ok();
     let mut recorder = recorder(&plant, &db);
     let mut sub = db.subscribe_all();
     // Log the starting point of every tag.
@@ -503,11 +525,16 @@ pub async fn historian_feed(
                     .iter()
                     .filter_map(|(id, s)| recorder.offer(*id, s))
                     .collect();
-                historian.push_all(samples);
+                if recording() {
+                    historian.push_all(samples);
+                }
             }
             _ = tick.tick() => {
                 let now = clock.now();
-                historian.push_all(recorder.tick(now));
+                let due = recorder.tick(now);
+                if recording() {
+                    historian.push_all(due);
+                }
                 let day = now.as_millis() / 86_400_000;
                 if last_retention != Some(day) {
                     last_retention = Some(day);

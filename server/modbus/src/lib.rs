@@ -32,7 +32,7 @@ use std::time::Duration;
 
 use gridscada_config::{DeviceConfig, Plant, Protocol};
 use gridscada_tagdb::{
-    Clock, TagDb, TagMeta, TagWriter, Value, ValueKind, WriteError, WriteFuture,
+    Clock, Leadership, TagDb, TagMeta, TagWriter, Value, ValueKind, WriteError, WriteFuture,
 };
 use parking_lot::Mutex;
 use tokio::sync::{mpsc, oneshot, watch};
@@ -237,6 +237,8 @@ fn check_limits(
 struct Shared {
     links: Vec<mpsc::Sender<WriteCmd>>,
     targets: HashMap<Arc<str>, WriteTarget>,
+    /// The fencing gate (asked again by the link as the frame goes out).
+    leadership: Leadership,
 }
 
 struct StatsSource {
@@ -284,6 +286,19 @@ impl FieldIo {
     /// serial port. Must be called inside a Tokio runtime. The plant's tags
     /// and [`device_status_tags`] must already be in `db`.
     pub fn start(plant: &Plant, db: Arc<TagDb>, clock: Arc<dyn Clock>) -> Result<FieldIo, Error> {
+        Self::start_fenced(plant, db, clock, Leadership::sole())
+    }
+
+    /// [`FieldIo::start`] for a server of a redundant pair: every write
+    /// asks `leadership` for its epoch the moment its frame goes out, and
+    /// is refused ([`WriteError::NotActive`]) without it. Polling goes on
+    /// either way, so a standby's tag database stays warm.
+    pub fn start_fenced(
+        plant: &Plant,
+        db: Arc<TagDb>,
+        clock: Arc<dyn Clock>,
+        leadership: Leadership,
+    ) -> Result<FieldIo, Error> {
         let (shutdown, shutdown_rx) = watch::channel(false);
         // Group devices by transport, keeping configuration order.
         let mut keys: Vec<String> = Vec::new();
@@ -508,6 +523,7 @@ impl FieldIo {
                 next_connect: now,
                 silent_timeouts: 0,
                 last_link_error: last_error,
+                leadership: leadership.clone(),
             });
         }
         let tasks = links
@@ -518,6 +534,7 @@ impl FieldIo {
             shared: Arc::new(Shared {
                 links: senders,
                 targets,
+                leadership,
             }),
             counters: StatsHandle {
                 stats: Arc::new(stats),
@@ -630,6 +647,12 @@ impl TagWriter for FieldWriter {
             if !target.writable {
                 return Err(WriteError::ReadOnly(name.to_string()));
             }
+            // Refused early on a standby, with the active server's name; the
+            // link asks again at the last moment.
+            self.shared
+                .leadership
+                .permit()
+                .map_err(WriteError::NotActive)?;
             check_limits(name, &value, target.limits)?;
             let encoded =
                 decode::encode(&target.codec, &value).map_err(|reason| WriteError::BadValue {

@@ -26,7 +26,9 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-use gridscada_tagdb::{Clock, Quality, Sample, TagDb, TagId, Timestamp, Value, WriteError};
+use gridscada_tagdb::{
+    Clock, Leadership, Quality, Sample, TagDb, TagId, Timestamp, Value, WriteError,
+};
 use parking_lot::Mutex;
 use tokio::sync::{mpsc, oneshot, watch};
 use tokio_modbus::{Request, Response};
@@ -163,6 +165,8 @@ pub(crate) struct Link {
     /// Timeouts in a row with no answer from anybody on the link.
     pub silent_timeouts: u32,
     pub last_link_error: Arc<Mutex<String>>,
+    /// The fencing gate of a redundant pair, asked as a write goes out.
+    pub leadership: Leadership,
 }
 
 /// What the link does next.
@@ -778,6 +782,19 @@ impl Link {
                 Request::WriteSingleRegister(address, next)
             }
         };
+        // The fence: the epoch is taken as the frame goes out, so a server
+        // whose lease ran out (by its own monotonic clock) sends nothing.
+        // Each write is logged with server and epoch, the record that the
+        // pair's tests check.
+        let epoch = self.leadership.permit().map_err(WriteError::NotActive)?;
+        tracing::info!(
+            target: "gridscada::field_write",
+            server = self.leadership.server(),
+            epoch,
+            tag = %name,
+            value = %cmd.value,
+            "field write"
+        );
         match self.request(d, &req).await {
             Ok(Ok(_)) => {}
             Ok(Err(code)) => return Err(exception(code)),

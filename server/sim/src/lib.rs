@@ -270,6 +270,40 @@ async fn step_loop(shared: Arc<Shared>, tick: Duration, mut shutdown: watch::Rec
 
 /// `gridscada sim`: serves the plant's devices on their configured addresses
 /// with the system clock until Ctrl-C.
+/// One line of the standalone simulator's fault-injection input.
+fn control_line(handle: &SimHandle, line: &str) -> Result<(), String> {
+    let words: Vec<&str> = line.split_whitespace().collect();
+    let zone = |w: &str| {
+        w.parse::<u8>()
+            .map_err(|_| format!("'{w}' is not a zone number"))
+    };
+    match words.as_slice() {
+        ["fault", panel, z, kind] => {
+            let kind = match *kind {
+                "permanent" => FaultKind::Permanent,
+                "transient" => FaultKind::Transient,
+                other => return Err(format!("unknown fault kind '{other}'")),
+            };
+            handle
+                .inject_zone_fault(panel, zone(z)?, kind)
+                .map_err(|e| e.to_string())
+        }
+        ["repair", panel, z] => handle
+            .repair_zone(panel, zone(z)?)
+            .map_err(|e| e.to_string()),
+        ["offline", device] => handle
+            .set_device_offline(device, true)
+            .map_err(|e| e.to_string()),
+        ["online", device] => handle
+            .set_device_offline(device, false)
+            .map_err(|e| e.to_string()),
+        [] => Ok(()),
+        _ => Err(format!(
+            "unknown command '{line}'; expected fault PANEL ZONE permanent|transient, repair PANEL ZONE, offline DEVICE or online DEVICE"
+        )),
+    }
+}
+
 pub async fn run_standalone(plant: &Plant) -> Result<(), Error> {
     let sim = start(plant, Arc::new(SystemClock), BindMode::Configured).await?;
     let snapshot = sim.handle().snapshot();
@@ -284,6 +318,21 @@ pub async fn run_standalone(plant: &Plant) -> Result<(), Error> {
             .collect();
         tracing::info!(address = %actual, "simulator: serving {}", units.join(", "));
     }
+    // Fault injection from standard input, one command a line (a test or
+    // an engineer at the terminal drives the plant like the demo's
+    // simulator API): `fault PANEL ZONE permanent|transient`, `repair
+    // PANEL ZONE`, `offline DEVICE`, `online DEVICE`. Each answers `ok` or
+    // `error: ...` on standard output.
+    let handle = sim.handle();
+    std::thread::spawn(move || {
+        use std::io::BufRead;
+        for line in std::io::stdin().lock().lines().map_while(Result::ok) {
+            match control_line(&handle, &line) {
+                Ok(()) => println!("ok"),
+                Err(e) => println!("error: {e}"),
+            }
+        }
+    });
     tokio::signal::ctrl_c().await?;
     tracing::info!("simulator: stopping");
     sim.shutdown().await;

@@ -12,10 +12,12 @@
 
 mod clock;
 mod db;
+mod leadership;
 mod value;
 mod write;
 
 pub use clock::{CivilTime, Clock, ScaledClock, SleepFuture, SystemClock, Timestamp};
 pub use db::{ChangeBatch, Subscription, TagDb, TagDbError, TagId, TagMeta, Update};
+pub use leadership::{Leadership, NotActive, Role};
 pub use value::{Quality, QualityCode, Sample, Value, ValueKind};
 pub use write::{TagWriter, WriteError, WriteFuture};

@@ -52,4 +52,7 @@ pub enum WriteError {
     Timeout(String),
     #[error("field I/O is shutting down")]
     Closed,
+    /// This server of a redundant pair does not hold the lease.
+    #[error("{0}")]
+    NotActive(crate::NotActive),
 }

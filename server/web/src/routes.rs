@@ -216,6 +216,14 @@ pub fn table() -> Vec<Route> {
             || post(api::tags::write),
             doc::<api::tags::__path_write>,
         ),
+        // The redundant pair (404 on a server alone).
+        r(
+            Method::GET,
+            "/api/pair",
+            Perm::LoggedIn,
+            || get(api::pair::view),
+            doc::<api::pair::__path_view>,
+        ),
         // Devices.
         r(
             Method::GET,

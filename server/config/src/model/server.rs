@@ -46,11 +46,27 @@ pub struct ServerConfig {
     /// The sub-path everything is served under (`/scada`); empty: the root.
     #[serde(default)]
     pub base_path: Option<Spanned<String>>,
+    /// The site this server runs (letters, digits, `-`, `_`): servers of
+    /// one site share a lease and command the same plant; servers of other
+    /// sites on the same database only read its history. Default `main`.
+    #[serde(default)]
+    pub site: Option<Spanned<String>>,
 }
+
+/// The site of a server that names none.
+pub const DEFAULT_SITE: &str = "main";
 
 /// The reverse-proxy settings in their normal forms (values that failed
 /// validation are left out; `serve` does not start with them).
 impl ServerConfig {
+    /// The site id (`[server] site`, default [`DEFAULT_SITE`]).
+    pub fn site(&self) -> &str {
+        self.site
+            .as_ref()
+            .map(|s| s.get_ref().as_str())
+            .unwrap_or(DEFAULT_SITE)
+    }
+
     /// `""` or `/seg…` without a trailing slash.
     pub fn base_path(&self) -> String {
         self.base_path
@@ -173,6 +189,7 @@ impl Default for ServerConfig {
             public_origin: None,
             trusted_proxies: vec![],
             base_path: None,
+            site: None,
         }
     }
 }

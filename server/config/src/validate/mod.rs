@@ -6,7 +6,7 @@
 //! kind of item is checked in its own file: devices `devices.rs`, tags
 //! `tags.rs`, their alarms `alarms.rs`, register overlaps `overlaps.rs`,
 //! device clocks `clocks.rs`, panels `panels.rs`, the microgrid
-//! `microgrid.rs`.
+//! `microgrid.rs`, the redundant pair and the site `redundancy.rs`.
 
 use std::collections::HashMap;
 use std::net::SocketAddr;
@@ -24,6 +24,7 @@ mod devices;
 mod microgrid;
 mod overlaps;
 mod panels;
+mod redundancy;
 mod tags;
 
 use clocks::check_time_tags;
@@ -208,6 +209,10 @@ fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
         check_tls(cx, tls, &main.server.http);
     }
     check_proxy(cx, &main.server);
+    redundancy::check_site(cx, &main.server);
+    if let Some(r) = &main.redundancy {
+        redundancy::check_redundancy(cx, r, &main.storage);
+    }
     let sessions = &main.server.sessions;
     for (role, minutes) in sessions.idle_minutes.get_ref() {
         if !(minutes.is_finite() && (0.0..=10_080.0).contains(minutes)) {

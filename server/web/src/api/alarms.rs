@@ -157,6 +157,7 @@ pub async fn ack(
     let Json(b) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
     let e = engine(&s)?;
     // The engine records it through the audit trail: not unless durable.
+    crate::api::pair::active_ready(&s)?;
     crate::api::audit_ready(&s).await?;
     let user = who.audit_name();
     let filter = b.filter.unwrap_or_default().to_filter()?;
@@ -210,6 +211,7 @@ pub async fn shelve(
     let Json(b) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
     let e = engine(&s)?;
     // The engine records it through the audit trail: not unless durable.
+    crate::api::pair::active_ready(&s)?;
     crate::api::audit_ready(&s).await?;
     let until = e
         .shelve(AlarmId(id), &who.audit_name(), b.minutes, &b.reason)
@@ -231,6 +233,7 @@ pub async fn unshelve(
 ) -> ApiResult<StatusCode> {
     let e = engine(&s)?;
     // The engine records it through the audit trail: not unless durable.
+    crate::api::pair::active_ready(&s)?;
     crate::api::audit_ready(&s).await?;
     e.unshelve(AlarmId(id), &who.audit_name())
         .map_err(alarm_error)?;

@@ -6,6 +6,7 @@ pub mod dispatch;
 pub mod events;
 pub mod live;
 pub mod misc;
+pub mod pair;
 pub mod panels;
 pub mod screens;
 pub mod session;
@@ -28,6 +29,8 @@ pub struct Components {
     pub alarms: Option<std::sync::Arc<gridscada_alarms::AlarmEngine>>,
     /// The latest result of the microgrid outer loop, if the plant has one.
     pub dispatch: Option<tokio::sync::watch::Receiver<gridscada_control::dispatch::DispatchStatus>>,
+    /// This server's part in a redundant pair, if it is one of a pair.
+    pub pair: Option<pair::Pair>,
 }
 
 fn audit_event(

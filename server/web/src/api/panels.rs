@@ -97,6 +97,7 @@ pub async fn one(
 async fn send(s: &WebState, who: &Principal, id: &str, kind: PanelCommandKind) -> ApiResult<()> {
     let p = find(s, id)?;
     may_view(who, id)?;
+    crate::api::pair::active_ready(s)?;
     // The sequence records the command through the audit trail: it goes
     // out only if that record can be made durable.
     crate::api::audit_ready(s).await?;
@@ -121,7 +122,7 @@ async fn send(s: &WebState, who: &Principal, id: &str, kind: PanelCommandKind) -
 fn refusal(e: CommandError) -> ApiError {
     let status = match e {
         CommandError::UnknownBreaker { .. } => StatusCode::NOT_FOUND,
-        CommandError::CommLost => StatusCode::SERVICE_UNAVAILABLE,
+        CommandError::CommLost | CommandError::Standby(_) => StatusCode::SERVICE_UNAVAILABLE,
         _ => StatusCode::CONFLICT,
     };
     ApiError::new(status, "refused", e.to_string())

@@ -416,10 +416,12 @@ pub fn write_error(e: WriteError) -> ApiError {
         WriteError::Device { .. } | WriteError::Mismatch { .. } => StatusCode::BAD_GATEWAY,
         WriteError::Timeout(_) => StatusCode::GATEWAY_TIMEOUT,
         WriteError::Closed => StatusCode::SERVICE_UNAVAILABLE,
+        WriteError::NotActive(_) => StatusCode::SERVICE_UNAVAILABLE,
     };
     let code = match &e {
         WriteError::OutOfLimits { .. } => "out_of_limits",
         WriteError::BadValue { .. } => "bad_value",
+        WriteError::NotActive(_) => "standby",
         _ => "write_failed",
     };
     ApiError::new(status, code, e.to_string())

@@ -259,6 +259,10 @@ pub enum CommandError {
     UnknownBreaker { name: String, zones: u8 },
     #[error("the ELCB has no trip output; it can only be reset (closed) from the SCADA")]
     ElcbCannotOpen,
+    /// This server of a redundant pair is on standby: its sequences run
+    /// only on the active server (the text names it).
+    #[error("{0}")]
+    Standby(String),
 }
 
 /// What the machine asks for.

@@ -1,0 +1,87 @@
+//! `/api/pair`: this server's part in a redundant pair (active or standby,
+//! the epoch, which server is active and at which URL, when each server of
+//! the pair was last seen), for the HMI's header and its reconnection on a
+//! failover; and the gate that refuses plant commands on a standby.
+//!
+//! The view comes from the application's lease keeper through a watch, so
+//! this crate knows nothing of the lease itself.
+
+use axum::extract::State;
+use axum::Json;
+use gridscada_tagdb::Leadership;
+use serde::Serialize;
+use tokio::sync::watch;
+use utoipa::ToSchema;
+
+use crate::error::{ApiError, ApiResult};
+use crate::WebState;
+
+/// One server of the pair as this one last saw it.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, ToSchema)]
+pub struct PairMember {
+    pub name: String,
+    /// The URL operators reach its HMI by (configured).
+    pub url: String,
+    /// Whether it holds the lease now.
+    pub active: bool,
+    /// Milliseconds since it last reported to the database; absent if
+    /// never seen.
+    pub seen_ms_ago: Option<u64>,
+}
+
+/// The pair as this server sees it.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, ToSchema)]
+pub struct PairView {
+    /// This server's site.
+    pub site: String,
+    /// This server's name.
+    pub server: String,
+    /// `active` or `standby`.
+    pub role: String,
+    /// The fencing epoch of the lease this server holds.
+    pub epoch: Option<u64>,
+    /// The server holding the lease, if one does.
+    pub active: Option<String>,
+    /// Its URL, for the HMI to reconnect to.
+    pub active_url: Option<String>,
+    /// Every server of the pair, this one included.
+    pub servers: Vec<PairMember>,
+    /// One server active and every other one seen within the lease.
+    pub healthy: bool,
+    /// How many times this server's role changed since it started.
+    pub role_changes: u64,
+}
+
+/// What the application hands the web layer for a pair.
+#[derive(Clone)]
+pub struct Pair {
+    pub leadership: Leadership,
+    pub view: watch::Receiver<PairView>,
+}
+
+/// Refuses a plant command (503, naming the active server) unless this
+/// server may command now. A server without a pair always may.
+pub fn active_ready(state: &WebState) -> ApiResult<()> {
+    match &state.components.pair {
+        Some(p) => p.leadership.permit().map(|_| ()).map_err(|e| {
+            ApiError::new(
+                axum::http::StatusCode::SERVICE_UNAVAILABLE,
+                "standby",
+                e.to_string(),
+            )
+        }),
+        None => Ok(()),
+    }
+}
+
+#[utoipa::path(get, path = "/api/pair", tag = "server", summary = "The redundant pair as this server sees it",
+    responses((status = 200, description = "OK", body = PairView),
+        (status = 404, description = "This server is not one of a pair")))]
+pub async fn view(State(s): State<WebState>) -> ApiResult<Json<PairView>> {
+    match &s.components.pair {
+        Some(p) => Ok(Json(p.view.borrow().clone())),
+        None => Err(ApiError::not_found(
+            "this server is not one of a redundant pair",
+        )),
+    }
+}
