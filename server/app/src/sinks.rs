@@ -462,6 +462,9 @@ pub async fn historian_feed(
     mut stop: watch::Receiver<bool>,
 ) {
     let mut recorder = recorder(&plant, &db);
+    // Tags added at run time (a central Sparkplug host's remote tags) are
+    // logged with the default policy, from the first change that follows.
+    let mut known = db.len();
     let mut sub = db.subscribe_all();
     // Log the starting point of every tag.
     let start = db.snapshot_all();
@@ -497,6 +500,12 @@ pub async fn historian_feed(
             }
             update = sub.recv() => {
                 let Some(update) = update else { return };
+                if db.len() > known {
+                    for (id, meta) in db.all_meta().skip(known) {
+                        recorder.set_policy(id, meta.name.clone(), RecordPolicy::default());
+                    }
+                    known = db.len();
+                }
                 let samples: Vec<_> = update
                     .batch()
                     .changes

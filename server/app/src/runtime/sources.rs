@@ -138,6 +138,8 @@ pub(super) struct StackMetrics {
     pub(super) poll: gridscada_modbus::StatsHandle,
     pub(super) historian: gridscada_store::HistorianHandle,
     pub(super) audit: gridscada_store::AuditHandle,
+    /// The central Sparkplug host's figures, if one runs.
+    pub(super) sparkplug_host: Option<super::sparkplug_host::HostStatsSource>,
 }
 
 impl StackMetrics {
@@ -192,6 +194,9 @@ impl StackMetrics {
 impl gridscada_web::metrics::MetricsSource for StackMetrics {
     fn render(&self, out: &mut gridscada_web::metrics::Prom) {
         self.render_audit(out);
+        if let Some(host) = &self.sparkplug_host {
+            super::sparkplug_host::render(&host(), out);
+        }
         let poll = self.poll.stats();
         for d in &poll.devices {
             let l = [("device", d.device.as_str())];

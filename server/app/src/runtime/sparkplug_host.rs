@@ -1,0 +1,125 @@
+//! The central Sparkplug B host in the stack (`[mqtt.host]`): the room it
+//! reserves in the tag database, its start, and its figures in `/metrics`.
+//! The host itself is `gridscada_sparkplug::host`.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::anyhow;
+use gridscada_config::Plant;
+use gridscada_sparkplug::host::{Host, HostOptions, HostStats, SitesPolicy};
+use gridscada_tagdb::{Clock, TagDb, TagWriter};
+
+/// What `/metrics` reads from the host.
+pub(crate) type HostStatsSource = Arc<dyn Fn() -> HostStats + Send + Sync>;
+
+/// Slots the tag database reserves for remote tags (none without a host).
+pub(super) fn room(plant: &Plant) -> usize {
+    plant
+        .mqtt
+        .as_ref()
+        .and_then(|m| m.host.as_ref())
+        .map_or(0, |h| *h.max_tags.get_ref())
+}
+
+/// Starts the host if configured; its writer sends remote tags to their
+/// edge and every other tag to `field`.
+pub(super) fn start(
+    plant: &Plant,
+    db: Arc<TagDb>,
+    clock: Arc<dyn Clock>,
+    field: Arc<dyn TagWriter>,
+) -> anyhow::Result<Option<(Host, Arc<dyn TagWriter>)>> {
+    let Some((mqtt, host)) = plant
+        .mqtt
+        .as_ref()
+        .and_then(|m| Some((m, m.host.as_ref()?)))
+    else {
+        return Ok(None);
+    };
+    let opts = HostOptions {
+        broker: mqtt.broker.get_ref().clone(),
+        host_id: host.host_id.get_ref().clone(),
+        sites: SitesPolicy {
+            group: mqtt.group.get_ref().clone(),
+            nodes: host.nodes.iter().map(|n| n.get_ref().clone()).collect(),
+            device_in_name: host.device_in_name,
+            rebirth_interval: Duration::from_secs_f64(*host.rebirth_interval_s.get_ref()),
+        },
+        max_message_bytes: *host.max_message_bytes.get_ref(),
+        write_timeout: Duration::from_secs_f64(*host.write_timeout_s.get_ref()),
+        keep_alive: Duration::from_secs(10),
+    };
+    let started = Host::start(opts, db, clock)
+        .map_err(|e| anyhow!("starting the Sparkplug host: {e}"))?;
+    let writer = started.writer(Some(field));
+    Ok(Some((started, writer)))
+}
+
+/// The host's families in `/metrics`.
+pub(super) fn render(s: &HostStats, out: &mut gridscada_web::metrics::Prom) {
+    for (kind, n) in &s.messages {
+        out.counter(
+            "gridscada_sparkplug_host_messages_total",
+            "Sparkplug messages the central host received, by type.",
+            &[("type", kind)],
+            *n as f64,
+        );
+    }
+    out.counter(
+        "gridscada_sparkplug_host_bytes_total",
+        "Payload bytes the central host received.",
+        &[],
+        s.bytes as f64,
+    );
+    for (reason, n) in &s.problems {
+        out.counter(
+            "gridscada_sparkplug_host_refused_total",
+            "Messages or metrics the central host refused (logged, nothing changed), by reason.",
+            &[("reason", reason)],
+            *n as f64,
+        );
+    }
+    for (name, help, v) in [
+        (
+            "gridscada_sparkplug_host_reconnects_total",
+            "Times the central host connected to the broker again after losing it.",
+            s.reconnects,
+        ),
+        (
+            "gridscada_sparkplug_host_rebirth_requests_total",
+            "Rebirths the central host asked of edge nodes (NCMD Node Control/Rebirth).",
+            s.rebirths_requested,
+        ),
+        (
+            "gridscada_sparkplug_host_writes_confirmed_total",
+            "Writes to remote tags that the edge's data confirmed.",
+            s.writes_confirmed,
+        ),
+        (
+            "gridscada_sparkplug_host_writes_failed_total",
+            "Writes to remote tags that failed or timed out.",
+            s.writes_failed,
+        ),
+    ] {
+        out.counter(name, help, &[], v as f64);
+    }
+    out.gauge(
+        "gridscada_sparkplug_host_connected",
+        "1 while the central host is connected to the broker.",
+        &[],
+        f64::from(u8::from(s.connected)),
+    );
+    out.gauge(
+        "gridscada_sparkplug_host_sites_online",
+        "Edge nodes online (born, not dead).",
+        &[],
+        s.sites_online as f64,
+    );
+    out.gauge(
+        "gridscada_sparkplug_host_tags",
+        "Remote tags the births have declared.",
+        &[],
+        s.tags as f64,
+    );
+}
