@@ -729,9 +729,10 @@ pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
             poll: stack.field.stats_handle(),
             historian: stack.historian.handle(),
             audit: stack.audit.handle(),
-            sparkplug_host: stack.sparkplug_host.as_ref().map(|h| {
-                Arc::new(h.stats_source()) as sparkplug_host::HostStatsSource
-            }),
+            sparkplug_host: stack
+                .sparkplug_host
+                .as_ref()
+                .map(|h| Arc::new(h.stats_source()) as sparkplug_host::HostStatsSource),
         })),
         screens: Default::default(),
         tag_index: Arc::new(gridscada_web::access::TagIndex::new(&stack.plant)),

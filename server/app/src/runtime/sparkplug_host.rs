@@ -50,8 +50,8 @@ pub(super) fn start(
         write_timeout: Duration::from_secs_f64(*host.write_timeout_s.get_ref()),
         keep_alive: Duration::from_secs(10),
     };
-    let started = Host::start(opts, db, clock)
-        .map_err(|e| anyhow!("starting the Sparkplug host: {e}"))?;
+    let started =
+        Host::start(opts, db, clock).map_err(|e| anyhow!("starting the Sparkplug host: {e}"))?;
     let writer = started.writer(Some(field));
     Ok(Some((started, writer)))
 }
