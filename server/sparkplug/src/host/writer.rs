@@ -132,6 +132,12 @@ pub struct RoutedWriter {
 
 impl RoutedWriter {
     async fn write_remote(&self, name: &str, value: Value) -> Result<Sample, WriteError> {
+        let result = self.command_and_confirm(name, value).await;
+        self.shared.counters.write(result.is_ok());
+        result
+    }
+
+    async fn command_and_confirm(&self, name: &str, value: Value) -> Result<Sample, WriteError> {
         let s = &self.shared;
         let now = s.clock.now();
         let (tag, topic, payload, expected) = s.sites.lock().command(&s.db, name, &value, now)?;
@@ -147,14 +153,12 @@ impl RoutedWriter {
             .await;
         if let Err(e) = sent {
             s.pending.lock().remove(tag, id);
-            s.counters.write(false);
             return Err(WriteError::Device {
                 device: "broker".into(),
                 reason: format!("the command could not be sent: {e}"),
             });
         }
-        let answer = tokio::time::timeout(s.write_timeout, rx).await;
-        let result = match answer {
+        match tokio::time::timeout(s.write_timeout, rx).await {
             Ok(Ok(r)) => r,
             Ok(Err(_)) => Err(WriteError::Closed),
             Err(_) => match s.pending.lock().remove(tag, id).and_then(|w| w.seen) {
@@ -172,9 +176,7 @@ impl RoutedWriter {
                     Err(WriteError::Timeout(name.to_owned()))
                 }
             },
-        };
-        s.counters.write(result.is_ok());
-        result
+        }
     }
 
     /// Whether `name` is a remote tag.
