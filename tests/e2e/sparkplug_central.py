@@ -247,6 +247,12 @@ rebirth_interval_s = 1
     check(back is not None, f"restarting site-b brings its tags back Good through its birth ({secs:.1f} s)")
     check(api.metrics().get("gridscada_sparkplug_host_sites_online") == 3, "3 sites online again")
 
+    def site_b_events():
+        status, events = api.call("GET", "/api/events?type=sparkplug")
+        text = json.dumps(events)
+        return status == 200 and "site-b died (NDEATH)" in text and "site-b born (NBIRTH)" in text
+    check(wait_for(site_b_events, 5)[0], "the event log records site-b's death and birth")
+
     # A frozen edge keeps its socket open: only the broker's keep-alive
     # finds it out (mosquitto 2.0 checks it coarsely, so its will comes
     # some seconds after 1.5 keep-alives). The host must act on the will

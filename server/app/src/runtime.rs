@@ -396,14 +396,20 @@ impl Stack {
             .context("starting field I/O")?;
         let mut writer = field.writer();
         // A central Sparkplug host takes the writes of remote tags.
-        let sparkplug_host =
-            match sparkplug_host::start(&plant, db.clone(), clock.clone(), writer.clone())? {
-                Some((host, routed)) => {
-                    writer = routed;
-                    Some(host)
-                }
-                None => None,
-            };
+        let sparkplug_host = match sparkplug_host::start(
+            &plant,
+            db.clone(),
+            clock.clone(),
+            writer.clone(),
+            events_tx.clone(),
+            &mut tasks,
+        )? {
+            Some((host, routed)) => {
+                writer = routed;
+                Some(host)
+            }
+            None => None,
+        };
 
         // One fault-isolation sequence per panel.
         let (panel_notices_tx, panel_notices_rx) = mpsc::channel::<PanelNotice>(1024);

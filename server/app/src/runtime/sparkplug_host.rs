@@ -7,8 +7,11 @@ use std::time::Duration;
 
 use anyhow::anyhow;
 use gridscada_config::Plant;
-use gridscada_sparkplug::host::{Host, HostOptions, HostStats, SitesPolicy};
+use gridscada_sparkplug::host::{Host, HostOptions, HostStats, SiteNotice, SitesPolicy};
+use gridscada_store::NewEvent;
 use gridscada_tagdb::{Clock, TagDb, TagWriter};
+use tokio::sync::mpsc;
+use tokio::task::JoinSet;
 
 /// What `/metrics` reads from the host.
 pub(crate) type HostStatsSource = Arc<dyn Fn() -> HostStats + Send + Sync>;
@@ -23,12 +26,15 @@ pub(super) fn room(plant: &Plant) -> usize {
 }
 
 /// Starts the host if configured; its writer sends remote tags to their
-/// edge and every other tag to `field`.
+/// edge and every other tag to `field`. Sites going online and offline go
+/// into the event log through `events` (a task in `tasks`).
 pub(super) fn start(
     plant: &Plant,
     db: Arc<TagDb>,
     clock: Arc<dyn Clock>,
     field: Arc<dyn TagWriter>,
+    events: mpsc::Sender<NewEvent>,
+    tasks: &mut JoinSet<()>,
 ) -> anyhow::Result<Option<(Host, Arc<dyn TagWriter>)>> {
     let Some((mqtt, host)) = plant
         .mqtt
@@ -50,8 +56,18 @@ pub(super) fn start(
         write_timeout: Duration::from_secs_f64(*host.write_timeout_s.get_ref()),
         keep_alive: Duration::from_secs(10),
     };
-    let started =
-        Host::start(opts, db, clock).map_err(|e| anyhow!("starting the Sparkplug host: {e}"))?;
+    let (notices_tx, mut notices) = mpsc::channel::<SiteNotice>(256);
+    let started = Host::start(opts, db, clock.clone(), Some(notices_tx))
+        .map_err(|e| anyhow!("starting the Sparkplug host: {e}"))?;
+    tasks.spawn(async move {
+        while let Some(n) = notices.recv().await {
+            let event =
+                crate::sinks::system_event(clock.as_ref(), "sparkplug", &n.source, n.message);
+            if events.send(event).await.is_err() {
+                break;
+            }
+        }
+    });
     let writer = started.writer(Some(field));
     Ok(Some((started, writer)))
 }

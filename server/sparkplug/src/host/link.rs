@@ -13,14 +13,14 @@ use gridscada_tagdb::{Clock, TagDb, TagWriter};
 use parking_lot::Mutex;
 use prost::Message;
 use rumqttc::{AsyncClient, Event, EventLoop, LastWill, MqttOptions, Packet, QoS};
-use tokio::sync::watch;
+use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 
 use super::sites::{Sites, SitesPolicy, HOST_OFFLINE};
 use super::stats::{Counters, HostStats};
 use super::writer::{Pending, RoutedWriter};
 use crate::proto::Payload;
-use crate::topic::{Topic, NAMESPACE};
+use crate::topic::{MessageType, Topic, NAMESPACE};
 
 /// How to run the central host (from `[mqtt]` and `[mqtt.host]`).
 #[derive(Debug, Clone)]
@@ -72,6 +72,15 @@ impl HostOptions {
     }
 }
 
+/// A site going online or offline, or the host losing the broker: for the
+/// event log.
+#[derive(Debug, Clone)]
+pub struct SiteNotice {
+    /// The edge node, or "broker".
+    pub source: String,
+    pub message: String,
+}
+
 /// State shared by the session task and the writer.
 pub(crate) struct Shared {
     pub db: Arc<TagDb>,
@@ -81,6 +90,19 @@ pub(crate) struct Shared {
     pub counters: Counters,
     pub client: AsyncClient,
     pub write_timeout: Duration,
+    /// Never waited for: a full channel drops the notice (logged anyway).
+    pub notices: Option<mpsc::Sender<SiteNotice>>,
+}
+
+impl Shared {
+    fn notice(&self, source: &str, message: String) {
+        if let Some(tx) = &self.notices {
+            let _ = tx.try_send(SiteNotice {
+                source: source.to_owned(),
+                message,
+            });
+        }
+    }
 }
 
 /// The running central host.
@@ -98,8 +120,14 @@ fn state_body(online: bool, timestamp: i64) -> Vec<u8> {
 }
 
 impl Host {
-    /// Starts the session task. Remote tags go into `db`'s reserved room.
-    pub fn start(opts: HostOptions, db: Arc<TagDb>, clock: Arc<dyn Clock>) -> Result<Host, String> {
+    /// Starts the session task. Remote tags go into `db`'s reserved room;
+    /// sites going online and offline are told on `notices`.
+    pub fn start(
+        opts: HostOptions,
+        db: Arc<TagDb>,
+        clock: Arc<dyn Clock>,
+        notices: Option<mpsc::Sender<SiteNotice>>,
+    ) -> Result<Host, String> {
         // One timestamp for the will and every online STATE of this run,
         // as Sparkplug 3.0 asks: a host's birth and death certificates match.
         let born = gridscada_tagdb::Timestamp::now_utc().as_millis();
@@ -113,6 +141,7 @@ impl Host {
             counters: Counters::default(),
             client,
             write_timeout: opts.write_timeout,
+            notices,
         });
         let (stop, stop_rx) = watch::channel(false);
         let task = tokio::spawn(run(opts, shared.clone(), events, born, stop_rx));
@@ -328,6 +357,20 @@ fn on_publish(
     for p in &fx.problems {
         counters.problem(p.label());
         tracing::warn!(topic = topic_text, "{p}");
+    }
+    if let (
+        true,
+        Topic::Message {
+            kind, edge_node, ..
+        },
+    ) = (fx.online_changed, &topic)
+    {
+        let message = match kind {
+            MessageType::NBirth => format!("{edge_node} born (NBIRTH): online, its tags Good"),
+            _ => format!("{edge_node} died (NDEATH): offline, its tags Bad"),
+        };
+        tracing::info!("{message}");
+        shared.notice(edge_node, message);
     }
     if fx.added > 0 {
         tracing::info!(

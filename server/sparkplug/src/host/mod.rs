@@ -12,7 +12,7 @@ mod sites;
 mod stats;
 mod writer;
 
-pub use link::{Host, HostOptions};
+pub use link::{Host, HostOptions, SiteNotice};
 pub use sites::{
     Effects, Problem, Remote, Sites, SitesPolicy, DEVICE_OFFLINE, HOST_OFFLINE, REBIRTH,
     SITE_OFFLINE,
