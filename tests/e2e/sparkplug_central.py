@@ -117,6 +117,13 @@ class Api:
         return out
 
 
+def site_alarm(api, node):
+    """(status, [the system alarm of `node`]) from /api/alarms."""
+    status, body = api.call("GET", "/api/alarms")
+    rows = body.get("alarms", []) if isinstance(body, dict) else (body or [])
+    return status, [a for a in rows if a.get("key") == f"sparkplug:{node}"]
+
+
 def retained_state(port, host_id, timeout=5):
     """The retained STATE of the host, read by a fresh MQTT client."""
     got = []
@@ -236,6 +243,8 @@ rebirth_interval_s = 1
     if dead:
         check(all(dead[f"{s}.P"]["quality"]["code"] == "good" for s in ("site-a", "site-c")),
               "the other sites stay Good")
+    active = wait_for(lambda: (lambda a: a and a[0]["active"])(site_alarm(api, "site-b")[1]), 5)[0]
+    check(active, "the system alarm sparkplug:site-b stands while it is dead")
     status, body = api.call("POST", "/api/tags/site-b.P_set/write", {"value": 12})
     check(status == 502 and "site offline" in body.get("detail", ""),
           "a write to the dead site is refused with its reason", (status, body))
@@ -252,6 +261,9 @@ rebirth_interval_s = 1
         text = json.dumps(events)
         return status == 200 and "site-b died (NDEATH)" in text and "site-b born (NBIRTH)" in text
     check(wait_for(site_b_events, 5)[0], "the event log records site-b's death and birth")
+    status, standing = site_alarm(api, "site-b")
+    check(status == 200 and standing and not standing[0]["active"] and standing[0]["selection"] == "site-b",
+          "its system alarm sparkplug:site-b was raised and has returned to normal", (status, standing))
 
     # A frozen edge keeps its socket open: only the broker's keep-alive
     # finds it out (mosquitto 2.0 checks it coarsely, so its will comes

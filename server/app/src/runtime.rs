@@ -402,6 +402,7 @@ impl Stack {
             clock.clone(),
             writer.clone(),
             events_tx.clone(),
+            alarms.clone(),
             &mut tasks,
         )? {
             Some((host, routed)) => {

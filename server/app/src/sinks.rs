@@ -213,7 +213,7 @@ pub async fn alarm_states(
 }
 
 /// Raises or clears a system alarm, logging (not failing) on error.
-fn system_alarm(
+pub(crate) fn system_alarm(
     alarms: &AlarmEngine,
     key: &str,
     active: bool,

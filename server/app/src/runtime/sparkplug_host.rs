@@ -6,12 +6,16 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::anyhow;
+use gridscada_alarms::AlarmEngine;
 use gridscada_config::Plant;
 use gridscada_sparkplug::host::{Host, HostOptions, HostStats, SiteNotice, SitesPolicy};
 use gridscada_store::NewEvent;
 use gridscada_tagdb::{Clock, TagDb, TagWriter};
 use tokio::sync::mpsc;
 use tokio::task::JoinSet;
+
+/// A remote site offline is as grave as a device not answering.
+const SITE_OFFLINE_PRIORITY: u32 = 700;
 
 /// What `/metrics` reads from the host.
 pub(crate) type HostStatsSource = Arc<dyn Fn() -> HostStats + Send + Sync>;
@@ -26,14 +30,16 @@ pub(super) fn room(plant: &Plant) -> usize {
 }
 
 /// Starts the host if configured; its writer sends remote tags to their
-/// edge and every other tag to `field`. Sites going online and offline go
-/// into the event log through `events` (a task in `tasks`).
+/// edge and every other tag to `field`. A site going offline (or the
+/// broker lost) is an event and a system alarm `sparkplug:NODE` (area: the
+/// node) until it is born again (a task in `tasks`).
 pub(super) fn start(
     plant: &Plant,
     db: Arc<TagDb>,
     clock: Arc<dyn Clock>,
     field: Arc<dyn TagWriter>,
     events: mpsc::Sender<NewEvent>,
+    alarms: Arc<AlarmEngine>,
     tasks: &mut JoinSet<()>,
 ) -> anyhow::Result<Option<(Host, Arc<dyn TagWriter>)>> {
     let Some((mqtt, host)) = plant
@@ -61,6 +67,14 @@ pub(super) fn start(
         .map_err(|e| anyhow!("starting the Sparkplug host: {e}"))?;
     tasks.spawn(async move {
         while let Some(n) = notices.recv().await {
+            crate::sinks::system_alarm(
+                &alarms,
+                &format!("sparkplug:{}", n.source),
+                !n.online,
+                SITE_OFFLINE_PRIORITY,
+                &n.source,
+                &n.message,
+            );
             let event =
                 crate::sinks::system_event(clock.as_ref(), "sparkplug", &n.source, n.message);
             if events.send(event).await.is_err() {

@@ -78,6 +78,8 @@ impl HostOptions {
 pub struct SiteNotice {
     /// The edge node, or "broker".
     pub source: String,
+    /// Whether `source` is now online (born, connected).
+    pub online: bool,
     pub message: String,
 }
 
@@ -95,10 +97,11 @@ pub(crate) struct Shared {
 }
 
 impl Shared {
-    fn notice(&self, source: &str, message: String) {
+    fn notice(&self, source: &str, online: bool, message: String) {
         if let Some(tx) = &self.notices {
             let _ = tx.try_send(SiteNotice {
                 source: source.to_owned(),
+                online,
                 message,
             });
         }
@@ -200,6 +203,11 @@ async fn run(
             Ok(Event::Incoming(Packet::ConnAck(_))) => {
                 if ever_connected {
                     shared.counters.reconnect();
+                    shared.notice(
+                        "broker",
+                        true,
+                        format!("central host connected to the broker {} again", opts.broker),
+                    );
                 }
                 tracing::info!(broker = %opts.broker, group = %opts.sites.group, "Sparkplug host connected");
                 connected = true;
@@ -365,12 +373,14 @@ fn on_publish(
         },
     ) = (fx.online_changed, &topic)
     {
-        let message = match kind {
-            MessageType::NBirth => format!("{edge_node} born (NBIRTH): online, its tags Good"),
-            _ => format!("{edge_node} died (NDEATH): offline, its tags Bad"),
+        let online = *kind == MessageType::NBirth;
+        let message = if online {
+            format!("{edge_node} born (NBIRTH): online, its tags Good")
+        } else {
+            format!("{edge_node} died (NDEATH): offline, its tags Bad")
         };
         tracing::info!("{message}");
-        shared.notice(edge_node, message);
+        shared.notice(edge_node, online, message);
     }
     if fx.added > 0 {
         tracing::info!(
