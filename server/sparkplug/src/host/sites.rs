@@ -393,8 +393,10 @@ impl Sites {
             };
             let tag = self.tag_name(node, device, name);
             let props = m.properties.as_ref();
+            let same_source =
+                |r: &Remote| r.node == node && r.device.as_deref() == device && r.metric == name;
             let id = match db.id(&tag) {
-                Some(id) if self.remotes.get(&id).is_some_and(|r| r.node == node) => {
+                Some(id) if self.remotes.get(&id).is_some_and(same_source) => {
                     if db.meta(id).is_some_and(|meta| meta.kind != kind) {
                         fx.problems.push(Problem::Refused {
                             node: node.to_owned(),
@@ -405,12 +407,19 @@ impl Sites {
                     }
                     id
                 }
-                Some(_) => {
+                Some(id) => {
+                    let reason = match self.remotes.get(&id) {
+                        Some(r) => format!(
+                            "metric '{name}': tag '{tag}' is already metric '{}' of {}{} (device_in_name = true keeps devices apart)",
+                            r.metric,
+                            r.node,
+                            r.device.as_deref().map(|d| format!("/{d}")).unwrap_or_default()
+                        ),
+                        None => format!("metric '{name}': tag '{tag}' is a local tag of the central host"),
+                    };
                     fx.problems.push(Problem::Refused {
                         node: node.to_owned(),
-                        reason: format!(
-                            "metric '{name}': tag '{tag}' already exists at the central host"
-                        ),
+                        reason,
                     });
                     continue;
                 }
@@ -496,8 +505,15 @@ impl Sites {
         }
         let mut unknown = None;
         for m in &payload.metrics {
+            // An alias is the node's, but must name a metric of this
+            // message's device (or of the node, for NDATA).
+            let of_here = |id: &TagId| {
+                self.remotes
+                    .get(id)
+                    .is_some_and(|r| r.device.as_deref() == device)
+            };
             let id = match (m.alias, m.name.as_deref()) {
-                (Some(alias), _) if n.aliases.contains_key(&alias) => n.aliases[&alias],
+                (Some(alias), _) if n.aliases.get(&alias).is_some_and(of_here) => n.aliases[&alias],
                 (_, Some(name))
                     if n.names
                         .contains_key(&(device.map(str::to_owned), name.to_owned())) =>

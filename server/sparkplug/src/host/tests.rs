@@ -465,6 +465,40 @@ fn a_name_clash_with_a_local_tag_or_another_group_is_refused() {
 }
 
 #[test]
+fn one_name_from_two_devices_is_refused_not_merged() {
+    let (mut s, db) = (sites(), db());
+    born_site(&mut s, &db, "site-a");
+    // Device PV2 declares the same metric names as PV1: without
+    // device_in_name they would be the same tags.
+    let fx = run(
+        &mut s,
+        &db,
+        Topic::device(G, MessageType::DBirth, "site-a", "PV2"),
+        dbirth(2),
+        0,
+    );
+    assert!(
+        matches!(&fx.problems[..], [Problem::Refused { reason, .. }, _] if reason.contains("is already metric 'PV1/P_set' of site-a/PV1")),
+        "{:?}",
+        fx.problems
+    );
+    assert_eq!(fx.added, 0);
+    // PV1's tags still follow PV1 only.
+    let d = msg(Some(3), vec![by_alias(2, MetricValue::Double(99.0))]);
+    run(
+        &mut s,
+        &db,
+        Topic::device(G, MessageType::DData, "site-a", "PV2"),
+        d,
+        1,
+    );
+    assert_eq!(
+        db.get_by_name("site-a.PV1.P_set").unwrap().value,
+        Value::Float(10.0)
+    );
+}
+
+#[test]
 fn device_in_name_and_full_room() {
     let db = TagDb::with_room([], 2).unwrap();
     let mut s = Sites::new(SitesPolicy {
