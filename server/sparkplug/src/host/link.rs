@@ -6,8 +6,9 @@
 //! shared `connection.rs` (TLS, credentials, `[mqtt]` keys) once both
 //! parts are on one branch. Only [`HostOptions::mqtt_options`] builds them.
 
+use std::collections::HashMap;
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use gridscada_tagdb::{Clock, TagDb, TagWriter};
 use parking_lot::Mutex;
@@ -193,6 +194,7 @@ async fn run(
     let group_topic = format!("{NAMESPACE}/{}/#", opts.sites.group);
     let mut connected = false;
     let mut ever_connected = false;
+    let mut gate = LogGate::default();
     loop {
         let event = tokio::select! {
             biased;
@@ -231,7 +233,15 @@ async fn run(
                 }
             }
             Ok(Event::Incoming(Packet::Publish(p))) => {
-                on_publish(&opts, &shared, &state_topic, born, &p.topic, &p.payload);
+                on_publish(
+                    &mut gate,
+                    &opts,
+                    &shared,
+                    &state_topic,
+                    born,
+                    &p.topic,
+                    &p.payload,
+                );
             }
             Ok(_) => {}
             Err(e) => {
@@ -299,7 +309,35 @@ fn request_rebirth(shared: &Shared, node: &str, now: gridscada_tagdb::Timestamp)
     }
 }
 
+/// At most one warning per kind of problem every 10 s: a peer that floods
+/// bad messages is counted in full and logged in sample.
+#[derive(Default)]
+struct LogGate(HashMap<&'static str, (Instant, u64)>);
+
+impl LogGate {
+    /// How many warnings of `kind` were held back since the last one, if
+    /// one may be logged now.
+    fn pass(&mut self, kind: &'static str) -> Option<u64> {
+        let now = Instant::now();
+        match self.0.get_mut(kind) {
+            Some((last, held)) if now.duration_since(*last) < Duration::from_secs(10) => {
+                *held += 1;
+                None
+            }
+            Some((last, held)) => {
+                *last = now;
+                Some(std::mem::take(held))
+            }
+            None => {
+                self.0.insert(kind, (now, 0));
+                Some(0)
+            }
+        }
+    }
+}
+
 fn on_publish(
+    gate: &mut LogGate,
     opts: &HostOptions,
     shared: &Shared,
     state_topic: &str,
@@ -311,18 +349,27 @@ fn on_publish(
     if body.len() > opts.max_message_bytes {
         counters.bytes(body.len());
         counters.problem("oversized");
-        tracing::warn!(
-            topic = topic_text,
-            bytes = body.len(),
-            max = opts.max_message_bytes,
-            "Sparkplug message larger than max_message_bytes, dropped"
-        );
+        if let Some(held_back) = gate.pass("oversized") {
+            tracing::warn!(
+                topic = topic_text,
+                bytes = body.len(),
+                max = opts.max_message_bytes,
+                held_back,
+                "Sparkplug message larger than max_message_bytes, dropped"
+            );
+        }
         return;
     }
     let Some(topic) = Topic::parse(topic_text) else {
         counters.bytes(body.len());
         counters.problem("bad_topic");
-        tracing::warn!(topic = topic_text, "not a Sparkplug B topic, dropped");
+        if let Some(held_back) = gate.pass("bad_topic") {
+            tracing::warn!(
+                topic = topic_text,
+                held_back,
+                "not a Sparkplug B topic, dropped"
+            );
+        }
         return;
     };
     let kind = match &topic {
@@ -352,7 +399,9 @@ fn on_publish(
         Ok(p) => p,
         Err(e) => {
             counters.problem("malformed");
-            tracing::warn!(topic = topic_text, error = %e, "malformed Sparkplug payload, dropped");
+            if let Some(held_back) = gate.pass("malformed") {
+                tracing::warn!(topic = topic_text, error = %e, held_back, "malformed Sparkplug payload, dropped");
+            }
             return;
         }
     };
@@ -364,7 +413,9 @@ fn on_publish(
     };
     for p in &fx.problems {
         counters.problem(p.label());
-        tracing::warn!(topic = topic_text, "{p}");
+        if let Some(held_back) = gate.pass(p.label()) {
+            tracing::warn!(topic = topic_text, held_back, "{p}");
+        }
     }
     if let (
         true,
@@ -400,5 +451,29 @@ fn on_publish(
     counters.set_sites(online, tags);
     if let Some(node) = fx.rebirth {
         request_rebirth(shared, &node, now);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_flood_of_one_problem_is_logged_once_per_window() {
+        let mut gate = LogGate::default();
+        assert_eq!(gate.pass("malformed"), Some(0));
+        assert_eq!(gate.pass("malformed"), None);
+        assert_eq!(gate.pass("malformed"), None);
+        // Another kind has its own window.
+        assert_eq!(gate.pass("oversized"), Some(0));
+        // The window over, the next warning says how many were held back.
+        gate.0.get_mut("malformed").unwrap().0 -= Duration::from_secs(11);
+        assert_eq!(gate.pass("malformed"), Some(2));
+    }
+
+    #[test]
+    fn the_state_body_is_sparkplug_3_json() {
+        let v: serde_json::Value = serde_json::from_slice(&state_body(true, 1234)).unwrap();
+        assert_eq!(v, serde_json::json!({"online": true, "timestamp": 1234}));
     }
 }
