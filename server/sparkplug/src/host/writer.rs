@@ -142,20 +142,28 @@ impl RoutedWriter {
         let now = s.clock.now();
         let (tag, topic, payload, expected) = s.sites.lock().command(&s.db, name, &value, now)?;
         let (id, rx) = s.pending.lock().add(tag, expected.clone());
-        let sent = s
-            .client
-            .publish(
+        // Bounded too: the client's queue could be full behind a broker
+        // that has stopped reading.
+        let sent = tokio::time::timeout(
+            s.write_timeout,
+            s.client.publish(
                 topic.to_string(),
                 QoS::AtLeastOnce,
                 false,
                 payload.encode_to_vec(),
-            )
-            .await;
-        if let Err(e) = sent {
+            ),
+        )
+        .await;
+        let refused = match sent {
+            Ok(Ok(())) => None,
+            Ok(Err(e)) => Some(format!("the command could not be sent: {e}")),
+            Err(_) => Some("the command could not be queued for the broker in time".to_owned()),
+        };
+        if let Some(reason) = refused {
             s.pending.lock().remove(tag, id);
             return Err(WriteError::Device {
                 device: "broker".into(),
-                reason: format!("the command could not be sent: {e}"),
+                reason,
             });
         }
         match tokio::time::timeout(s.write_timeout, rx).await {
