@@ -29,6 +29,7 @@ mod audit_tests;
 #[cfg(test)]
 mod shutdown_tests;
 mod sources;
+mod sparkplug_host;
 
 use sources::{StackDevices, StackMetrics};
 
@@ -251,6 +252,8 @@ pub struct Stack {
     /// standby takes over at once.
     pair_keeper: Option<(watch::Sender<bool>, tokio::task::JoinHandle<()>)>,
     field: gridscada_modbus::FieldIo,
+    /// The central Sparkplug B host (`[mqtt.host]`), if configured.
+    sparkplug_host: Option<gridscada_sparkplug::host::Host>,
     historian: gridscada_store::Historian,
     /// Events and alarm transitions on their way to the store (or spool).
     audit: gridscada_store::AuditTrail,
@@ -333,7 +336,11 @@ impl Stack {
         };
         let plant = Arc::new(plant);
 
-        let db = Arc::new(TagDb::new(all_tags(&plant)).context("building the tag database")?);
+        // With room for the remote tags of a central Sparkplug host.
+        let db = Arc::new(
+            TagDb::with_room(all_tags(&plant), sparkplug_host::room(&plant))
+                .context("building the tag database")?,
+        );
         tracing::info!(
             tags = db.len(),
             devices = plant.devices.len(),
@@ -450,7 +457,23 @@ impl Stack {
             }
             _ => (None, None),
         };
-        let writer = field.writer();
+        let mut writer = field.writer();
+        // A central Sparkplug host takes the writes of remote tags.
+        let sparkplug_host = match sparkplug_host::start(
+            &plant,
+            db.clone(),
+            clock.clone(),
+            writer.clone(),
+            events_tx.clone(),
+            alarms.clone(),
+            &mut tasks,
+        )? {
+            Some((host, routed)) => {
+                writer = routed;
+                Some(host)
+            }
+            None => None,
+        };
 
         // One fault-isolation sequence per panel.
         let (panel_notices_tx, panel_notices_rx) = mpsc::channel::<PanelNotice>(1024);
@@ -583,6 +606,7 @@ impl Stack {
             pair,
             pair_keeper,
             field,
+            sparkplug_host,
             historian,
             audit,
             historian_feed: (feed_stop, historian_feed),
@@ -615,6 +639,9 @@ impl Stack {
             let _ = keeper.await;
         }
         self.field.shutdown().await;
+        if let Some(host) = self.sparkplug_host.take() {
+            host.shutdown().await;
+        }
         if let Some(sim) = self.simulator.take() {
             sim.shutdown().await;
         }
@@ -823,6 +850,10 @@ pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
             historian: stack.historian.handle(),
             audit: stack.audit.handle(),
             pair: stack.pair.clone(),
+            sparkplug_host: stack
+                .sparkplug_host
+                .as_ref()
+                .map(|h| Arc::new(h.stats_source()) as sparkplug_host::HostStatsSource),
         })),
         screens: Default::default(),
         tag_index: Arc::new(gridscada_web::access::TagIndex::new(&stack.plant)),

@@ -213,7 +213,7 @@ pub async fn alarm_states(
 }
 
 /// Raises or clears a system alarm, logging (not failing) on error.
-fn system_alarm(
+pub(crate) fn system_alarm(
     alarms: &AlarmEngine,
     key: &str,
     active: bool,
@@ -484,6 +484,9 @@ pub async fn historian_feed(
     // runs warm (its deadbands follow) but hands nothing on.
     let recording = || leadership.permit().is_ok();
     let mut recorder = recorder(&plant, &db);
+    // Tags added at run time (a central Sparkplug host's remote tags) are
+    // logged with the default policy, from the first change that follows.
+    let mut known = db.len();
     let mut sub = db.subscribe_all();
     // Log the starting point of every tag.
     let start = db.snapshot_all();
@@ -519,6 +522,12 @@ pub async fn historian_feed(
             }
             update = sub.recv() => {
                 let Some(update) = update else { return };
+                if db.len() > known {
+                    for (id, meta) in db.all_meta().skip(known) {
+                        recorder.set_policy(id, meta.name.clone(), RecordPolicy::default());
+                    }
+                    known = db.len();
+                }
                 let samples: Vec<_> = update
                     .batch()
                     .changes

@@ -335,6 +335,13 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
             )),
         }
     }
+    // A central Sparkplug host may leave out `tag_files`: its tags come
+    // from the births of edge nodes.
+    let central = mqtt.as_ref().is_some_and(|m: &MqttConfig| m.host.is_some());
+    let tag_files = match tag_files {
+        None if central => Some(Vec::new()),
+        other => other,
+    };
     let Some(tag_files) = tag_files else {
         if diags.len() == before {
             diags.push(file.error_at(0..0, "missing 'tag_files': list the tag files of the plant"));

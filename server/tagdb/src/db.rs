@@ -1,9 +1,12 @@
 //! The in-memory tag database and change subscription.
 //!
 //! The set of tags is fixed when the database is built (the plant configuration
-//! plus the derived status tags); only samples change afterwards. That keeps
-//! lookups by id a plain index and by name one hash probe, and lets 100,000 tags
-//! live in two flat vectors.
+//! plus the derived status tags), except for a bounded room reserved up front
+//! ([`TagDb::with_room`]) that a central Sparkplug host fills at run time from
+//! the births of remote sites ([`TagDb::add`]). Tags are only ever appended,
+//! never removed or changed, so ids stay dense and stable: lookups by id stay
+//! a plain index and by name one hash probe, and every slot is allocated when
+//! the database is built, so a `&TagMeta` handed out stays valid.
 //!
 //! Updates arrive in batches (one poll cycle is one batch). Each batch that
 //! changes anything gets the next sequence number and goes out on a bounded
@@ -12,7 +15,8 @@
 //! snapshot are skipped, so it never rolls a value back.
 
 use std::collections::HashMap;
-use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, OnceLock};
 
 use parking_lot::RwLock;
 use serde::Serialize;
@@ -74,6 +78,10 @@ pub enum TagDbError {
     EmptyName,
     #[error("too many tags (at most {} are supported)", u32::MAX)]
     TooMany,
+    #[error(
+        "no room for tag '{name}': all {room} slots reserved for tags added at run time are taken"
+    )]
+    Full { name: String, room: usize },
 }
 
 /// A batch of changes (or a snapshot), in increasing sequence order.
@@ -117,8 +125,13 @@ struct Live {
 
 /// The tag database. Cheap to share behind an `Arc`.
 pub struct TagDb {
-    meta: Vec<TagMeta>,
-    by_name: HashMap<Arc<str>, TagId>,
+    /// One slot per tag the database can hold; the first `len` are set.
+    meta: Vec<OnceLock<TagMeta>>,
+    /// How many slots are set (tags added at run time raise it).
+    len: AtomicUsize,
+    /// How many slots were reserved for tags added at run time.
+    room: usize,
+    by_name: RwLock<HashMap<Arc<str>, TagId>>,
     live: RwLock<Live>,
     tx: broadcast::Sender<Arc<ChangeBatch>>,
 }
@@ -129,6 +142,15 @@ const RING_BATCHES: usize = 256;
 impl TagDb {
     /// Builds a database holding `tags`; every tag starts Bad ("no value yet").
     pub fn new(tags: impl IntoIterator<Item = TagMeta>) -> Result<TagDb, TagDbError> {
+        TagDb::with_room(tags, 0)
+    }
+
+    /// Builds a database holding `tags`, with room for `room` more tags added
+    /// at run time by [`TagDb::add`]. The room is allocated now.
+    pub fn with_room(
+        tags: impl IntoIterator<Item = TagMeta>,
+        room: usize,
+    ) -> Result<TagDb, TagDbError> {
         let mut meta = Vec::new();
         let mut by_name = HashMap::new();
         for tag in tags {
@@ -139,16 +161,23 @@ impl TagDb {
             if by_name.insert(tag.name.clone(), id).is_some() {
                 return Err(TagDbError::Duplicate(tag.name.to_string()));
             }
-            meta.push(tag);
+            meta.push(OnceLock::from(tag));
         }
-        let samples: Vec<Sample> = meta
+        let len = meta.len();
+        u32::try_from(len + room).map_err(|_| TagDbError::TooMany)?;
+        let mut samples: Vec<Sample> = meta
             .iter()
+            .filter_map(|m| m.get())
             .map(|m| Sample::never_read(default_value(m.kind)))
             .collect();
+        meta.resize_with(len + room, OnceLock::new);
+        samples.resize_with(len + room, || Sample::never_read(Value::Bool(false)));
         let (tx, _) = broadcast::channel(RING_BATCHES);
         Ok(TagDb {
             meta,
-            by_name,
+            len: AtomicUsize::new(len),
+            room,
+            by_name: RwLock::new(by_name),
             live: RwLock::new(Live {
                 tickets: vec![0; samples.len()],
                 samples,
@@ -159,28 +188,64 @@ impl TagDb {
         })
     }
 
+    /// Adds a tag at run time, in the room reserved by [`TagDb::with_room`];
+    /// it starts Bad ("no value yet") like every tag. Subscribers that watch
+    /// every tag see its samples from then on.
+    pub fn add(&self, tag: TagMeta) -> Result<TagId, TagDbError> {
+        if tag.name.is_empty() {
+            return Err(TagDbError::EmptyName);
+        }
+        // Under the samples' lock, so an applier never sees the new id
+        // before its slot is ready.
+        let mut live = self.live.write();
+        let mut by_name = self.by_name.write();
+        if by_name.contains_key(&tag.name) {
+            return Err(TagDbError::Duplicate(tag.name.to_string()));
+        }
+        let len = self.len.load(Ordering::Acquire);
+        let Some(slot) = self.meta.get(len) else {
+            return Err(TagDbError::Full {
+                name: tag.name.to_string(),
+                room: self.room,
+            });
+        };
+        let id = TagId(len as u32);
+        live.samples[len] = Sample::never_read(default_value(tag.kind));
+        live.tickets[len] = 0;
+        by_name.insert(tag.name.clone(), id);
+        // Only this function sets slots, under the lock: the slot is empty.
+        let _ = slot.set(tag);
+        self.len.store(len + 1, Ordering::Release);
+        Ok(id)
+    }
+
+    /// How many more tags [`TagDb::add`] can take.
+    pub fn room_left(&self) -> usize {
+        self.meta.len() - self.len()
+    }
+
     pub fn len(&self) -> usize {
-        self.meta.len()
+        self.len.load(Ordering::Acquire)
     }
 
     pub fn is_empty(&self) -> bool {
-        self.meta.is_empty()
+        self.len() == 0
     }
 
     pub fn id(&self, name: &str) -> Option<TagId> {
-        self.by_name.get(name).copied()
+        self.by_name.read().get(name).copied()
     }
 
     pub fn meta(&self, id: TagId) -> Option<&TagMeta> {
-        self.meta.get(id.index())
+        self.meta.get(id.index()).and_then(OnceLock::get)
     }
 
     /// Every tag, in id order.
     pub fn all_meta(&self) -> impl Iterator<Item = (TagId, &TagMeta)> {
-        self.meta
+        self.meta[..self.len()]
             .iter()
             .enumerate()
-            .map(|(i, m)| (TagId(i as u32), m))
+            .filter_map(|(i, m)| Some((TagId(i as u32), m.get()?)))
     }
 
     /// Ids of the tags whose names start with `prefix` (all for "").
@@ -192,6 +257,9 @@ impl TagDb {
     }
 
     pub fn get(&self, id: TagId) -> Option<Sample> {
+        if id.index() >= self.len() {
+            return None;
+        }
         self.live.read().samples.get(id.index()).cloned()
     }
 
@@ -208,8 +276,10 @@ impl TagDb {
     /// number they are consistent with.
     pub fn snapshot(&self, ids: &[TagId]) -> ChangeBatch {
         let live = self.live.read();
+        let len = self.len();
         let changes = ids
             .iter()
+            .filter(|id| id.index() < len)
             .filter_map(|id| live.samples.get(id.index()).map(|s| (*id, s.clone())))
             .collect();
         ChangeBatch {
@@ -223,8 +293,7 @@ impl TagDb {
         let live = self.live.read();
         ChangeBatch {
             seq: live.seq,
-            changes: live
-                .samples
+            changes: live.samples[..self.len()]
                 .iter()
                 .enumerate()
                 .map(|(i, s)| (TagId(i as u32), s.clone()))
@@ -270,8 +339,13 @@ impl TagDb {
         batch: impl IntoIterator<Item = (TagId, Sample, u64)>,
     ) -> usize {
         let mut changes = Vec::new();
+        // Slots beyond it are room not yet taken (set under this same lock).
+        let len = self.len();
         for (id, sample, ticket) in batch {
             let i = id.index();
+            if i >= len {
+                continue;
+            }
             let (Some(slot), Some(seen)) = (live.samples.get_mut(i), live.tickets.get_mut(i))
             else {
                 continue;
@@ -315,7 +389,9 @@ impl TagDb {
     pub fn set_quality(&self, ids: &[TagId], quality: &Quality, timestamp: Timestamp) -> usize {
         let batch: Vec<(TagId, Sample)> = {
             let live = self.live.read();
+            let len = self.len();
             ids.iter()
+                .filter(|id| id.index() < len)
                 .filter_map(|id| {
                     live.samples.get(id.index()).map(|s| {
                         (

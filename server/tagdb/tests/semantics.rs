@@ -165,3 +165,39 @@ fn an_older_observation_never_replaces_a_newer_sample() {
     db.apply_observed([(id, Sample::good(41.2, t(3000)), next)]);
     assert_eq!(db.get(id).unwrap().value, Value::Float(41.2));
 }
+
+#[tokio::test]
+async fn tags_added_at_run_time_fill_the_room_and_reach_subscribers() {
+    let db = Arc::new(TagDb::with_room([TagMeta::new("Local.A", ValueKind::Float)], 2).unwrap());
+    let mut all = db.subscribe_all();
+    let mut only_local = db.subscribe(&[TagId(0)]);
+    assert_eq!((db.len(), db.room_left()), (1, 2));
+    // A sample for a slot not taken yet is ignored, not stored for later.
+    assert_eq!(db.apply([(TagId(1), Sample::good(1.0, ts(1)))]), 0);
+    assert!(db.get(TagId(1)).is_none());
+
+    let id = db
+        .add(TagMeta::new("site-a.Feeder.P", ValueKind::Float).units("kW"))
+        .unwrap();
+    assert_eq!(id, TagId(1));
+    assert_eq!(db.id("site-a.Feeder.P"), Some(id));
+    assert!(db.get(id).unwrap().is_never_read());
+    assert_eq!(db.all_meta().count(), 2);
+    assert_eq!(
+        db.add(TagMeta::new("Local.A", ValueKind::Float)),
+        Err(gridscada_tagdb::TagDbError::Duplicate("Local.A".into()))
+    );
+
+    db.apply([(id, Sample::good(5.0, ts(2)))]);
+    let update = all.recv().await.unwrap();
+    assert_eq!(update.batch().changes[0].0, id);
+    assert!(only_local.try_recv().is_none());
+    assert_eq!(db.snapshot_all().changes.len(), 2);
+
+    db.add(TagMeta::new("site-a.Feeder.Q", ValueKind::Float))
+        .unwrap();
+    assert!(matches!(
+        db.add(TagMeta::new("site-a.Feeder.S", ValueKind::Float)),
+        Err(gridscada_tagdb::TagDbError::Full { room: 2, .. })
+    ));
+}

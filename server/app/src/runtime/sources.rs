@@ -140,6 +140,8 @@ pub(super) struct StackMetrics {
     pub(super) audit: gridscada_store::AuditHandle,
     /// A redundant pair's role, epoch and health.
     pub(super) pair: Option<crate::pair::PairHandle>,
+    /// The central Sparkplug host's figures, if one runs.
+    pub(super) sparkplug_host: Option<super::sparkplug_host::HostStatsSource>,
 }
 
 impl StackMetrics {
@@ -196,6 +198,9 @@ impl gridscada_web::metrics::MetricsSource for StackMetrics {
         self.render_audit(out);
         if let Some(p) = &self.pair {
             crate::pair::render_metrics(p, out);
+        }
+        if let Some(host) = &self.sparkplug_host {
+            super::sparkplug_host::render(&host(), out);
         }
         let poll = self.poll.stats();
         for d in &poll.devices {

@@ -22,6 +22,7 @@ mod alarms;
 mod clocks;
 mod devices;
 mod microgrid;
+mod mqtt_host;
 mod overlaps;
 mod panels;
 mod redundancy;
@@ -30,6 +31,7 @@ mod tags;
 use clocks::check_time_tags;
 use devices::check_device;
 use microgrid::check_microgrid;
+use mqtt_host::check_mqtt_host;
 use overlaps::check_overlaps;
 use panels::check_panel;
 use tags::{check_tag, check_tag_name};
@@ -268,11 +270,16 @@ fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
             );
         }
     }
-    if main.tag_files.is_empty() {
+    if let Some(mqtt) = &main.mqtt {
+        check_mqtt_host(cx, mqtt);
+    }
+    // A central Sparkplug host may have no devices of its own.
+    let central = main.mqtt.as_ref().is_some_and(|m| m.host.is_some());
+    if main.tag_files.is_empty() && !central {
         cx.err(
             0,
             0..0,
-            "tag_files is empty: a plant needs at least one tag file",
+            "tag_files is empty: a plant needs at least one tag file (or [mqtt.host], a central host)",
         );
     }
 }

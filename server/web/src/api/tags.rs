@@ -60,10 +60,23 @@ pub struct TagSource {
 
 impl WebState {
     pub fn write_role(&self, name: &str) -> Option<Role> {
-        self.tag_index
-            .get(&self.plant, name)
-            .filter(|t| *t.writable.get_ref())
-            .and_then(|t| t.write_role.as_ref().map(|r| *r.get_ref()))
+        match self.tag_index.get(&self.plant, name) {
+            Some(t) => t
+                .writable
+                .get_ref()
+                .then(|| t.write_role.as_ref().map(|r| *r.get_ref()))
+                .flatten(),
+            // A remote tag of a central Sparkplug host: writable as its
+            // birth says, by `[mqtt.host] write_role`.
+            None => {
+                let host = self.plant.mqtt.as_ref()?.host.as_ref()?;
+                let id = self.db.id(name)?;
+                self.db
+                    .meta(id)
+                    .filter(|m| m.writable)
+                    .map(|_| *host.write_role.get_ref())
+            }
+        }
     }
 
     pub fn tag_view(&self, id: TagId, meta: &TagMeta) -> Option<TagView> {
@@ -75,9 +88,7 @@ impl WebState {
             units: meta.units.clone(),
             kind: meta.kind,
             writable: meta.writable,
-            write_role: config
-                .filter(|t| *t.writable.get_ref())
-                .and_then(|t| t.write_role.as_ref().map(|r| *r.get_ref())),
+            write_role: self.write_role(&meta.name),
             source: config.map(|t| TagSource {
                 device: t.device.get_ref().clone(),
                 table: *t.kind.get_ref(),

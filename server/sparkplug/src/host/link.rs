@@ -1,0 +1,479 @@
+//! The host's MQTT session: connect, subscribe, publish `STATE`, and feed
+//! every message of the group through [`Sites`] into the tag database.
+//!
+//! MERGE NOTE: the connection options here (broker URL, client id, keep
+//! alive, will) are the host's minimal own; they belong in the crate's
+//! shared `connection.rs` (TLS, credentials, `[mqtt]` keys) once both
+//! parts are on one branch. Only [`HostOptions::mqtt_options`] builds them.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use gridscada_tagdb::{Clock, TagDb, TagWriter};
+use parking_lot::Mutex;
+use prost::Message;
+use rumqttc::{AsyncClient, Event, EventLoop, LastWill, MqttOptions, Packet, QoS};
+use tokio::sync::{mpsc, watch};
+use tokio::task::JoinHandle;
+
+use super::sites::{Sites, SitesPolicy, HOST_OFFLINE};
+use super::stats::{Counters, HostStats};
+use super::writer::{Pending, RoutedWriter};
+use crate::proto::Payload;
+use crate::topic::{MessageType, Topic, NAMESPACE};
+
+/// How to run the central host (from `[mqtt]` and `[mqtt.host]`).
+#[derive(Debug, Clone)]
+pub struct HostOptions {
+    /// `mqtt://host:port` (or `tcp://`).
+    pub broker: String,
+    pub host_id: String,
+    pub sites: SitesPolicy,
+    /// A larger message is counted and dropped, not decoded.
+    pub max_message_bytes: usize,
+    /// How long a write waits for the edge to report the value.
+    pub write_timeout: Duration,
+    /// The host's own MQTT keep-alive.
+    pub keep_alive: Duration,
+}
+
+impl HostOptions {
+    fn mqtt_options(&self, will: Vec<u8>) -> Result<MqttOptions, String> {
+        let rest = self
+            .broker
+            .strip_prefix("mqtt://")
+            .or_else(|| self.broker.strip_prefix("tcp://"))
+            .ok_or_else(|| format!("broker '{}' must be mqtt://host:port", self.broker))?;
+        let (host, port) = rest
+            .rsplit_once(':')
+            .and_then(|(h, p)| Some((h, p.parse::<u16>().ok()?)))
+            .ok_or_else(|| format!("broker '{}' needs a port", self.broker))?;
+        let mut o = MqttOptions::new(format!("gridscada-host-{}", self.host_id), host, port);
+        o.set_keep_alive(self.keep_alive)
+            .set_clean_session(true)
+            // The protocol's own limit: refusing larger messages is ours to
+            // do (counted, the session kept), not the client's (which would
+            // drop the connection).
+            .set_max_packet_size(256 * 1024 * 1024, 1024 * 1024)
+            .set_last_will(LastWill::new(
+                self.state_topic(),
+                will,
+                QoS::AtLeastOnce,
+                true,
+            ));
+        Ok(o)
+    }
+
+    fn state_topic(&self) -> String {
+        Topic::State {
+            host_id: self.host_id.clone(),
+        }
+        .to_string()
+    }
+}
+
+/// A site going online or offline, or the host losing the broker: for the
+/// event log.
+#[derive(Debug, Clone)]
+pub struct SiteNotice {
+    /// The edge node, or "broker".
+    pub source: String,
+    /// Whether `source` is now online (born, connected).
+    pub online: bool,
+    pub message: String,
+}
+
+/// State shared by the session task and the writer.
+pub(crate) struct Shared {
+    pub db: Arc<TagDb>,
+    pub clock: Arc<dyn Clock>,
+    pub sites: Mutex<Sites>,
+    pub pending: Mutex<Pending>,
+    pub counters: Counters,
+    pub client: AsyncClient,
+    pub write_timeout: Duration,
+    /// Never waited for: a full channel drops the notice (logged anyway).
+    pub notices: Option<mpsc::Sender<SiteNotice>>,
+}
+
+impl Shared {
+    fn notice(&self, source: &str, online: bool, message: String) {
+        if let Some(tx) = &self.notices {
+            let _ = tx.try_send(SiteNotice {
+                source: source.to_owned(),
+                online,
+                message,
+            });
+        }
+    }
+}
+
+/// The running central host.
+pub struct Host {
+    shared: Arc<Shared>,
+    stop: watch::Sender<bool>,
+    task: JoinHandle<()>,
+}
+
+/// The Sparkplug 3.0 STATE body.
+fn state_body(online: bool, timestamp: i64) -> Vec<u8> {
+    serde_json::json!({ "online": online, "timestamp": timestamp })
+        .to_string()
+        .into_bytes()
+}
+
+impl Host {
+    /// Starts the session task. Remote tags go into `db`'s reserved room;
+    /// sites going online and offline are told on `notices`.
+    pub fn start(
+        opts: HostOptions,
+        db: Arc<TagDb>,
+        clock: Arc<dyn Clock>,
+        notices: Option<mpsc::Sender<SiteNotice>>,
+    ) -> Result<Host, String> {
+        // One timestamp for the will and every online STATE of this run,
+        // as Sparkplug 3.0 asks: a host's birth and death certificates match.
+        let born = gridscada_tagdb::Timestamp::now_utc().as_millis();
+        let mqtt = opts.mqtt_options(state_body(false, born))?;
+        let (client, events) = AsyncClient::new(mqtt, 256);
+        let shared = Arc::new(Shared {
+            db,
+            clock,
+            sites: Mutex::new(Sites::new(opts.sites.clone())),
+            pending: Mutex::new(Pending::default()),
+            counters: Counters::default(),
+            client,
+            write_timeout: opts.write_timeout,
+            notices,
+        });
+        let (stop, stop_rx) = watch::channel(false);
+        let task = tokio::spawn(run(opts, shared.clone(), events, born, stop_rx));
+        Ok(Host { shared, stop, task })
+    }
+
+    /// The writer for the whole server: remote tags as commands to their
+    /// edge, the rest to `local` (the field writer).
+    pub fn writer(&self, local: Option<Arc<dyn TagWriter>>) -> Arc<dyn TagWriter> {
+        Arc::new(RoutedWriter {
+            shared: self.shared.clone(),
+            local,
+        })
+    }
+
+    pub fn stats(&self) -> HostStats {
+        self.shared.counters.snapshot()
+    }
+
+    /// A handle that reads the figures (for `/metrics`) after `self` moves.
+    pub fn stats_source(&self) -> impl Fn() -> HostStats + Send + Sync + 'static {
+        let shared = self.shared.clone();
+        move || shared.counters.snapshot()
+    }
+
+    /// Publishes STATE offline and disconnects.
+    pub async fn shutdown(self) {
+        self.stop.send_replace(true);
+        if tokio::time::timeout(Duration::from_secs(3), self.task)
+            .await
+            .is_err()
+        {
+            tracing::warn!("the Sparkplug host did not stop within 3 s");
+        }
+    }
+}
+
+async fn run(
+    opts: HostOptions,
+    shared: Arc<Shared>,
+    mut events: EventLoop,
+    born: i64,
+    mut stop: watch::Receiver<bool>,
+) {
+    let state_topic = opts.state_topic();
+    let group_topic = format!("{NAMESPACE}/{}/#", opts.sites.group);
+    let mut connected = false;
+    let mut ever_connected = false;
+    let mut gate = LogGate::default();
+    loop {
+        let event = tokio::select! {
+            biased;
+            _ = stop.changed() => break,
+            e = events.poll() => e,
+        };
+        match event {
+            Ok(Event::Incoming(Packet::ConnAck(_))) => {
+                if ever_connected {
+                    shared.counters.reconnect();
+                    shared.notice(
+                        "broker",
+                        true,
+                        format!("central host connected to the broker {} again", opts.broker),
+                    );
+                }
+                tracing::info!(broker = %opts.broker, group = %opts.sites.group, "Sparkplug host connected");
+                connected = true;
+                ever_connected = true;
+                shared.counters.set_connected(true);
+                let c = &shared.client;
+                // Its own STATE first (to answer a stale offline), then the
+                // group, then online: edge nodes rebirth on it.
+                let ok = c.try_subscribe(&state_topic, QoS::AtLeastOnce).is_ok()
+                    && c.try_subscribe(&group_topic, QoS::AtLeastOnce).is_ok()
+                    && c.try_publish(&state_topic, QoS::AtLeastOnce, true, state_body(true, born))
+                        .is_ok();
+                if !ok {
+                    tracing::error!("the Sparkplug host could not queue its subscriptions");
+                }
+                // After a lost session every node must be born again.
+                let now = shared.clock.now();
+                let nodes = shared.sites.lock().known_nodes();
+                for node in nodes {
+                    request_rebirth(&shared, &node, now);
+                }
+            }
+            Ok(Event::Incoming(Packet::Publish(p))) => {
+                on_publish(
+                    &mut gate,
+                    &opts,
+                    &shared,
+                    &state_topic,
+                    born,
+                    &p.topic,
+                    &p.payload,
+                );
+            }
+            Ok(_) => {}
+            Err(e) => {
+                if connected {
+                    connected = false;
+                    shared.counters.set_connected(false);
+                    tracing::warn!(broker = %opts.broker, error = %e, "Sparkplug host lost the broker; remote tags are Bad until their sites are born again");
+                    let now = shared.clock.now();
+                    let bad = shared.sites.lock().host_offline(&shared.db, now);
+                    shared.db.apply(bad);
+                    let failed = shared.pending.lock().fail_all(HOST_OFFLINE);
+                    for _ in 0..failed {
+                        shared.counters.write(false);
+                    }
+                    shared
+                        .counters
+                        .set_sites(0, shared.counters.snapshot().tags as usize);
+                } else {
+                    tracing::debug!(broker = %opts.broker, error = %e, "Sparkplug host cannot reach the broker");
+                }
+                // rumqttc reconnects on the next poll; do not spin.
+                tokio::select! {
+                    _ = stop.changed() => break,
+                    _ = tokio::time::sleep(Duration::from_secs(1)) => {}
+                }
+            }
+        }
+    }
+    // An orderly stop: say so, rather than leave it to the will.
+    if connected {
+        let c = &shared.client;
+        let _ = c.try_publish(
+            &state_topic,
+            QoS::AtLeastOnce,
+            true,
+            state_body(false, born),
+        );
+        let _ = c.try_disconnect();
+        let _ = tokio::time::timeout(Duration::from_secs(2), async {
+            loop {
+                match events.poll().await {
+                    Ok(Event::Outgoing(rumqttc::Outgoing::Disconnect)) | Err(_) => break,
+                    Ok(_) => {}
+                }
+            }
+        })
+        .await;
+    }
+    shared.counters.set_connected(false);
+}
+
+fn request_rebirth(shared: &Shared, node: &str, now: gridscada_tagdb::Timestamp) {
+    let (topic, payload) = shared.sites.lock().rebirth_command(node, now);
+    match shared.client.try_publish(
+        topic.to_string(),
+        QoS::AtLeastOnce,
+        false,
+        payload.encode_to_vec(),
+    ) {
+        Ok(()) => {
+            shared.counters.rebirth();
+            tracing::info!(node, "asked the edge node for a rebirth");
+        }
+        Err(e) => tracing::warn!(node, error = %e, "rebirth request not sent"),
+    }
+}
+
+/// At most one warning per kind of problem every 10 s: a peer that floods
+/// bad messages is counted in full and logged in sample.
+#[derive(Default)]
+struct LogGate(HashMap<&'static str, (Instant, u64)>);
+
+impl LogGate {
+    /// How many warnings of `kind` were held back since the last one, if
+    /// one may be logged now.
+    fn pass(&mut self, kind: &'static str) -> Option<u64> {
+        let now = Instant::now();
+        match self.0.get_mut(kind) {
+            Some((last, held)) if now.duration_since(*last) < Duration::from_secs(10) => {
+                *held += 1;
+                None
+            }
+            Some((last, held)) => {
+                *last = now;
+                Some(std::mem::take(held))
+            }
+            None => {
+                self.0.insert(kind, (now, 0));
+                Some(0)
+            }
+        }
+    }
+}
+
+fn on_publish(
+    gate: &mut LogGate,
+    opts: &HostOptions,
+    shared: &Shared,
+    state_topic: &str,
+    born: i64,
+    topic_text: &str,
+    body: &[u8],
+) {
+    let counters = &shared.counters;
+    if body.len() > opts.max_message_bytes {
+        counters.bytes(body.len());
+        counters.problem("oversized");
+        if let Some(held_back) = gate.pass("oversized") {
+            tracing::warn!(
+                topic = topic_text,
+                bytes = body.len(),
+                max = opts.max_message_bytes,
+                held_back,
+                "Sparkplug message larger than max_message_bytes, dropped"
+            );
+        }
+        return;
+    }
+    let Some(topic) = Topic::parse(topic_text) else {
+        counters.bytes(body.len());
+        counters.problem("bad_topic");
+        if let Some(held_back) = gate.pass("bad_topic") {
+            tracing::warn!(
+                topic = topic_text,
+                held_back,
+                "not a Sparkplug B topic, dropped"
+            );
+        }
+        return;
+    };
+    let kind = match &topic {
+        Topic::State { .. } => "STATE",
+        Topic::Message { kind, .. } => kind.as_str(),
+    };
+    counters.message(kind, body.len());
+    if let Topic::State { .. } = topic {
+        // Another session (or the broker's will) says this host is offline
+        // while it runs: say online again.
+        if topic_text == state_topic {
+            let online = serde_json::from_slice::<serde_json::Value>(body)
+                .ok()
+                .and_then(|v| v.get("online")?.as_bool());
+            if online == Some(false) {
+                let _ = shared.client.try_publish(
+                    state_topic,
+                    QoS::AtLeastOnce,
+                    true,
+                    state_body(true, born),
+                );
+            }
+        }
+        return;
+    }
+    let payload = match Payload::decode(body) {
+        Ok(p) => p,
+        Err(e) => {
+            counters.problem("malformed");
+            if let Some(held_back) = gate.pass("malformed") {
+                tracing::warn!(topic = topic_text, error = %e, held_back, "malformed Sparkplug payload, dropped");
+            }
+            return;
+        }
+    };
+    let now = shared.clock.now();
+    let (fx, online, tags) = {
+        let mut sites = shared.sites.lock();
+        let fx = sites.handle(&shared.db, &topic, &payload, now);
+        (fx, sites.online(), sites.remote_tags())
+    };
+    for p in &fx.problems {
+        counters.problem(p.label());
+        if let Some(held_back) = gate.pass(p.label()) {
+            tracing::warn!(topic = topic_text, held_back, "{p}");
+        }
+    }
+    if let (
+        true,
+        Topic::Message {
+            kind, edge_node, ..
+        },
+    ) = (fx.online_changed, &topic)
+    {
+        let online = *kind == MessageType::NBirth;
+        let message = if online {
+            format!("{edge_node} born (NBIRTH): online, its tags Good")
+        } else {
+            format!("{edge_node} died (NDEATH): offline, its tags Bad")
+        };
+        tracing::info!("{message}");
+        shared.notice(edge_node, online, message);
+    }
+    if fx.added > 0 {
+        tracing::info!(
+            topic = topic_text,
+            added = fx.added,
+            "remote tags added from a birth"
+        );
+    }
+    if !fx.samples.is_empty() {
+        shared.db.apply(fx.samples.iter().cloned());
+        // After the apply: a confirmed write's answer shows the new value.
+        let sites = shared.sites.lock();
+        shared.pending.lock().offer(&fx.samples, |id| {
+            sites.remote(id).map(|r| r.node.clone()).unwrap_or_default()
+        });
+    }
+    counters.set_sites(online, tags);
+    if let Some(node) = fx.rebirth {
+        request_rebirth(shared, &node, now);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_flood_of_one_problem_is_logged_once_per_window() {
+        let mut gate = LogGate::default();
+        assert_eq!(gate.pass("malformed"), Some(0));
+        assert_eq!(gate.pass("malformed"), None);
+        assert_eq!(gate.pass("malformed"), None);
+        // Another kind has its own window.
+        assert_eq!(gate.pass("oversized"), Some(0));
+        // The window over, the next warning says how many were held back.
+        gate.0.get_mut("malformed").unwrap().0 -= Duration::from_secs(11);
+        assert_eq!(gate.pass("malformed"), Some(2));
+    }
+
+    #[test]
+    fn the_state_body_is_sparkplug_3_json() {
+        let v: serde_json::Value = serde_json::from_slice(&state_body(true, 1234)).unwrap();
+        assert_eq!(v, serde_json::json!({"online": true, "timestamp": 1234}));
+    }
+}
