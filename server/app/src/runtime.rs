@@ -26,6 +26,7 @@ use crate::{demo_plant, settings, sinks, users};
 
 #[cfg(test)]
 mod audit_tests;
+pub mod northbound;
 #[cfg(test)]
 mod shutdown_tests;
 mod sources;
@@ -90,10 +91,11 @@ pub async fn demo(
     data: PathBuf,
     config: Option<PathBuf>,
     scenario: Option<Box<dyn LiveDriver>>,
+    mqtt: Option<northbound::DemoMqtt>,
 ) -> ExitCode {
     report(
         async {
-            let plant = match (&scenario, &config) {
+            let mut plant = match (&scenario, &config) {
                 (Some(live), _) => live.plant().clone(),
                 (None, Some(c)) => gridscada_config::load_path(c)
                     .map_err(|d| diagnostics("the configuration", d))?,
@@ -106,6 +108,9 @@ pub async fn demo(
                 return Err(anyhow!(
                     "the demo prints its passwords and serves a simulated plant, so it only binds loopback addresses; --http {addr} is not one"
                 ));
+            }
+            if let Some(m) = &mqtt {
+                northbound::enable_demo(&mut plant, m)?;
             }
             run(plant, addr, &data, Mode::Demo, scenario).await
         }
@@ -245,6 +250,8 @@ pub struct Stack {
     pub dispatch: Option<watch::Receiver<DispatchStatus>>,
     pub simulator: Option<gridscada_sim::Simulator>,
     pub events: mpsc::Sender<NewEvent>,
+    /// The MQTT Sparkplug B edge node (`[mqtt.edge]`), once started.
+    pub mqtt_edge: Option<gridscada_sparkplug::edge::EdgeNode>,
     field: gridscada_modbus::FieldIo,
     historian: gridscada_store::Historian,
     /// Events and alarm transitions on their way to the store (or spool).
@@ -479,6 +486,7 @@ impl Stack {
             dispatch: dispatch_rx,
             simulator,
             events: events_tx,
+            mqtt_edge: None,
             field,
             historian,
             audit,
@@ -505,6 +513,10 @@ impl Stack {
     /// writer (which writes everything offered). Returns the historian's
     /// final figures, the ones it logs.
     pub async fn shutdown(mut self) -> gridscada_store::HistorianMetrics {
+        // The edge node first: its NDEATH says the node is going.
+        if let Some(edge) = self.mqtt_edge.take() {
+            edge.shutdown().await;
+        }
         self.field.shutdown().await;
         if let Some(sim) = self.simulator.take() {
             sim.shutdown().await;
@@ -571,6 +583,14 @@ async fn run(
         },
     )
     .await?;
+    let mut stack = stack;
+    match northbound::start_edge(&stack, data) {
+        Ok(edge) => stack.mqtt_edge = edge,
+        Err(e) => {
+            stack.shutdown().await;
+            return Err(e);
+        }
+    }
     let clock = stack.clock.clone();
     let store = stack.store.clone();
     let events_tx = stack.events.clone();
@@ -709,6 +729,7 @@ pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
             poll: stack.field.stats_handle(),
             historian: stack.historian.handle(),
             audit: stack.audit.handle(),
+            mqtt: stack.mqtt_edge.as_ref().map(|e| e.metrics()),
         })),
         screens: Default::default(),
         tag_index: Arc::new(gridscada_web::access::TagIndex::new(&stack.plant)),
