@@ -188,6 +188,11 @@ class Api:
         with self.opener.open(self.base + path, timeout=20) as r:
             return json.loads(r.read())
 
+    def post(self, path):
+        req = urllib.request.Request(self.base + path, data=b"", method="POST", headers={"Origin": self.base})
+        with self.opener.open(req, timeout=20) as r:
+            return r.status
+
     def tags(self):
         return {t["name"]: t for t in self.get("/api/tags")["tags"]}
 
@@ -327,6 +332,8 @@ def run(args, host, broker):
           json.dumps(dict(list(missing.items())[:8]), default=str))
 
     commands(args, host, api, tags)
+    device_death(host, api, devices)
+    rebirth(host)
     outage(args, host, api, broker)
     with host.lock:
         check("seq runs 0..255 without a gap within each session, no DDATA before its DBIRTH",
@@ -421,6 +428,56 @@ def commands(args, host, api, tags):
     check(f"no write of {ro} went out", f"requests {ro}:" not in text and f"wrote {ro}" not in text, "")
     check("refused DCMDs are in the event log", "may not write" in text and "read-only" in text, text[:300])
     check("the edge is still up after bad input", wait_for(lambda: api.metrics().get("gridscada_mqtt_connected") == 1.0, 5), "")
+
+
+def messages_since(host, n, kind, device=None):
+    with host.lock:
+        return [p for _, k, d, p in host.messages[n:] if k == kind and (device is None or d == device)]
+
+
+def device_death(host, api, devices):
+    """A device that stops answering: DDEATH; back: DBIRTH with Good values."""
+    device = devices[0]
+    n = len(host.messages)
+    api.post(f"/api/sim/devices/{device}/offline")
+    died = wait_for(lambda: bool(messages_since(host, n, "DDEATH", device)), 20)
+    check(f"{device} taken off line: its DDEATH", died, "none within 20 s")
+    with host.lock:
+        stray = [p for _, k, d, p in host.messages[n:] if k == "DDATA" and d == device]
+        after_death = False
+        bad_ddata = False
+        for _, k, d, _p in host.messages[n:]:
+            if d != device:
+                continue
+            if k == "DDEATH":
+                after_death = True
+            elif k == "DDATA" and after_death:
+                bad_ddata = True
+    check(f"no DDATA for {device} while it is dead", not bad_ddata, len(stray))
+    n = len(host.messages)
+    api.post(f"/api/sim/devices/{device}/online")
+    wait_for(lambda: messages_since(host, n, "DBIRTH", device), 30)
+    born = messages_since(host, n, "DBIRTH", device)
+    check(f"{device} back: a new DBIRTH", bool(born), "none within 30 s")
+    if born:
+        q = [props(m).get("Quality") for m in born[0].metrics]
+        good = wait_for(lambda: all(t["quality"]["code"] == "good" for t in api.tags().values()
+                                    if (t.get("source") or {}).get("device") == device), 15)
+        check(f"its DBIRTH carries its tags with quality (Good once read: {q.count(192)} of {len(q)})", good and len(q) > 0, q[:5])
+
+
+def rebirth(host):
+    """NCMD Node Control/Rebirth: NBIRTH (seq 0, same bdSeq) and every DBIRTH again."""
+    with host.lock:
+        bd = host.bd_seq
+        devices = len(host.births)
+    n = len(host.messages)
+    host.rebirth()
+    ok_ = wait_for(lambda: len(messages_since(host, n, "DBIRTH")) >= devices, 15)
+    nb = messages_since(host, n, "NBIRTH")
+    check(f"NCMD rebirth: NBIRTH and {devices} DBIRTHs again, same bdSeq",
+          ok_ and len(nb) == 1 and nb[0].seq == 0 and host.bd_seq == bd,
+          (len(nb), len(messages_since(host, n, "DBIRTH")), bd, host.bd_seq))
 
 
 def outage(args, host, api, broker):
