@@ -136,6 +136,9 @@ impl EdgeNode {
         let metrics = Arc::new(EdgeMetrics::default());
         EdgeMetrics::add(&metrics.buffered, buffer.len() as u64);
         let (stop, stop_rx) = watch::channel(false);
+        // The session task stops after the edge loop, which says goodbye
+        // (NDEATH, DISCONNECT) through it first.
+        let (session_stop, session_stop_rx) = watch::channel(false);
         let (session_tx, session_rx) = mpsc::channel(1024);
         let death_topic = Topic::node(&group, MessageType::NDeath, &node).to_string();
         tokio::spawn(session::run(
@@ -143,7 +146,7 @@ impl EdgeNode {
             death_topic,
             session::BdSeqFile(dir.join("bdseq")),
             session_tx,
-            stop_rx.clone(),
+            session_stop_rx,
         ));
         let model = EdgeModel::new(&ctx.plant, &ctx.db, &edge);
         let keep_alive = Duration::from_secs(*mqtt.keep_alive_s.get_ref());
@@ -166,6 +169,7 @@ impl EdgeNode {
             writes: Arc::new(Semaphore::new(MAX_WRITES_IN_FLIGHT)),
             metrics: metrics.clone(),
             sessions: 0,
+            session_stop,
         };
         let task = tokio::spawn(state.run(session_rx, stop_rx));
         Ok(EdgeNode {
@@ -218,6 +222,7 @@ struct Edge {
     writes: Arc<Semaphore>,
     metrics: Arc<EdgeMetrics>,
     sessions: u64,
+    session_stop: watch::Sender<bool>,
 }
 
 /// What a recent window of sent data may hold at most (metrics).
@@ -266,6 +271,7 @@ impl Edge {
             // Let the session task send them before it stops.
             tokio::time::sleep(Duration::from_millis(200)).await;
         }
+        self.session_stop.send_replace(true);
         if let Err(e) = self.buffer.flush() {
             tracing::error!(error = %e, "could not write the MQTT buffer");
         }
