@@ -196,6 +196,24 @@ fn a_plaintext_password_in_the_file_is_a_located_warning_not_an_error() {
     );
     assert!(w[0].contains("GRIDSCADA_STORAGE_PASSWORD"), "{w:?}");
     assert!(!w[0].contains("s3cret"), "{w:?}");
+    // A broker password in the file: located, and not shown.
+    let p = load(
+        dir.path(),
+        "[mqtt]\nbroker = \"mqtt://b:1883\"\ngroup = \"G\"\nusername = \"u\"\npassword = \"br0ker\"\n",
+    );
+    let w: Vec<String> = p.warnings.iter().map(|w| w.to_string()).collect();
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert!(
+        w[0].starts_with(&format!(
+            "{}:6:12: warning: [mqtt] password is in the file",
+            main.display()
+        )),
+        "{w:?}"
+    );
+    assert!(
+        w[0].contains("GRIDSCADA_MQTT_PASSWORD") && !w[0].contains("br0ker"),
+        "{w:?}"
+    );
     // No password, or SQLite: no warning.
     for url in ["postgres://scada@db/scada", "sqlite://gridscada.db"] {
         let p = load(dir.path(), &format!("[storage]\nurl = \"{url}\"\n"));
