@@ -413,6 +413,13 @@ def commands(args, host, api, tags):
                          dcmd_payload(alias=sup[1], datatype=10, value=1.0)))
     for _, dev, payload in refusals:
         host.command("DCMD", dev, payload)
+    flood = spb.Payload()
+    for i in range(50):
+        m = flood.metrics.add()
+        m.alias = 900000000 + i
+        m.datatype = 11
+        m.boolean_value = True
+    host.command("DCMD", device, flood.SerializeToString())
     host.command("DCMD", device, b"\xff\x01garbage not protobuf")
     host.command("DCMD", device, b"\x00" * (300 * 1024))
     host.command("NCMD", None, b"\x08")
@@ -420,13 +427,17 @@ def commands(args, host, api, tags):
     after = api.metrics()
     refused = after.get('gridscada_mqtt_commands_total{outcome="refused"}', 0) - before.get('gridscada_mqtt_commands_total{outcome="refused"}', 0)
     malformed = after.get("gridscada_mqtt_malformed_messages_total", 0) - before.get("gridscada_mqtt_malformed_messages_total", 0)
-    check(f"{len(refusals)} refused DCMDs are counted", refused >= len(refusals), f"refused +{refused}")
+    check(f"{len(refusals)} refused DCMDs and a DCMD of 50 unknown metrics are counted",
+          refused >= len(refusals) + 50, f"refused +{refused}")
     check("malformed and oversized messages are counted", malformed >= 3, f"malformed +{malformed}")
     now = api.tags()
     check(f"nothing changed: {target} is still {old}", now[target]["value"] == old, now[target]["value"])
     text = json.dumps(api.get("/api/events?limit=200"))
     check(f"no write of {ro} went out", f"requests {ro}:" not in text and f"wrote {ro}" not in text, "")
     check("refused DCMDs are in the event log", "may not write" in text and "read-only" in text, text[:300])
+    check("a flood of refused metrics is summarized in the event log, not one record each",
+          "30 more metrics of one DCMD" in text and text.count("may not write alias 9000000") == 20,
+          text.count("may not write alias 9000000"))
     check("the edge is still up after bad input", wait_for(lambda: api.metrics().get("gridscada_mqtt_connected") == 1.0, 5), "")
 
 

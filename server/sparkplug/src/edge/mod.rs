@@ -41,6 +41,8 @@ use model::{EdgeModel, Seq};
 /// At most this many metrics go in one DDATA (a large device's changes
 /// are split), so that no message grows past what brokers take by default.
 pub const MAX_METRICS_PER_MESSAGE: usize = 5000;
+/// Refusals of one DCMD audited one by one; the rest in one record.
+const MAX_AUDITED_REFUSALS: usize = 20;
 /// DCMD writes in flight at once; more are refused as busy.
 const MAX_WRITES_IN_FLIGHT: usize = 16;
 /// The folder of the edge's files in the data folder.
@@ -170,6 +172,7 @@ impl EdgeNode {
             metrics: metrics.clone(),
             sessions: 0,
             session_stop,
+            refused_in_message: 0,
         };
         let task = tokio::spawn(state.run(session_rx, stop_rx));
         Ok(EdgeNode {
@@ -223,6 +226,8 @@ struct Edge {
     metrics: Arc<EdgeMetrics>,
     sessions: u64,
     session_stop: watch::Sender<bool>,
+    /// Refusals of the DCMD being handled.
+    refused_in_message: usize,
 }
 
 /// What a recent window of sent data may hold at most (metrics).
@@ -681,6 +686,7 @@ impl Edge {
     }
 
     async fn on_dcmd(&mut self, device: &str, payload: Payload) {
+        self.refused_in_message = 0;
         let who = Commander {
             user: None,
             label: format!(
@@ -699,6 +705,7 @@ impl Edge {
             if payload.metrics.is_empty() {
                 self.malformed(device, "a DCMD to an unknown device");
             }
+            self.summarize_refusals(&who, device);
             return;
         };
         for m in payload.metrics {
@@ -745,12 +752,40 @@ impl Edge {
                 }
             });
         }
+        self.summarize_refusals(&who, device);
+    }
+
+    /// One audit record for the refusals of a message beyond the ones
+    /// audited one by one.
+    fn summarize_refusals(&self, who: &Commander, device: &str) {
+        let more = self.refused_in_message.saturating_sub(MAX_AUDITED_REFUSALS);
+        if more == 0 {
+            return;
+        }
+        tracing::warn!(%device, refused = more, "Sparkplug DCMD: more metrics refused");
+        let (audit, who, device, ts) = (
+            self.ctx.audit.clone(),
+            who.clone(),
+            device.to_string(),
+            self.ctx.clock.now(),
+        );
+        let why =
+            format!("{more} more metrics of one DCMD to device '{device}' refused (see the log)");
+        tokio::spawn(async move { audit_refused(&*audit, ts, &who, &device, &why).await });
     }
 
     /// Refuses one command: logged, counted and audited (in the background,
-    /// so that a slow store does not hold up publishing).
-    fn refuse(&self, who: &Commander, name: &str, why: &str) {
+    /// so that a slow store does not hold up publishing). Of one message,
+    /// the first [`MAX_AUDITED_REFUSALS`] are audited one by one and the
+    /// rest in one record, so that a flood of bad metrics cannot flood the
+    /// event log.
+    fn refuse(&mut self, who: &Commander, name: &str, why: &str) {
         EdgeMetrics::add(&self.metrics.commands_refused, 1);
+        self.refused_in_message += 1;
+        if self.refused_in_message > MAX_AUDITED_REFUSALS {
+            tracing::debug!(tag = %name, %why, "Sparkplug DCMD refused");
+            return;
+        }
         tracing::warn!(tag = %name, %why, "Sparkplug DCMD refused");
         let (audit, who, name, why, ts) = (
             self.ctx.audit.clone(),
