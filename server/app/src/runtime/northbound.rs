@@ -34,6 +34,19 @@ pub fn enable_demo(plant: &mut Plant, demo: &DemoMqtt) -> anyhow::Result<()> {
             demo.node
         );
     }
+    // What validation checks for a configured [mqtt.edge]: every device is a
+    // Sparkplug device, named by a topic level, and none takes the name of
+    // the server's own.
+    if let Some(d) = plant.devices.iter().find(|d| {
+        let name = d.name.get_ref();
+        !gridscada_sparkplug::topic::valid_id(name) || name == gridscada_config::DERIVED_DEVICE
+    }) {
+        anyhow::bail!(
+            "--mqtt: device '{}' cannot be a Sparkplug device (a topic level without '/', '+' or '#', and not '{}')",
+            d.name.get_ref(),
+            gridscada_config::DERIVED_DEVICE
+        );
+    }
     let s = |v: &str| Spanned::new(0..0, v.to_string());
     plant.mqtt = Some(MqttConfig {
         broker: s(&demo.broker),
