@@ -60,6 +60,13 @@ enum Command {
         /// Plant seconds per wall second while a scenario runs.
         #[arg(long, default_value_t = 1.0, requires = "scenario")]
         speed: f64,
+        /// Publish the plant as a Sparkplug B edge node to this broker
+        /// (mqtt://host:port), group "gridscada".
+        #[arg(long, value_name = "URL")]
+        mqtt: Option<String>,
+        /// The edge node id with --mqtt.
+        #[arg(long, value_name = "ID", default_value = runtime::northbound::DEMO_NODE, requires = "mqtt")]
+        mqtt_node: String,
     },
     /// Replay a scenario through the whole stack (simulators, Modbus poller,
     /// alarms, historian, fault isolation, dispatch) faster than real time,
@@ -275,6 +282,8 @@ fn main() -> ExitCode {
             config,
             scenario,
             speed,
+            mqtt,
+            mqtt_node,
         } => {
             let live = match scenario {
                 Some(file) => match replay::LiveScenario::load(&file, speed) {
@@ -286,7 +295,11 @@ fn main() -> ExitCode {
                 },
                 None => None,
             };
-            runtime::block_on(runtime::demo(http, data, config, live))
+            let mqtt = mqtt.map(|broker| runtime::northbound::DemoMqtt {
+                broker,
+                node: mqtt_node,
+            });
+            runtime::block_on(runtime::demo(http, data, config, live, mqtt))
         }
         Command::Replay {
             file,

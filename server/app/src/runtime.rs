@@ -26,6 +26,7 @@ use crate::{demo_plant, settings, sinks, users};
 
 #[cfg(test)]
 mod audit_tests;
+pub mod northbound;
 #[cfg(test)]
 mod shutdown_tests;
 mod sources;
@@ -91,10 +92,11 @@ pub async fn demo(
     data: PathBuf,
     config: Option<PathBuf>,
     scenario: Option<Box<dyn LiveDriver>>,
+    mqtt: Option<northbound::DemoMqtt>,
 ) -> ExitCode {
     report(
         async {
-            let plant = match (&scenario, &config) {
+            let mut plant = match (&scenario, &config) {
                 (Some(live), _) => live.plant().clone(),
                 (None, Some(c)) => gridscada_config::load_path(c)
                     .map_err(|d| diagnostics("the configuration", d))?,
@@ -107,6 +109,9 @@ pub async fn demo(
                 return Err(anyhow!(
                     "the demo prints its passwords and serves a simulated plant, so it only binds loopback addresses; --http {addr} is not one"
                 ));
+            }
+            if let Some(m) = &mqtt {
+                northbound::enable_demo(&mut plant, m)?;
             }
             run(plant, addr, &data, Mode::Demo, scenario).await
         }
@@ -251,6 +256,8 @@ pub struct Stack {
     /// The lease keeper's stop signal and task: stopped first, so the
     /// standby takes over at once.
     pair_keeper: Option<(watch::Sender<bool>, tokio::task::JoinHandle<()>)>,
+    /// The MQTT Sparkplug B edge node (`[mqtt.edge]`), once started.
+    pub mqtt_edge: Option<gridscada_sparkplug::edge::EdgeNode>,
     field: gridscada_modbus::FieldIo,
     /// The central Sparkplug B host (`[mqtt.host]`), if configured.
     sparkplug_host: Option<gridscada_sparkplug::host::Host>,
@@ -605,6 +612,7 @@ impl Stack {
             events: events_tx,
             pair,
             pair_keeper,
+            mqtt_edge: None,
             field,
             sparkplug_host,
             historian,
@@ -637,6 +645,10 @@ impl Stack {
         if let Some((stop, keeper)) = self.pair_keeper.take() {
             stop.send_replace(true);
             let _ = keeper.await;
+        }
+        // The edge node first: its NDEATH says the node is going.
+        if let Some(edge) = self.mqtt_edge.take() {
+            edge.shutdown().await;
         }
         self.field.shutdown().await;
         if let Some(host) = self.sparkplug_host.take() {
@@ -707,6 +719,14 @@ async fn run(
         },
     )
     .await?;
+    let mut stack = stack;
+    match northbound::start_edge(&stack, data) {
+        Ok(edge) => stack.mqtt_edge = edge,
+        Err(e) => {
+            stack.shutdown().await;
+            return Err(e);
+        }
+    }
     let clock = stack.clock.clone();
     let store = stack.store.clone();
     let events_tx = stack.events.clone();
@@ -854,6 +874,7 @@ pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
                 .sparkplug_host
                 .as_ref()
                 .map(|h| Arc::new(h.stats_source()) as sparkplug_host::HostStatsSource),
+            mqtt: stack.mqtt_edge.as_ref().map(|e| e.metrics()),
         })),
         screens: Default::default(),
         tag_index: Arc::new(gridscada_web::access::TagIndex::new(&stack.plant)),

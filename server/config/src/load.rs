@@ -194,6 +194,15 @@ pub fn load_with(
             ),
         )));
     }
+    if let Some(password) = main_cfg.mqtt.as_ref().and_then(|m| m.password.as_ref()) {
+        warnings.push(Warning(all_files[0].error_at(
+            password.span(),
+            format!(
+                "[mqtt] password is in the file; keep secrets out of it: give it in {} in the server's environment",
+                crate::overrides::ENV_MQTT_PASSWORD.name
+            ),
+        )));
+    }
     Ok(Plant {
         main_path: main.to_path_buf(),
         data_dir: base.join(&main_cfg.server.data_dir),

@@ -65,8 +65,13 @@ pub const ENV_PUBLIC_ORIGIN: EnvVar = EnvVar {
     setting: "[server] public_origin",
 };
 
+pub const ENV_MQTT_PASSWORD: EnvVar = EnvVar {
+    name: "GRIDSCADA_MQTT_PASSWORD",
+    setting: "[mqtt] password",
+};
+
 /// Every variable [`apply_env`] reads, in the order it applies them.
-pub const ENV_VARS: [EnvVar; 9] = [
+pub const ENV_VARS: [EnvVar; 10] = [
     ENV_STORAGE_URL,
     ENV_STORAGE_PASSWORD,
     ENV_HTTP,
@@ -76,6 +81,7 @@ pub const ENV_VARS: [EnvVar; 9] = [
     ENV_TLS_KEY,
     ENV_BASE_PATH,
     ENV_PUBLIC_ORIGIN,
+    ENV_MQTT_PASSWORD,
 ];
 
 /// Replaces the file's settings with the `GRIDSCADA_*` variables that `get`
@@ -202,6 +208,22 @@ pub fn apply_env(
                 applied.push(ENV_PUBLIC_ORIGIN.name);
             }
             Err(why) => fail(ENV_PUBLIC_ORIGIN, why),
+        }
+    }
+    if let Some(password) = value(ENV_MQTT_PASSWORD, &mut fail) {
+        match &mut plant.mqtt {
+            Some(mqtt) if mqtt.username.is_some() => {
+                mqtt.password = Some(Spanned::new(0..0, password));
+                applied.push(ENV_MQTT_PASSWORD.name);
+            }
+            Some(_) => fail(
+                ENV_MQTT_PASSWORD,
+                "[mqtt] has no username for this password".into(),
+            ),
+            None => fail(
+                ENV_MQTT_PASSWORD,
+                "the configuration has no [mqtt] section".into(),
+            ),
         }
     }
     if errors.is_empty() {

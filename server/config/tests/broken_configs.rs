@@ -562,3 +562,45 @@ fn audit_retention_is_checked_and_located() {
     let got = problems(main, &tags);
     assert!(got[0].contains("event_days"), "{got:?}");
 }
+
+#[test]
+fn mqtt_edge_settings_are_checked_where_they_are() {
+    let tags = format!(
+        "{DEVICE}\n[[tag]]\nname = \"A.Volts\"\ndevice = \"D1\"\nkind = \"input_register\"\naddress = 0\ntype = \"f32\"\n\n[[tag]]\nname = \"A.Cmd\"\ndevice = \"D1\"\nkind = \"coil\"\naddress = 0\nwritable = true\nwrite_role = \"operator\"\n"
+    );
+    let main = format!(
+        "{MAIN}[mqtt]\nbroker = \"tcp://broker:1883\"\ngroup = \"a/b\"\npassword = \"x\"\nkeep_alive_s = 0\n\n[mqtt.edge]\nnode = \"n#1\"\ndeadband = -1.0\nbatch_ms = 5\ncommands = [\"A.Volts\", \"Nope.*\", \"A.Cmd\", \"A.*\"]\n"
+    );
+    assert_problems(
+        &main,
+        &tags,
+        &[
+            "DIR/gridscada.toml:3:10: error: [mqtt] broker: 'tcp://broker:1883' must start with mqtt:// or mqtts://, like mqtt://broker.example:1883",
+            "DIR/gridscada.toml:4:9: error: [mqtt] group: 'a/b' must be a topic level: not empty, without '/', '+' or '#'",
+            "DIR/gridscada.toml:5:12: error: [mqtt] password: given without a username",
+            "DIR/gridscada.toml:6:16: error: [mqtt] keep_alive_s: 0 must be 1 to 3600 seconds",
+            "DIR/gridscada.toml:9:8: error: [mqtt.edge] node: 'n#1' must be a topic level: not empty, without '/', '+' or '#'",
+            "DIR/gridscada.toml:10:12: error: [mqtt.edge] deadband: -1 must be 0 or more",
+            "DIR/gridscada.toml:11:12: error: [mqtt.edge] batch_ms: 5 must be 10 to 60000",
+            "DIR/gridscada.toml:12:13: error: [mqtt.edge] commands: tag 'A.Volts' is not writable",
+            "DIR/gridscada.toml:12:24: error: [mqtt.edge] commands: 'Nope.*' names no tag of the tag files",
+        ],
+    );
+}
+
+#[test]
+fn mqtts_needs_a_ca_file_and_devices_must_be_topic_levels() {
+    let tags =
+        "[[device]]\nname = \"gridscada\"\nprotocol = \"tcp\"\naddress = \"127.0.0.1:1502\"\n";
+    let main = format!(
+        "{MAIN}[mqtt]\nbroker = \"mqtts://broker.example:8883\"\ngroup = \"G\"\n[mqtt.edge]\nnode = \"n1\"\n"
+    );
+    assert_problems(
+        &main,
+        tags,
+        &[
+            "DIR/gridscada.toml:3:10: error: [mqtt] broker: an mqtts:// broker needs ca_file, the CA certificate(s) that signed the broker's certificate (PEM)",
+            "DIR/tags.toml:2:8: error: device 'gridscada': with [mqtt.edge], this name is taken by the Sparkplug device of the server's own tags",
+        ],
+    );
+}

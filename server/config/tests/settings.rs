@@ -83,7 +83,7 @@ fn every_override_replaces_its_setting() {
     let dir = tempfile::tempdir().unwrap();
     let mut p = load(
         dir.path(),
-        "[server]\nhttp = \"127.0.0.1:8080\"\nmetrics_token = \"from-file\"\n[storage]\nurl = \"postgres://scada:old@db/scada\"\n",
+        "[server]\nhttp = \"127.0.0.1:8080\"\nmetrics_token = \"from-file\"\n[storage]\nurl = \"postgres://scada:old@db/scada\"\n[mqtt]\nbroker = \"mqtt://127.0.0.1:1883\"\ngroup = \"G\"\nusername = \"edge\"\n",
     );
     let applied = apply_env(
         &mut p,
@@ -100,9 +100,17 @@ fn every_override_replaces_its_setting() {
             ("GRIDSCADA_TLS_KEY", "/etc/gridscada/key.pem"),
             ("GRIDSCADA_BASE_PATH", "/scada/"),
             ("GRIDSCADA_PUBLIC_ORIGIN", "https://SCADA.example.com:443"),
+            ("GRIDSCADA_MQTT_PASSWORD", "broker secret"),
         ]),
     )
     .unwrap();
+    assert_eq!(
+        p.mqtt
+            .as_ref()
+            .and_then(|m| m.password.as_ref())
+            .map(|p| p.get_ref().as_str()),
+        Some("broker secret")
+    );
     assert_eq!(applied, ENV_VARS.iter().map(|v| v.name).collect::<Vec<_>>());
     assert_eq!(
         p.storage.url.get_ref(),
@@ -188,6 +196,24 @@ fn a_plaintext_password_in_the_file_is_a_located_warning_not_an_error() {
     );
     assert!(w[0].contains("GRIDSCADA_STORAGE_PASSWORD"), "{w:?}");
     assert!(!w[0].contains("s3cret"), "{w:?}");
+    // A broker password in the file: located, and not shown.
+    let p = load(
+        dir.path(),
+        "[mqtt]\nbroker = \"mqtt://b:1883\"\ngroup = \"G\"\nusername = \"u\"\npassword = \"br0ker\"\n",
+    );
+    let w: Vec<String> = p.warnings.iter().map(|w| w.to_string()).collect();
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert!(
+        w[0].starts_with(&format!(
+            "{}:6:12: warning: [mqtt] password is in the file",
+            main.display()
+        )),
+        "{w:?}"
+    );
+    assert!(
+        w[0].contains("GRIDSCADA_MQTT_PASSWORD") && !w[0].contains("br0ker"),
+        "{w:?}"
+    );
     // No password, or SQLite: no warning.
     for url in ["postgres://scada@db/scada", "sqlite://gridscada.db"] {
         let p = load(dir.path(), &format!("[storage]\nurl = \"{url}\"\n"));

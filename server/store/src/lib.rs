@@ -43,6 +43,7 @@ macro_rules! on_backend {
 
 mod alarms;
 mod audit;
+pub mod command;
 mod csv;
 mod dispatch;
 mod error;

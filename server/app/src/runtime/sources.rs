@@ -142,6 +142,8 @@ pub(super) struct StackMetrics {
     pub(super) pair: Option<crate::pair::PairHandle>,
     /// The central Sparkplug host's figures, if one runs.
     pub(super) sparkplug_host: Option<super::sparkplug_host::HostStatsSource>,
+    /// The Sparkplug B edge node's figures, when it runs.
+    pub(super) mqtt: Option<Arc<gridscada_sparkplug::edge::EdgeMetrics>>,
 }
 
 impl StackMetrics {
@@ -193,6 +195,81 @@ impl StackMetrics {
     }
 }
 
+impl StackMetrics {
+    /// The MQTT edge node: messages and bytes each way, sessions, the
+    /// store-and-forward buffer, commands.
+    fn render_mqtt(&self, out: &mut gridscada_web::metrics::Prom) {
+        use gridscada_sparkplug::edge::EdgeMetrics as M;
+        let Some(m) = &self.mqtt else { return };
+        for (name, help, labels, value) in [
+            (
+                "gridscada_mqtt_messages_total",
+                "MQTT messages published (out) and received (in).",
+                [("direction", "out")],
+                &m.messages_sent,
+            ),
+            (
+                "gridscada_mqtt_messages_total",
+                "MQTT messages published (out) and received (in).",
+                [("direction", "in")],
+                &m.messages_received,
+            ),
+            (
+                "gridscada_mqtt_bytes_total",
+                "MQTT payload bytes published (out) and received (in).",
+                [("direction", "out")],
+                &m.bytes_sent,
+            ),
+            (
+                "gridscada_mqtt_bytes_total",
+                "MQTT payload bytes published (out) and received (in).",
+                [("direction", "in")],
+                &m.bytes_received,
+            ),
+            (
+                "gridscada_mqtt_commands_total",
+                "Sparkplug DCMD writes, by outcome.",
+                [("outcome", "written")],
+                &m.commands_written,
+            ),
+            (
+                "gridscada_mqtt_commands_total",
+                "Sparkplug DCMD writes, by outcome.",
+                [("outcome", "failed")],
+                &m.commands_failed,
+            ),
+            (
+                "gridscada_mqtt_commands_total",
+                "Sparkplug DCMD writes, by outcome.",
+                [("outcome", "refused")],
+                &m.commands_refused,
+            ),
+        ] {
+            out.counter(name, help, &labels, M::get(value) as f64);
+        }
+        for (name, help, value) in [
+            ("gridscada_mqtt_reconnects_total", "MQTT sessions after the first (each one a rebirth).", &m.reconnects),
+            ("gridscada_mqtt_replayed_samples_total", "Buffered samples sent as historical data after an outage.", &m.replayed),
+            ("gridscada_mqtt_dropped_samples_total", "Samples lost: the buffer was full, or their device had no birth on replay.", &m.dropped),
+            ("gridscada_mqtt_malformed_messages_total", "Received messages refused: oversized, not Sparkplug B, or not a command of this node.", &m.malformed),
+        ] {
+            out.counter(name, help, &[], M::get(value) as f64);
+        }
+        out.gauge(
+            "gridscada_mqtt_connected",
+            "1 while the edge node has a broker session.",
+            &[],
+            M::get(&m.connected) as f64,
+        );
+        out.gauge(
+            "gridscada_mqtt_buffered_samples",
+            "Samples in the store-and-forward buffer, waiting for the broker.",
+            &[],
+            M::get(&m.buffered) as f64,
+        );
+    }
+}
+
 impl gridscada_web::metrics::MetricsSource for StackMetrics {
     fn render(&self, out: &mut gridscada_web::metrics::Prom) {
         self.render_audit(out);
@@ -202,6 +279,7 @@ impl gridscada_web::metrics::MetricsSource for StackMetrics {
         if let Some(host) = &self.sparkplug_host {
             super::sparkplug_host::render(&host(), out);
         }
+        self.render_mqtt(out);
         let poll = self.poll.stats();
         for d in &poll.devices {
             let l = [("device", d.device.as_str())];

@@ -16,6 +16,28 @@ pub struct MqttConfig {
     pub broker: Spanned<String>,
     /// The Sparkplug group id (the topic's second level).
     pub group: Spanned<String>,
+    /// The MQTT client id; unique on the broker. Default: `gridscada-`
+    /// followed by the edge node id (or the host id).
+    #[serde(default)]
+    pub client_id: Option<Spanned<String>>,
+    /// The broker account, if the broker asks for one.
+    #[serde(default)]
+    pub username: Option<Spanned<String>>,
+    /// Its password; better given as `GRIDSCADA_MQTT_PASSWORD`.
+    #[serde(default)]
+    pub password: Option<Spanned<String>>,
+    /// For `mqtts://`: the CA certificate(s) that signed the broker's
+    /// certificate, PEM. A relative path is taken from the main file's folder.
+    #[serde(default)]
+    pub ca_file: Option<Spanned<String>>,
+    /// The MQTT keep-alive: the broker declares this client dead (and
+    /// publishes its NDEATH) after 1.5 times this without a packet.
+    #[serde(default = "default_keep_alive")]
+    pub keep_alive_s: Spanned<u64>,
+    /// The largest message taken from the broker; a larger one is refused
+    /// and counted (protects against a rogue publisher).
+    #[serde(default = "default_max_message")]
+    pub max_message_bytes: Spanned<usize>,
     /// The edge node (`[mqtt.edge]`), if this server publishes.
     #[serde(default)]
     pub edge: Option<MqttEdgeConfig>,
@@ -25,12 +47,80 @@ pub struct MqttConfig {
     pub host: Option<MqttHostConfig>,
 }
 
+pub const DEFAULT_MQTT_KEEP_ALIVE_S: u64 = 10;
+pub const DEFAULT_MQTT_MAX_MESSAGE_BYTES: usize = 256 * 1024;
+
+fn default_keep_alive() -> Spanned<u64> {
+    Spanned::new(0..0, DEFAULT_MQTT_KEEP_ALIVE_S)
+}
+fn default_max_message() -> Spanned<usize> {
+    Spanned::new(0..0, DEFAULT_MQTT_MAX_MESSAGE_BYTES)
+}
+
+/// The Sparkplug device of an edge node that carries the tags of no Modbus
+/// device (device status, panel sequence and dispatch tags). No configured
+/// device may take this name while the edge is on.
+pub const DERIVED_DEVICE: &str = "gridscada";
+
 /// `[mqtt.edge]`: this server as a Sparkplug B edge node.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MqttEdgeConfig {
     /// The edge node id (the topic's fourth level), unique in the group.
     pub node: Spanned<String>,
+    /// A change of a numeric tag smaller than this (in its engineering
+    /// units) from the last value published is not published. 0: every change.
+    #[serde(default = "zero_f64")]
+    pub deadband: Spanned<f64>,
+    /// Changes are gathered this long into one DDATA per device.
+    #[serde(default = "default_batch_ms")]
+    pub batch_ms: Spanned<u64>,
+    /// While the broker is unreachable, at most this many samples are kept
+    /// on disk (in `DATA/mqtt-buffer/`) to send as historical data; later
+    /// ones are dropped and counted.
+    #[serde(default = "default_buffer_samples")]
+    pub buffer_samples: Spanned<usize>,
+    /// The tags a DCMD may write: names, or a prefix ending in `*`
+    /// (`SS1.*`). Empty: commands are refused.
+    #[serde(default)]
+    pub commands: Vec<Spanned<String>>,
+    /// The role a DCMD write acts with: a tag whose `write_role` is above
+    /// it is refused.
+    #[serde(default = "default_command_role")]
+    pub command_role: Spanned<Role>,
+}
+
+pub const DEFAULT_MQTT_BATCH_MS: u64 = 100;
+pub const DEFAULT_MQTT_BUFFER_SAMPLES: usize = 1_000_000;
+
+fn zero_f64() -> Spanned<f64> {
+    Spanned::new(0..0, 0.0)
+}
+fn default_batch_ms() -> Spanned<u64> {
+    Spanned::new(0..0, DEFAULT_MQTT_BATCH_MS)
+}
+fn default_buffer_samples() -> Spanned<usize> {
+    Spanned::new(0..0, DEFAULT_MQTT_BUFFER_SAMPLES)
+}
+fn default_command_role() -> Spanned<Role> {
+    Spanned::new(0..0, Role::Operator)
+}
+
+impl MqttEdgeConfig {
+    /// Whether the allow-list names this tag (exactly, or by a `PREFIX*`).
+    pub fn allows_command(&self, tag: &str) -> bool {
+        self.commands
+            .iter()
+            .any(|p| pattern_matches(p.get_ref(), tag))
+    }
+}
+
+/// `name` exactly, or a prefix when the pattern ends in `*`.
+pub fn pattern_matches(pattern: &str, tag: &str) -> bool {
+    match pattern.strip_suffix('*') {
+        Some(prefix) => tag.starts_with(prefix),
+        None => pattern == tag,
+    }
 }
 
 /// `[mqtt.host]`: this server as the central Sparkplug B host. It

@@ -22,6 +22,7 @@ mod alarms;
 mod clocks;
 mod devices;
 mod microgrid;
+mod mqtt;
 mod mqtt_host;
 mod overlaps;
 mod panels;
@@ -131,6 +132,9 @@ pub(crate) fn check(
     }
     if let Some(mg) = &main.microgrid {
         check_microgrid(&mut cx, mg, &lookup);
+    }
+    if let Some(m) = &main.mqtt {
+        mqtt::check_mqtt(&mut cx, m, &device_by_name, &tag_by_name);
     }
 }
 

@@ -88,6 +88,19 @@ async fn durable(state: &WebState, event: NewEvent) -> Result<(), String> {
     }
 }
 
+/// The web layer's audit path (the trail, or the store without one) as the
+/// shared audited write takes it.
+pub struct WebAudit<'a>(pub &'a WebState);
+
+impl gridscada_store::command::CommandAudit for WebAudit<'_> {
+    fn durable(
+        &self,
+        event: NewEvent,
+    ) -> std::pin::Pin<Box<dyn std::future::Future<Output = Result<(), String>> + Send + '_>> {
+        Box::pin(durable(self.0, event))
+    }
+}
+
 /// Before a command whose audit record the component itself makes through
 /// the audit trail (a panel sequence, the alarm engine): refuses it (503)
 /// when that record could be neither stored nor spooled now.

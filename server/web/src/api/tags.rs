@@ -8,7 +8,7 @@ use gridscada_tagdb::{Sample, TagId, TagMeta, Value, WriteError};
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
-use crate::api::{audit, audit_first};
+use crate::api::audit;
 use crate::auth::Principal;
 use crate::error::{ApiError, ApiResult};
 use crate::openapi::shapes;
@@ -376,46 +376,34 @@ pub async fn write(
         s.db.get(id)
             .map(|o| o.value.to_string())
             .unwrap_or_default();
-    // The request is on record before it goes to the device.
-    audit_first(
-        &s,
-        &who,
-        "write_request",
+    // The request is on record before it goes to the device (the same
+    // audited write as a Sparkplug DCMD).
+    let commander = gridscada_store::command::Commander {
+        user: who.user.clone(),
+        label: who.audit_name(),
+    };
+    let clock = s.clock.clone();
+    match gridscada_store::command::audited_write(
+        &crate::api::WebAudit(&s),
+        writer.as_ref(),
+        || clock.now(),
+        &commander,
         &name,
-        format!("{} requests {name}: {old} -> {value}", who.audit_name()),
+        &old,
+        value,
     )
-    .await?;
-    match writer.write(&name, value.clone()).await {
-        Ok(confirmed) => {
-            // The device may hold the value at its own resolution (a scaled
-            // register): record what was asked and what it confirmed.
-            audit(
-                &s,
-                &who,
-                "write",
-                &name,
-                format!(
-                    "{} wrote {name}: {old} -> requested {value}, confirmed {}",
-                    who.audit_name(),
-                    confirmed.value
-                ),
-            )
-            .await;
-            s.tag_view(id, &meta)
-                .map(Json)
-                .ok_or_else(|| ApiError::not_found(format!("no tag named '{name}'")))
+    .await
+    {
+        Ok(_) => s
+            .tag_view(id, &meta)
+            .map(Json)
+            .ok_or_else(|| ApiError::not_found(format!("no tag named '{name}'"))),
+        Err(gridscada_store::command::CommandError::Unaudited(why)) => {
+            Err(ApiError::unavailable(format!(
+                "command refused: its audit record can be neither stored nor spooled, and no command goes out unrecorded ({why})"
+            )))
         }
-        Err(e) => {
-            audit(
-                &s,
-                &who,
-                "write_failed",
-                &name,
-                format!("{} could not write {name} = {value}: {e}", who.audit_name()),
-            )
-            .await;
-            Err(write_error(e))
-        }
+        Err(gridscada_store::command::CommandError::Write(e)) => Err(write_error(e)),
     }
 }
 
