@@ -66,8 +66,21 @@ pub async fn audit_first(
     source: &str,
     message: String,
 ) -> Result<(), crate::error::ApiError> {
-    let event = audit_event(state, who, kind, source, message);
-    durable(state, event).await.map_err(refused_unaudited)
+    durable_event(state, who, kind, source, message)
+        .await
+        .map_err(refused_unaudited)
+}
+
+/// Records an event through the audit trail and waits until it is durable;
+/// the error says why it could not be made so.
+pub(crate) async fn durable_event(
+    state: &WebState,
+    who: &Principal,
+    kind: &str,
+    source: &str,
+    message: String,
+) -> Result<(), String> {
+    durable(state, audit_event(state, who, kind, source, message)).await
 }
 
 async fn durable(state: &WebState, event: NewEvent) -> Result<(), String> {
@@ -96,7 +109,7 @@ pub async fn audit_ready(state: &WebState) -> Result<(), crate::error::ApiError>
     r.map_err(refused_unaudited)
 }
 
-fn refused_unaudited(why: String) -> crate::error::ApiError {
+pub(crate) fn refused_unaudited(why: String) -> crate::error::ApiError {
     tracing::error!(%why, "command refused: its audit record cannot be made durable");
     crate::error::ApiError::unavailable(format!(
         "command refused: its audit record can be neither stored nor spooled, and no command goes out unrecorded ({why})"

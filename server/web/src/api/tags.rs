@@ -8,8 +8,9 @@ use gridscada_tagdb::{Sample, TagId, TagMeta, Value, WriteError};
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
-use crate::api::{audit, audit_first};
+use crate::api::refused_unaudited;
 use crate::auth::Principal;
+use crate::command::{write_tag, WriteRefused};
 use crate::error::{ApiError, ApiResult};
 use crate::openapi::shapes;
 use crate::WebState;
@@ -321,91 +322,21 @@ pub async fn write(
     body: Result<Json<WriteBody>, axum::extract::rejection::JsonRejection>,
 ) -> ApiResult<Json<TagView>> {
     let Json(body) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
-    let id =
-        s.db.id(&name)
-            .ok_or_else(|| ApiError::not_found(format!("no tag named '{name}'")))?;
-    let meta =
-        s.db.meta(id)
-            .cloned()
-            .ok_or_else(|| ApiError::not_found(format!("no tag named '{name}'")))?;
-    // A refusal is audited too: who tried to command what.
-    let refuse = |why: String| async {
-        audit(
-            &s,
-            &who,
-            "write_refused",
-            &name,
-            format!("{} may not write {name}: {why}", who.audit_name()),
-        )
-        .await;
-        Err(ApiError::forbidden(why))
+    let refused = |e: WriteRefused| match e {
+        WriteRefused::UnknownTag(why) => ApiError::not_found(why),
+        WriteRefused::Forbidden(why) => ApiError::forbidden(why),
+        WriteRefused::BadValue(why) => ApiError::bad_request(why),
+        WriteRefused::NoFieldIo => ApiError::unavailable("field I/O is not running"),
+        WriteRefused::Unaudited(why) => refused_unaudited(why),
+        WriteRefused::Failed(e) => write_error(e),
     };
-    let Some(required) = s.write_role(&name) else {
-        return refuse(format!("tag '{name}' is read-only")).await;
-    };
-    if who.role < required {
-        return refuse(format!(
-            "writing '{name}' needs the {} role or above; you are {}",
-            required.label(),
-            who.role.label()
-        ))
-        .await;
-    }
-    let value = body.value.coerce(meta.kind).ok_or_else(|| {
-        ApiError::bad_request(format!(
-            "{} is not a valid {:?} value for '{name}'",
-            body.value, meta.kind
-        ))
-    })?;
-    let writer = s
-        .writer
-        .clone()
-        .ok_or_else(|| ApiError::unavailable("field I/O is not running"))?;
-    let old =
-        s.db.get(id)
-            .map(|o| o.value.to_string())
-            .unwrap_or_default();
-    // The request is on record before it goes to the device.
-    audit_first(
-        &s,
-        &who,
-        "write_request",
-        &name,
-        format!("{} requests {name}: {old} -> {value}", who.audit_name()),
-    )
-    .await?;
-    match writer.write(&name, value.clone()).await {
-        Ok(confirmed) => {
-            // The device may hold the value at its own resolution (a scaled
-            // register): record what was asked and what it confirmed.
-            audit(
-                &s,
-                &who,
-                "write",
-                &name,
-                format!(
-                    "{} wrote {name}: {old} -> requested {value}, confirmed {}",
-                    who.audit_name(),
-                    confirmed.value
-                ),
-            )
-            .await;
-            s.tag_view(id, &meta)
-                .map(Json)
-                .ok_or_else(|| ApiError::not_found(format!("no tag named '{name}'")))
-        }
-        Err(e) => {
-            audit(
-                &s,
-                &who,
-                "write_failed",
-                &name,
-                format!("{} could not write {name} = {value}: {e}", who.audit_name()),
-            )
-            .await;
-            Err(write_error(e))
-        }
-    }
+    write_tag(&s, &who, &name, body.value, "")
+        .await
+        .map_err(refused)?;
+    s.db.id(&name)
+        .and_then(|id| s.tag_view(id, s.db.meta(id)?))
+        .map(Json)
+        .ok_or_else(|| ApiError::not_found(format!("no tag named '{name}'")))
 }
 
 pub fn write_error(e: WriteError) -> ApiError {
