@@ -6,7 +6,7 @@
 //! kind of item is checked in its own file: devices `devices.rs`, tags
 //! `tags.rs`, their alarms `alarms.rs`, register overlaps `overlaps.rs`,
 //! device clocks `clocks.rs`, panels `panels.rs`, the microgrid
-//! `microgrid.rs`.
+//! `microgrid.rs`, the OPC UA server `opcua.rs`.
 
 use std::collections::HashMap;
 use std::net::SocketAddr;
@@ -22,6 +22,7 @@ mod alarms;
 mod clocks;
 mod devices;
 mod microgrid;
+mod opcua;
 mod overlaps;
 mod panels;
 mod tags;
@@ -29,6 +30,7 @@ mod tags;
 use clocks::check_time_tags;
 use devices::check_device;
 use microgrid::check_microgrid;
+use opcua::check_opcua;
 use overlaps::check_overlaps;
 use panels::check_panel;
 use tags::{check_tag, check_tag_name};
@@ -208,6 +210,9 @@ fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
         check_tls(cx, tls, &main.server.http);
     }
     check_proxy(cx, &main.server);
+    if let Some(ua) = &main.opcua {
+        check_opcua(cx, main, ua);
+    }
     let sessions = &main.server.sessions;
     for (role, minutes) in sessions.idle_minutes.get_ref() {
         if !(minutes.is_finite() && (0.0..=10_080.0).contains(minutes)) {
