@@ -59,6 +59,10 @@ enum Command {
         /// Plant seconds per wall second while a scenario runs.
         #[arg(long, default_value_t = 1.0, requires = "scenario")]
         speed: f64,
+        /// Serve OPC UA on this loopback port (every endpoint, the demo's
+        /// accounts; see docs/NORTHBOUND.md).
+        #[arg(long, value_name = "PORT")]
+        opcua: Option<u16>,
     },
     /// Replay a scenario through the whole stack (simulators, Modbus poller,
     /// alarms, historian, fault isolation, dispatch) faster than real time,
@@ -274,6 +278,7 @@ fn main() -> ExitCode {
             config,
             scenario,
             speed,
+            opcua,
         } => {
             let live = match scenario {
                 Some(file) => match replay::LiveScenario::load(&file, speed) {
@@ -285,7 +290,7 @@ fn main() -> ExitCode {
                 },
                 None => None,
             };
-            runtime::block_on(runtime::demo(http, data, config, live))
+            runtime::block_on(runtime::demo(http, data, config, live, opcua))
         }
         Command::Replay {
             file,

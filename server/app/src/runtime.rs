@@ -26,6 +26,7 @@ use crate::{demo_plant, settings, sinks, users};
 
 #[cfg(test)]
 mod audit_tests;
+mod opcua;
 #[cfg(test)]
 mod shutdown_tests;
 mod sources;
@@ -90,10 +91,11 @@ pub async fn demo(
     data: PathBuf,
     config: Option<PathBuf>,
     scenario: Option<Box<dyn LiveDriver>>,
+    opcua_port: Option<u16>,
 ) -> ExitCode {
     report(
         async {
-            let plant = match (&scenario, &config) {
+            let mut plant = match (&scenario, &config) {
                 (Some(live), _) => live.plant().clone(),
                 (None, Some(c)) => gridscada_config::load_path(c)
                     .map_err(|d| diagnostics("the configuration", d))?,
@@ -107,6 +109,8 @@ pub async fn demo(
                     "the demo prints its passwords and serves a simulated plant, so it only binds loopback addresses; --http {addr} is not one"
                 ));
             }
+            // The demo serves OPC UA only when asked (`--opcua PORT`).
+            plant.opcua = opcua_port.map(opcua::demo_config);
             run(plant, addr, &data, Mode::Demo, scenario).await
         }
         .await,
@@ -588,6 +592,7 @@ async fn run(
     // The demo serves loopback only, and its figures are no secret.
     web.auth.metrics_open = mode == Mode::Demo;
     load_screens(&web, mode).await?;
+    let opcua = opcua::start(&stack.plant, data, &mut web).await?;
     let listening = crate::https::listen(&stack.plant, http, web, https).await?;
     crate::https::reload_on_sighup(listening.https.clone(), events_tx.clone(), clock.clone());
     let (url, server) = (listening.url, listening.server);
@@ -611,6 +616,9 @@ async fn run(
     println!("  Health:      {url}healthz");
     if let Some(redirect) = listening.redirect {
         println!("  Redirect:    http://{redirect}/ -> HTTPS");
+    }
+    if let Some(ua) = &opcua {
+        println!("  OPC UA:      {}", ua.endpoint());
     }
     println!("  Data folder: {}", data.display());
     if let Some(creds) = &credentials {
@@ -644,6 +652,9 @@ async fn run(
         ))
         .await;
     drop(events_tx);
+    if let Some(ua) = opcua {
+        ua.shutdown().await;
+    }
     stack.shutdown().await;
     outcome
 }
