@@ -471,11 +471,23 @@ async def phase_write(base, url, creds, tmp):
         events[:3],
     )
 
+    # The guest reads what the HMI shows a guest (the screens of its group),
+    # nothing else.
+    guest_api = Api(base)
+    guest_api.login("opcua-guest", "guest-password-1")
+    guest_tags = guest_api.tags()
+    visible = sorted(guest_tags)[0] if guest_tags else None
+    check("the guest may read some tags in the HMI, not the setpoint", visible and sp not in guest_tags, (len(guest_tags), sp))
     async with client(url, "opcua-guest", "guest-password-1") as c:
         ns = await c.get_namespace_index(NS_URI)
+        dv = await c.get_node(ua.NodeId(visible, ns)).read_data_value()
+        check(f"the guest reads {visible} over OPC UA, as in the HMI", dv.StatusCode.is_good() or dv.StatusCode.is_bad() and dv.StatusCode.value != ua.StatusCodes.BadUserAccessDenied, dv)
         node = c.get_node(ua.NodeId(sp, ns))
-        dv = await node.read_data_value()
-        check("the guest reads over OPC UA", dv.StatusCode.is_good(), dv)
+        try:
+            dv = await node.read_data_value()
+            check(f"the guest may not read {sp} (not on its screens)", False, dv)
+        except ua.UaStatusCodeError as e:
+            check(f"the guest may not read {sp} (not on its screens): BadUserAccessDenied", e.code == ua.StatusCodes.BadUserAccessDenied, str(e))
         try:
             await node.write_value(ua.DataValue(ua.Variant(new + 1, ua.VariantType.Float)))
             check("a user without write rights is refused", False, "Good")

@@ -90,11 +90,9 @@ impl OpcUaServer {
             ));
         }
         let metrics = Arc::new(Metrics::default());
-        let users = Arc::new(users::Users::new(
-            web.clone(),
-            cfg.anonymous,
-            metrics.clone(),
-        ));
+        let users = Arc::new(
+            users::Users::new(web.clone(), cfg.anonymous, metrics.clone()).with_guest_reads(),
+        );
         let anonymous_ids: Vec<String> = if cfg.anonymous {
             vec![opcua::server::ANONYMOUS_USER_TOKEN_ID.to_string()]
         } else {

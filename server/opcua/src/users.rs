@@ -1,9 +1,10 @@
 //! Who an OPC UA session is: gridscada's own users and roles. A username
 //! token is checked by the same login check as the web's (throttling,
 //! Argon2, a failed attempt on record); anonymous sessions exist only if the
-//! configuration allows them, as the read-only guest. A user's write rights
-//! are looked up again at each write, so a blocked or demoted user loses them
-//! without reconnecting.
+//! configuration allows them, as the read-only guest. A user reads the tags
+//! the HMI would show them (the screens of their group, docs/ACCESS.md, as of
+//! the login); write rights are looked up again at each write, so a blocked
+//! or demoted user loses them without reconnecting.
 
 use std::net::{IpAddr, Ipv6Addr};
 use std::sync::atomic::Ordering;
@@ -11,6 +12,7 @@ use std::sync::Arc;
 
 use async_trait::async_trait;
 use gridscada_config::Role;
+use gridscada_web::access::{default_screens, Readable};
 use gridscada_web::auth::Principal;
 use gridscada_web::command::{check_login, LoginRefused};
 use gridscada_web::WebState;
@@ -41,7 +43,9 @@ pub(crate) struct Users {
     pub metrics: Arc<Metrics>,
     /// Each logged-in user's role at login, for the access level a browse
     /// shows (writes look the user up again).
-    roles: parking_lot::Mutex<std::collections::HashMap<String, Role>>,
+    roles: parking_lot::Mutex<std::collections::HashMap<String, (Role, Arc<Readable>)>>,
+    /// What anonymous sessions read: a guest's default screens.
+    anonymous_reads: Arc<Readable>,
 }
 
 impl Users {
@@ -51,7 +55,21 @@ impl Users {
             anonymous,
             metrics,
             roles: Default::default(),
+            anonymous_reads: Arc::new(Readable::default()),
         }
+    }
+
+    /// Once the screens are loaded: what anonymous sessions may read (the
+    /// guest role's default screens).
+    pub fn with_guest_reads(mut self) -> Users {
+        let guest = Principal {
+            user: Some("anonymous".into()),
+            role: Role::Guest,
+            group: None,
+            screens: default_screens(&self.web.plant, &self.web.screens, Role::Guest),
+        };
+        self.anonymous_reads = Arc::new(self.web.readable(&guest));
+        self
     }
 
     /// The caller behind a session's token, as the store describes them now;
@@ -129,13 +147,17 @@ impl AuthManager for Users {
                 ))
             }
         };
-        self.roles.lock().insert(user.name.clone(), user.role);
         let who = Principal {
             user: Some(user.name.clone()),
             role: user.role,
             group: Some(user.group.clone()),
-            screens: vec![],
+            screens: self.web.screens_of(&user.group, user.role).await,
         };
+        // The tags the HMI would let this user read, as of this login.
+        let reads = Arc::new(self.web.readable(&who));
+        self.roles
+            .lock()
+            .insert(user.name.clone(), (user.role, reads));
         gridscada_web::api::audit(
             &self.web,
             &who,
@@ -153,30 +175,36 @@ impl AuthManager for Users {
         level: AccessLevel,
         node_id: &NodeId,
     ) -> AccessLevel {
-        if !level.contains(AccessLevel::CURRENT_WRITE) {
+        // Only tag variables (and their units) are subject to the plant's
+        // access rules; the server's own nodes keep their levels.
+        let Identifier::String(id) = &node_id.identifier else {
+            return level;
+        };
+        let id = id.as_ref();
+        let tag = id.strip_suffix("#EngineeringUnits").unwrap_or(id);
+        if self.web.db.id(tag).is_none() {
             return level;
         }
-        let role = if token.is_anonymous() {
-            Role::Guest
+        let (role, reads) = if token.is_anonymous() {
+            (Role::Guest, self.anonymous_reads.clone())
         } else {
-            self.roles
-                .lock()
-                .get(&token.0)
-                .copied()
-                .unwrap_or(Role::Guest)
+            match self.roles.lock().get(&token.0) {
+                Some((role, reads)) => (*role, reads.clone()),
+                None => (Role::Guest, Arc::new(Readable::default())),
+            }
         };
-        let may = match &node_id.identifier {
-            Identifier::String(name) => self
-                .web
-                .write_role(name.as_ref())
-                .is_some_and(|r| role >= r),
-            _ => false,
-        };
-        if may {
-            level
-        } else {
-            level - AccessLevel::CURRENT_WRITE
+        let mut level = level;
+        if !reads.may_read(tag) {
+            // As in the HMI: a tag outside the caller's screens is not read.
+            level -= AccessLevel::CURRENT_READ | AccessLevel::CURRENT_WRITE;
         }
+        if tag == id
+            && level.contains(AccessLevel::CURRENT_WRITE)
+            && self.web.write_role(tag).is_none_or(|r| role < r)
+        {
+            level -= AccessLevel::CURRENT_WRITE;
+        }
+        level
     }
 
     fn user_token_policies(&self, endpoint: &ServerEndpoint) -> Vec<UserTokenPolicy> {
