@@ -67,6 +67,10 @@ enum Command {
         /// The edge node id with --mqtt.
         #[arg(long, value_name = "ID", default_value = runtime::northbound::DEMO_NODE, requires = "mqtt")]
         mqtt_node: String,
+        /// Serve OPC UA on this loopback port (every endpoint, the demo's
+        /// accounts; see docs/NORTHBOUND.md).
+        #[arg(long, value_name = "PORT")]
+        opcua: Option<u16>,
     },
     /// Replay a scenario through the whole stack (simulators, Modbus poller,
     /// alarms, historian, fault isolation, dispatch) faster than real time,
@@ -284,6 +288,7 @@ fn main() -> ExitCode {
             speed,
             mqtt,
             mqtt_node,
+            opcua,
         } => {
             let live = match scenario {
                 Some(file) => match replay::LiveScenario::load(&file, speed) {
@@ -299,7 +304,7 @@ fn main() -> ExitCode {
                 broker,
                 node: mqtt_node,
             });
-            runtime::block_on(runtime::demo(http, data, config, live, mqtt))
+            runtime::block_on(runtime::demo(http, data, config, live, mqtt, opcua))
         }
         Command::Replay {
             file,

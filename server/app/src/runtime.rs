@@ -27,6 +27,7 @@ use crate::{demo_plant, settings, sinks, users};
 #[cfg(test)]
 mod audit_tests;
 pub mod northbound;
+mod opcua;
 #[cfg(test)]
 mod shutdown_tests;
 mod sources;
@@ -93,6 +94,7 @@ pub async fn demo(
     config: Option<PathBuf>,
     scenario: Option<Box<dyn LiveDriver>>,
     mqtt: Option<northbound::DemoMqtt>,
+    opcua_port: Option<u16>,
 ) -> ExitCode {
     report(
         async {
@@ -113,6 +115,8 @@ pub async fn demo(
             if let Some(m) = &mqtt {
                 northbound::enable_demo(&mut plant, m)?;
             }
+            // The demo serves OPC UA only when asked (`--opcua PORT`).
+            plant.opcua = opcua_port.map(opcua::demo_config);
             run(plant, addr, &data, Mode::Demo, scenario).await
         }
         .await,
@@ -744,6 +748,7 @@ async fn run(
     // The demo serves loopback only, and its figures are no secret.
     web.auth.metrics_open = mode == Mode::Demo;
     load_screens(&web, mode).await?;
+    let opcua = opcua::start(&stack.plant, data, &mut web).await?;
     let listening = crate::https::listen(&stack.plant, http, web, https).await?;
     crate::https::reload_on_sighup(listening.https.clone(), events_tx.clone(), clock.clone());
     let (url, server) = (listening.url, listening.server);
@@ -767,6 +772,9 @@ async fn run(
     println!("  Health:      {url}healthz");
     if let Some(redirect) = listening.redirect {
         println!("  Redirect:    http://{redirect}/ -> HTTPS");
+    }
+    if let Some(ua) = &opcua {
+        println!("  OPC UA:      {}", ua.endpoint());
     }
     println!("  Data folder: {}", data.display());
     if let Some(creds) = &credentials {
@@ -800,6 +808,9 @@ async fn run(
         ))
         .await;
     drop(events_tx);
+    if let Some(ua) = opcua {
+        ua.shutdown().await;
+    }
     stack.shutdown().await;
     outcome
 }

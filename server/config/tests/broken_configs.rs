@@ -604,3 +604,34 @@ fn mqtts_needs_a_ca_file_and_devices_must_be_topic_levels() {
         ],
     );
 }
+
+#[test]
+fn opcua_section_is_checked_and_located() {
+    let main = "tag_files = [\"tags.toml\"]\n[server]\nhttp = \"127.0.0.1:8080\"\n[opcua]\nlisten = \"0.0.0.0:8080\"\nhost = \"bad host\"\nsecurity = [\"none\", \"none\"]\npki_dir = \" \"\n";
+    assert_problems(
+        main,
+        DEVICE,
+        &[
+            "DIR/gridscada.toml:5:10: error: [opcua] listen: port 8080 is the HMI's ([server] http); give OPC UA its own (4840 is usual)",
+            "DIR/gridscada.toml:6:8: error: [opcua] host: 'bad host' is not a host name or IP address clients can resolve",
+            "DIR/gridscada.toml:7:12: error: [opcua] security: 'none' is listed twice",
+            "DIR/gridscada.toml:8:11: error: [opcua] pki_dir: must name a folder (relative to the data folder)",
+        ],
+    );
+    let main = "tag_files = [\"tags.toml\"]\n[opcua]\nlisten = \"4840\"\nsecurity = []\n";
+    assert_problems(
+        main,
+        DEVICE,
+        &[
+            "DIR/gridscada.toml:3:10: error: [opcua] listen: '4840' is not an address like 0.0.0.0:4840",
+            "DIR/gridscada.toml:4:12: error: [opcua] security: offer at least one endpoint (\"basic256sha256-sign-encrypt\" is the safe choice)",
+        ],
+    );
+    let main = "tag_files = [\"tags.toml\"]\n[opcua]\nlisten = \"0.0.0.0:4840\"\nsecurity = [\"basic128\"]\n";
+    let got = problems(main, DEVICE);
+    assert_eq!(got.len(), 1, "{got:?}");
+    assert!(
+        got[0].starts_with("DIR/gridscada.toml:4:13: error: [opcua]: unknown variant `basic128`, expected one of `none`, `basic256sha256-sign`, `basic256sha256-sign-encrypt`"),
+        "{got:?}"
+    );
+}

@@ -19,5 +19,5 @@ mod write;
 pub use clock::{CivilTime, Clock, ScaledClock, SleepFuture, SystemClock, Timestamp};
 pub use db::{ChangeBatch, Subscription, TagDb, TagDbError, TagId, TagMeta, Update};
 pub use leadership::{Leadership, NotActive, Role};
-pub use value::{Quality, QualityCode, Sample, Value, ValueKind};
+pub use value::{Quality, QualityCode, Sample, Value, ValueKind, NEVER_READ};
 pub use write::{TagWriter, WriteError, WriteFuture};

@@ -11,6 +11,7 @@
 pub mod access;
 pub mod api;
 pub mod auth;
+pub mod command;
 pub mod error;
 mod hmi;
 pub mod metrics;

@@ -9,4 +9,74 @@ use serde_spanned::Spanned;
 pub struct OpcUaConfig {
     /// Address the OPC UA server listens on (`0.0.0.0:4840`).
     pub listen: Spanned<String>,
+    /// The host name in the endpoint URLs the server announces
+    /// (`opc.tcp://HOST:PORT/`); clients connect to what they are told, so
+    /// it must be a name they resolve. Default: the listen address, or this
+    /// machine's host name when that is `0.0.0.0`.
+    #[serde(default)]
+    pub host: Option<Spanned<String>>,
+    /// The endpoints offered, by security policy and mode. Default: only
+    /// Basic256Sha256 with Sign and with SignAndEncrypt; `none` (no signing,
+    /// no encryption) only if listed.
+    #[serde(default = "default_security")]
+    pub security: Spanned<Vec<OpcUaSecurity>>,
+    /// Anonymous sessions (read-only, the guest role). Off by default:
+    /// every session then logs in as a gridscada user.
+    #[serde(default)]
+    pub anonymous: bool,
+    /// The certificate store (own certificate and key, trusted and rejected
+    /// client certificates), relative to the data folder.
+    #[serde(default = "default_pki_dir")]
+    pub pki_dir: Spanned<String>,
+    /// Make a self-signed server certificate at start when there is none.
+    /// Off: the operator puts one in `PKI/own/cert.der` and
+    /// `PKI/private/private.pem`.
+    #[serde(default = "yes")]
+    pub create_certificate: bool,
+    /// Trust every client certificate on first sight. Off: a new client's
+    /// certificate lands in `PKI/rejected/certs` until an operator moves it
+    /// to `PKI/trusted/certs`. For commissioning only.
+    #[serde(default)]
+    pub trust_all_clients: bool,
+}
+
+/// One endpoint's security policy and message security mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Deserialize)]
+pub enum OpcUaSecurity {
+    /// No signing or encryption: anyone on the path can read and alter the
+    /// traffic (user passwords are still encrypted with the server's key).
+    #[serde(rename = "none")]
+    None,
+    #[serde(rename = "basic256sha256-sign")]
+    Basic256Sha256Sign,
+    #[serde(rename = "basic256sha256-sign-encrypt")]
+    Basic256Sha256SignEncrypt,
+}
+
+impl OpcUaSecurity {
+    pub fn label(self) -> &'static str {
+        match self {
+            OpcUaSecurity::None => "none",
+            OpcUaSecurity::Basic256Sha256Sign => "basic256sha256-sign",
+            OpcUaSecurity::Basic256Sha256SignEncrypt => "basic256sha256-sign-encrypt",
+        }
+    }
+}
+
+fn default_security() -> Spanned<Vec<OpcUaSecurity>> {
+    Spanned::new(
+        0..0,
+        vec![
+            OpcUaSecurity::Basic256Sha256Sign,
+            OpcUaSecurity::Basic256Sha256SignEncrypt,
+        ],
+    )
+}
+
+fn default_pki_dir() -> Spanned<String> {
+    Spanned::new(0..0, "opcua-pki".into())
+}
+
+fn yes() -> bool {
+    true
 }

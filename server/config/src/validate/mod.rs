@@ -6,7 +6,8 @@
 //! kind of item is checked in its own file: devices `devices.rs`, tags
 //! `tags.rs`, their alarms `alarms.rs`, register overlaps `overlaps.rs`,
 //! device clocks `clocks.rs`, panels `panels.rs`, the microgrid
-//! `microgrid.rs`, the redundant pair and the site `redundancy.rs`.
+//! `microgrid.rs`, the redundant pair and the site `redundancy.rs`, the MQTT northbound `mqtt.rs` and
+//! `mqtt_host.rs`, the OPC UA server `opcua.rs`.
 
 use std::collections::HashMap;
 use std::net::SocketAddr;
@@ -24,6 +25,7 @@ mod devices;
 mod microgrid;
 mod mqtt;
 mod mqtt_host;
+mod opcua;
 mod overlaps;
 mod panels;
 mod redundancy;
@@ -33,6 +35,7 @@ use clocks::check_time_tags;
 use devices::check_device;
 use microgrid::check_microgrid;
 use mqtt_host::check_mqtt_host;
+use opcua::check_opcua;
 use overlaps::check_overlaps;
 use panels::check_panel;
 use tags::{check_tag, check_tag_name};
@@ -218,6 +221,9 @@ fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
     redundancy::check_site(cx, &main.server);
     if let Some(r) = &main.redundancy {
         redundancy::check_redundancy(cx, r, &main.storage);
+    }
+    if let Some(ua) = &main.opcua {
+        check_opcua(cx, main, ua);
     }
     let sessions = &main.server.sessions;
     for (role, minutes) in sessions.idle_minutes.get_ref() {

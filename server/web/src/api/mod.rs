@@ -59,20 +59,6 @@ pub async fn audit(state: &WebState, who: &Principal, kind: &str, source: &str, 
     }
 }
 
-/// Records an operator command in the event log and waits until the record
-/// is durable (in the store, or fsync'd in the audit spool). Call it before
-/// the command goes out: when it fails (503), the command must not.
-pub async fn audit_first(
-    state: &WebState,
-    who: &Principal,
-    kind: &str,
-    source: &str,
-    message: String,
-) -> Result<(), crate::error::ApiError> {
-    let event = audit_event(state, who, kind, source, message);
-    durable(state, event).await.map_err(refused_unaudited)
-}
-
 async fn durable(state: &WebState, event: NewEvent) -> Result<(), String> {
     match &state.audit {
         Some(a) => a
@@ -112,7 +98,7 @@ pub async fn audit_ready(state: &WebState) -> Result<(), crate::error::ApiError>
     r.map_err(refused_unaudited)
 }
 
-fn refused_unaudited(why: String) -> crate::error::ApiError {
+pub(crate) fn refused_unaudited(why: String) -> crate::error::ApiError {
     tracing::error!(%why, "command refused: its audit record cannot be made durable");
     crate::error::ApiError::unavailable(format!(
         "command refused: its audit record can be neither stored nor spooled, and no command goes out unrecorded ({why})"

@@ -10,6 +10,7 @@ use utoipa::ToSchema;
 
 use crate::api::audit;
 use crate::auth::{self, Principal};
+use crate::command::{check_login, LoginRefused};
 use crate::error::{ApiError, ApiResult};
 use crate::openapi::shapes;
 use crate::WebState;
@@ -52,67 +53,25 @@ pub async fn login(
     // The real client, behind a trusted proxy too (crate::proxy).
     let ip = client.ip;
     let name = login.username.trim().to_string();
-    if name.is_empty()
-        || name.len() > 128
-        || name.chars().any(char::is_control)
-        || login.password.len() > 1024
-    {
-        return Err(refused());
-    }
-    // Counted before the password is checked, so a burst cannot get past
-    // the limit (auth::Throttle).
-    let attempt = s.auth.throttle.reserve(&name, ip).map_err(|wait| {
-        ApiError::new(
-            StatusCode::TOO_MANY_REQUESTS,
-            "throttled",
-            format!(
-                "too many failed logins; try again in {} s",
-                wait.as_secs().max(1)
+    let user = check_login(&s, &name, login.password, ip, "web")
+        .await
+        .map_err(|e| match e {
+            LoginRefused::Invalid => refused(),
+            LoginRefused::Throttled(wait) => ApiError::new(
+                StatusCode::TOO_MANY_REQUESTS,
+                "throttled",
+                format!(
+                    "too many failed logins; try again in {} s",
+                    wait.as_secs().max(1)
+                ),
             ),
-        )
-    })?;
-    let user = match s.store.user(&name).await {
-        Ok(u) => u,
-        Err(e) => {
-            s.auth.throttle.cancel(attempt);
-            return Err(e.into());
-        }
-    };
-    let hash = user
-        .as_ref()
-        .map(|u| u.password_hash.clone())
-        .unwrap_or_else(|| s.auth.decoy_hash.to_string());
-    let Ok(password_ok) = s.auth.passwords.verify(login.password, hash).await else {
-        s.auth.throttle.cancel(attempt);
-        return Err(ApiError::new(
-            StatusCode::TOO_MANY_REQUESTS,
-            "busy",
-            "the server is busy checking other logins; try again in a few seconds",
-        ));
-    };
-    let anon = Principal::anonymous();
-    let user = match user {
-        Some(u) if password_ok && !u.blocked => u,
-        other => {
-            // The reserved attempt stays counted as a failure.
-            drop(attempt);
-            let why = match other {
-                Some(u) if u.blocked && password_ok => "user is blocked",
-                Some(_) => "wrong password",
-                None => "unknown user",
-            };
-            audit(
-                &s,
-                &anon,
-                "login_failed",
-                "web",
-                format!("failed login as '{name}' from {ip}: {why}"),
-            )
-            .await;
-            return Err(refused());
-        }
-    };
-    s.auth.throttle.success(attempt);
+            LoginRefused::Busy => ApiError::new(
+                StatusCode::TOO_MANY_REQUESTS,
+                "busy",
+                "the server is busy checking other logins; try again in a few seconds",
+            ),
+            LoginRefused::Store(e) => e.into(),
+        })?;
     let previous =
         auth::token_from_cookies(headers.get(header::COOKIE).and_then(|v| v.to_str().ok()));
     // Stored before the cookie is sent, so the session outlives a restart.

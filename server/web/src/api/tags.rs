@@ -8,8 +8,9 @@ use gridscada_tagdb::{Sample, TagId, TagMeta, Value, WriteError};
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
-use crate::api::audit;
+use crate::api::refused_unaudited;
 use crate::auth::Principal;
+use crate::command::{write_tag, WriteRefused};
 use crate::error::{ApiError, ApiResult};
 use crate::openapi::shapes;
 use crate::WebState;
@@ -332,79 +333,21 @@ pub async fn write(
     body: Result<Json<WriteBody>, axum::extract::rejection::JsonRejection>,
 ) -> ApiResult<Json<TagView>> {
     let Json(body) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
-    let id =
-        s.db.id(&name)
-            .ok_or_else(|| ApiError::not_found(format!("no tag named '{name}'")))?;
-    let meta =
-        s.db.meta(id)
-            .cloned()
-            .ok_or_else(|| ApiError::not_found(format!("no tag named '{name}'")))?;
-    // A refusal is audited too: who tried to command what.
-    let refuse = |why: String| async {
-        audit(
-            &s,
-            &who,
-            "write_refused",
-            &name,
-            format!("{} may not write {name}: {why}", who.audit_name()),
-        )
-        .await;
-        Err(ApiError::forbidden(why))
+    let refused = |e: WriteRefused| match e {
+        WriteRefused::UnknownTag(why) => ApiError::not_found(why),
+        WriteRefused::Forbidden(why) => ApiError::forbidden(why),
+        WriteRefused::BadValue(why) => ApiError::bad_request(why),
+        WriteRefused::NoFieldIo => ApiError::unavailable("field I/O is not running"),
+        WriteRefused::Unaudited(why) => refused_unaudited(why),
+        WriteRefused::Failed(e) => write_error(e),
     };
-    let Some(required) = s.write_role(&name) else {
-        return refuse(format!("tag '{name}' is read-only")).await;
-    };
-    if who.role < required {
-        return refuse(format!(
-            "writing '{name}' needs the {} role or above; you are {}",
-            required.label(),
-            who.role.label()
-        ))
-        .await;
-    }
-    let value = body.value.coerce(meta.kind).ok_or_else(|| {
-        ApiError::bad_request(format!(
-            "{} is not a valid {:?} value for '{name}'",
-            body.value, meta.kind
-        ))
-    })?;
-    let writer = s
-        .writer
-        .clone()
-        .ok_or_else(|| ApiError::unavailable("field I/O is not running"))?;
-    let old =
-        s.db.get(id)
-            .map(|o| o.value.to_string())
-            .unwrap_or_default();
-    // The request is on record before it goes to the device (the same
-    // audited write as a Sparkplug DCMD).
-    let commander = gridscada_store::command::Commander {
-        user: who.user.clone(),
-        label: who.audit_name(),
-    };
-    let clock = s.clock.clone();
-    match gridscada_store::command::audited_write(
-        &crate::api::WebAudit(&s),
-        writer.as_ref(),
-        || clock.now(),
-        &commander,
-        &name,
-        &old,
-        value,
-    )
-    .await
-    {
-        Ok(_) => s
-            .tag_view(id, &meta)
-            .map(Json)
-            .ok_or_else(|| ApiError::not_found(format!("no tag named '{name}'"))),
-        Err(gridscada_store::command::CommandError::Unaudited(why)) => {
-            Err(ApiError::unavailable(format!(
-                "command refused: its audit record can be neither stored nor spooled, and no command goes out unrecorded ({why})"
-            )))
-        }
-        Err(gridscada_store::command::CommandError::Write(e)) => Err(write_error(e)),
-    }
+    write_tag(&s, &who, &name, body.value, "")
+        .await
+        .map_err(refused)?;
+    s.db.id(&name)
+        .and_then(|id| s.tag_view(id, s.db.meta(id)?))
+        .map(Json)
+        .ok_or_else(|| ApiError::not_found(format!("no tag named '{name}'")))
 }
 
 pub fn write_error(e: WriteError) -> ApiError {
