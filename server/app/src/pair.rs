@@ -306,19 +306,67 @@ pub async fn announce(
     }
 }
 
+/// A standby's panel as the active server left it in the store.
+struct Follow<'a> {
+    store: &'a Store,
+    panel: &'a str,
+    status: &'a watch::Sender<PanelStatus>,
+}
+
+impl Follow<'_> {
+    /// Shows the active server's retained state (mode, faulty zones,
+    /// lockout) in this standby's status, so its HMI and API read what the
+    /// plant's sequence knows.
+    async fn refresh(&self) {
+        let Some(r) = sinks::load_panel_retained(self.store)
+            .await
+            .remove(self.panel)
+        else {
+            return;
+        };
+        self.status.send_if_modified(|s| {
+            if s.retained == r {
+                return false;
+            }
+            s.mode = r.mode;
+            s.lockout = r.lockout;
+            s.load0_faulty = r.faulty.contains(&0);
+            s.faulty_zones = r.faulty.iter().copied().filter(|z| *z > 0).collect();
+            if r.lockout {
+                s.step = "lockout".into();
+            } else if s.step == "lockout" {
+                s.step = "idle".into();
+            }
+            s.retained = r;
+            true
+        });
+    }
+}
+
+/// How often a standby reads the active server's panel states.
+const FOLLOW_EVERY: std::time::Duration = std::time::Duration::from_secs(2);
+
 /// Waits until this server is active; meanwhile answers `commands` with a
-/// refusal naming the active server. `None` once the stack stops.
+/// refusal naming the active server, and follows the panel's stored state.
+/// `None` once the stack stops.
 async fn until_active(
     roles: &mut watch::Receiver<Role>,
     commands: Option<&mut mpsc::Receiver<PanelCommand>>,
+    follow: Option<Follow<'_>>,
 ) -> Option<u64> {
     let mut commands = commands;
+    let mut tick = tokio::time::interval(FOLLOW_EVERY);
     loop {
         if let Role::Active { epoch } = *roles.borrow_and_update() {
             return Some(epoch);
         }
         tokio::select! {
             r = roles.changed() => r.ok()?,
+            _ = tick.tick() => {
+                if let Some(f) = &follow {
+                    f.refresh().await;
+                }
+            }
             cmd = async {
                 match commands.as_mut() {
                     Some(c) => c.recv().await,
@@ -358,7 +406,12 @@ pub async fn panel_host(
     let id = h.panel.id.get_ref().clone();
     let mut roles = h.leadership.subscribe();
     loop {
-        let Some(epoch) = until_active(&mut roles, Some(&mut commands)).await else {
+        let follow = Follow {
+            store: &h.store,
+            panel: &id,
+            status: &status,
+        };
+        let Some(epoch) = until_active(&mut roles, Some(&mut commands), Some(follow)).await else {
             return;
         };
         let retained = sinks::load_panel_retained(&h.store).await.remove(&id);
@@ -426,7 +479,7 @@ pub async fn dispatch_host(
 ) {
     let mut roles = leadership.subscribe();
     loop {
-        if until_active(&mut roles, None).await.is_none() {
+        if until_active(&mut roles, None, None).await.is_none() {
             return;
         }
         let run = dispatch::run_dispatch_with(

@@ -685,6 +685,23 @@ fn the_pair_keeps_isolating_faults_through_kills_freezes_and_a_cut_database() {
                 );
             }
             *outcomes.entry(format!("{panel} {outcome}")).or_default() += 1;
+            // The standby (the restarted server) shows what the active
+            // server's sequence knows.
+            let mut standby = Client::new(&servers[ai].addr());
+            standby.cookie = op_a.cookie.clone();
+            wait_for(
+                &format!("the standby to follow {panel}"),
+                Duration::from_secs(10),
+                || {
+                    let (s, q) = standby
+                        .try_request("GET", &format!("/api/panels/{panel}"), None)
+                        .ok()?;
+                    (s == 200
+                        && q["lockout"] == p["lockout"]
+                        && q["faulty_zones"] == p["faulty_zones"])
+                        .then_some(())
+                },
+            );
         }
         // Until the operator's recovery (repair, then Reset), no known
         // faulty zone may be closed.
