@@ -6,7 +6,7 @@
 //! kind of item is checked in its own file: devices `devices.rs`, tags
 //! `tags.rs`, their alarms `alarms.rs`, register overlaps `overlaps.rs`,
 //! device clocks `clocks.rs`, panels `panels.rs`, the microgrid
-//! `microgrid.rs`.
+//! `microgrid.rs`, alarm notification routes `notify.rs`.
 
 use std::collections::HashMap;
 use std::net::SocketAddr;
@@ -22,6 +22,7 @@ mod alarms;
 mod clocks;
 mod devices;
 mod microgrid;
+mod notify;
 mod overlaps;
 mod panels;
 mod tags;
@@ -29,6 +30,7 @@ mod tags;
 use clocks::check_time_tags;
 use devices::check_device;
 use microgrid::check_microgrid;
+use notify::check_notify;
 use overlaps::check_overlaps;
 use panels::check_panel;
 use tags::{check_tag, check_tag_name};
@@ -61,6 +63,7 @@ pub(crate) fn check(
 ) {
     let mut cx = Ctx { files, diags };
     check_main(&mut cx, main);
+    check_notify(&mut cx, main);
 
     let mut device_by_name: HashMap<&str, (usize, &DeviceConfig)> = HashMap::new();
     for (f, d) in devices {
