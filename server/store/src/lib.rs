@@ -48,6 +48,7 @@ mod dispatch;
 mod error;
 mod events;
 mod historian;
+mod notifications;
 mod panels;
 mod recorder;
 mod screens;
@@ -69,6 +70,7 @@ pub use historian::{
     quality_from_code, quality_to_code, HistorySample, RawSample, RetentionPolicy, TagTrend,
     TrendBucket, MAX_TREND_BUCKETS,
 };
+pub use notifications::{LastNotified, NewNotification, Notification, NotificationStatus};
 pub use recorder::{RecordPolicy, Recorder};
 pub use screens::{ScreenRecord, MAX_SCREEN_BYTES};
 pub use sessions::{SessionKey, SessionRecord};
