@@ -245,6 +245,8 @@ pub struct Stack {
     pub dispatch: Option<watch::Receiver<DispatchStatus>>,
     pub simulator: Option<gridscada_sim::Simulator>,
     pub events: mpsc::Sender<NewEvent>,
+    /// The alarm notifier's figures, if `[[notify]]` routes run.
+    pub notify: Option<gridscada_notify::NotifyHandle>,
     field: gridscada_modbus::FieldIo,
     historian: gridscada_store::Historian,
     /// Events and alarm transitions on their way to the store (or spool).
@@ -272,6 +274,9 @@ pub struct StackOptions {
     pub restore_panels: bool,
     /// The data folder in use: the audit spool lives in it.
     pub data_dir: PathBuf,
+    /// Send alarm notifications (`[[notify]]`); off for replay, whose
+    /// alarms are not the plant's.
+    pub notify: bool,
 }
 
 impl Stack {
@@ -325,7 +330,18 @@ impl Stack {
         let (transitions_tx, transitions_rx) = mpsc::channel(4096);
         let (alarm_events_tx, alarm_events_rx) = mpsc::channel(1024);
         let (states_tx, states_rx) = mpsc::channel(4096);
-        tasks.spawn(sinks::alarm_transitions(audit.handle(), transitions_rx));
+        // A copy of each transition for the notifier, if it runs.
+        let (notify_tx, notify_rx) = if opts.notify && !plant.notify.is_empty() {
+            let (tx, rx) = mpsc::channel(4096);
+            (Some(tx), Some(rx))
+        } else {
+            (None, None)
+        };
+        tasks.spawn(sinks::alarm_transitions(
+            audit.handle(),
+            transitions_rx,
+            notify_tx,
+        ));
         tasks.spawn(sinks::alarm_events(alarm_events_rx, events_tx.clone()));
         tasks.spawn(sinks::alarm_states(store.clone(), states_rx));
         let alarms = gridscada_alarms::AlarmEngine::new(
@@ -370,6 +386,23 @@ impl Stack {
         }
         tasks.spawn(alarms.clone().run());
         tasks.spawn(sinks::audit_spool_alarm(audit.handle(), alarms.clone()));
+        let notify = match notify_rx {
+            Some(rx) => {
+                let (notifier, handle) = gridscada_notify::Notifier::new(
+                    &plant,
+                    store.clone(),
+                    alarms.clone(),
+                    clock.clone(),
+                    events_tx.clone(),
+                    rx,
+                    &|name| std::env::var(name).ok(),
+                )
+                .map_err(|e| anyhow!("starting alarm notification: {e}"))?;
+                tasks.spawn(notifier.run());
+                Some(handle)
+            }
+            None => None,
+        };
 
         // The historian.
         let historian = gridscada_store::Historian::spawn(store.clone(), Default::default());
@@ -479,6 +512,7 @@ impl Stack {
             dispatch: dispatch_rx,
             simulator,
             events: events_tx,
+            notify,
             field,
             historian,
             audit,
@@ -568,6 +602,7 @@ async fn run(
             // A scenario starts from its own initial state.
             restore_panels: scenario.is_none(),
             data_dir: data.to_path_buf(),
+            notify: true,
         },
     )
     .await?;
@@ -709,6 +744,7 @@ pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
             poll: stack.field.stats_handle(),
             historian: stack.historian.handle(),
             audit: stack.audit.handle(),
+            notify: stack.notify.clone(),
         })),
         screens: Default::default(),
         tag_index: Arc::new(gridscada_web::access::TagIndex::new(&stack.plant)),

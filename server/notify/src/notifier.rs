@@ -94,20 +94,18 @@ fn hmi_base(plant: &Plant, n: &NotifyConfig) -> Option<String> {
 }
 
 impl Notifier {
-    /// Builds every route's channel (reading secrets through `env`); the
-    /// sender is where the alarm engine's transitions go. `None` if the
-    /// plant has no `[[notify]]`.
+    /// Builds every route's channel (reading secrets through `env`).
+    /// `transitions` are the alarm engine's (a copy of what goes to the
+    /// alarm history); events go to the event log.
     pub fn new(
         plant: &Plant,
         store: Store,
         alarms: Arc<AlarmEngine>,
         clock: Arc<dyn Clock>,
         events: mpsc::Sender<NewEvent>,
+        transitions: mpsc::Receiver<AlarmTransition>,
         env: &dyn Fn(&str) -> Option<String>,
-    ) -> Result<Option<(Notifier, mpsc::Sender<AlarmTransition>, NotifyHandle)>, String> {
-        if plant.notify.is_empty() {
-            return Ok(None);
-        }
+    ) -> Result<(Notifier, NotifyHandle), String> {
         let base = plant.main_path.parent().unwrap_or(Path::new(""));
         let mut routes = vec![];
         for n in &plant.notify {
@@ -136,20 +134,18 @@ impl Notifier {
                 .collect(),
             ..Default::default()
         });
-        let (tx, rx) = mpsc::channel(4096);
-        Ok(Some((
+        Ok((
             Notifier {
                 routes,
                 store,
                 alarms,
                 clock,
                 events,
-                transitions: rx,
+                transitions,
                 figures: figures.clone(),
             },
-            tx,
             NotifyHandle { figures },
-        )))
+        ))
     }
 
     /// Plans and delivers until the transitions' sender is dropped (the
@@ -467,7 +463,7 @@ struct Delivery {
 
 impl Delivery {
     async fn run(mut self) {
-        let mut last_prune = i64::MIN;
+        let mut last_prune: Option<i64> = None;
         loop {
             let now = self.clock.now().as_millis();
             match self
@@ -485,8 +481,8 @@ impl Delivery {
             if let Ok(p) = self.store.pending_notifications().await {
                 self.figures.pending.store(p, Ordering::Relaxed);
             }
-            if now - last_prune > 86_400_000 {
-                last_prune = now;
+            if last_prune.is_none_or(|t| now - t > 86_400_000) {
+                last_prune = Some(now);
                 if let Err(e) = self
                     .store
                     .prune_notifications(Timestamp::from_millis(now - KEEP_DONE_MS), 5000)

@@ -138,6 +138,7 @@ pub(super) struct StackMetrics {
     pub(super) poll: gridscada_modbus::StatsHandle,
     pub(super) historian: gridscada_store::HistorianHandle,
     pub(super) audit: gridscada_store::AuditHandle,
+    pub(super) notify: Option<gridscada_notify::NotifyHandle>,
 }
 
 impl StackMetrics {
@@ -189,9 +190,62 @@ impl StackMetrics {
     }
 }
 
+impl StackMetrics {
+    /// Alarm notification, per route: sent, failed attempts, given up,
+    /// held by the flood limit, failing now; and the outbox's backlog.
+    fn render_notify(&self, out: &mut gridscada_web::metrics::Prom) {
+        use std::sync::atomic::Ordering::Relaxed;
+        let Some(n) = &self.notify else {
+            return;
+        };
+        let f = &n.figures;
+        let failing = f.failing.lock().clone();
+        for (route, c) in &f.routes {
+            let l = [("route", route.as_str())];
+            for (name, help, v) in [
+                (
+                    "gridscada_notifications_sent_total",
+                    "Alarm notifications delivered.",
+                    &c.sent,
+                ),
+                (
+                    "gridscada_notifications_failed_attempts_total",
+                    "Alarm notification delivery attempts that failed (retried with back-off).",
+                    &c.failed_attempts,
+                ),
+                (
+                    "gridscada_notifications_given_up_total",
+                    "Alarm notifications given up after retrying.",
+                    &c.given_up,
+                ),
+                (
+                    "gridscada_notifications_held_total",
+                    "Alarm notifications held by the flood limit and told in a summary.",
+                    &c.held,
+                ),
+            ] {
+                out.counter(name, help, &l, v.load(Relaxed) as f64);
+            }
+            out.gauge(
+                "gridscada_notifications_failing",
+                "1 while the route cannot deliver (its system alarm stands).",
+                &l,
+                f64::from(u8::from(failing.get(route).copied().unwrap_or(false))),
+            );
+        }
+        out.gauge(
+            "gridscada_notifications_pending",
+            "Alarm notifications waiting in the outbox.",
+            &[],
+            f.pending.load(Relaxed) as f64,
+        );
+    }
+}
+
 impl gridscada_web::metrics::MetricsSource for StackMetrics {
     fn render(&self, out: &mut gridscada_web::metrics::Prom) {
         self.render_audit(out);
+        self.render_notify(out);
         let poll = self.poll.stats();
         for d in &poll.devices {
             let l = [("device", d.device.as_str())];
