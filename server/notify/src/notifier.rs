@@ -499,7 +499,12 @@ impl Delivery {
                         .map(|(_, h)| h.blocked_until_ms)
                         .filter(|&b| b > now)
                         .min();
-                    let at = blocked.map_or(t.as_millis(), |b| t.as_millis().max(b).min(b));
+                    // Due now but on a route backing off: wait for the route.
+                    let at = if t.as_millis() > now {
+                        t.as_millis()
+                    } else {
+                        blocked.unwrap_or(now + 1000)
+                    };
                     Duration::from_millis((at - now).clamp(200, 5000) as u64)
                 }
                 _ => Duration::from_secs(5),

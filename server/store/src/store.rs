@@ -149,7 +149,7 @@ const SQLITE_MIGRATIONS: &[(i64, &str, &str)] = &[
     ),
     (
         10,
-        "notifications",
+        "notifications, out-of-service ends",
         include_str!("../migrations/sqlite/0010_notifications.sql"),
     ),
 ];
@@ -191,7 +191,7 @@ const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
     ),
     (
         10,
-        "notifications",
+        "notifications, out-of-service ends",
         include_str!("../migrations/postgres/0010_notifications.sql"),
     ),
 ];

@@ -23,3 +23,7 @@ CREATE TABLE IF NOT EXISTS notifications (
 );
 CREATE INDEX IF NOT EXISTS notifications_due ON notifications (status, next_attempt);
 CREATE INDEX IF NOT EXISTS notifications_by_alarm ON notifications (route, alarm_key, created_at);
+
+-- An alarm taken out of service until a set time returns by itself then
+-- (NULL: only by hand).
+ALTER TABLE alarm_states ADD COLUMN out_of_service_until INTEGER;
