@@ -1,5 +1,6 @@
 // Alarm screen: Online (the alarms active now, live, with acknowledge and
-// shelve with a reason, and the summary per area: counts by priority for
+// shelve with a reason, out of service with a reason and an end (supervisors),
+// and the summary per area: counts by priority for
 // each selection) and History (transitions from the database), each with
 // filters. A history row says what happened (its cause: "Activated while
 // suppressed", "Acknowledged"...) and the state it left the alarm in; the
@@ -63,6 +64,30 @@ export default {
         h('div', { class: 'table-wrap', tabindex: '0' }, h('table', { class: 'data alarms', id: 'alarms-online' },
           h('thead', {}, h('tr', {}, [h('th', { scope: 'col' }, h('span', { class: 'sr-only', text: 'Select' })), ...ALARM_HEADERS.map((t) => h('th', { scope: 'col', text: t })), h('th', { scope: 'col', text: 'Actions' })])),
           tbody))));
+      // Shelved and out-of-service alarms are not annunciated, so not in the
+      // live list: they are reviewed (and returned) here.
+      const hiddenBody = h('tbody');
+      const hiddenCount = h('span', { class: 'hint', id: 'alarms-hidden-count' });
+      body.append(h('section', { class: 'card', 'aria-labelledby': 'alarms-hidden-title' },
+        h('h2', { id: 'alarms-hidden-title', text: 'Shelved and out of service' }), hiddenCount,
+        h('div', { class: 'table-wrap', tabindex: '0' }, h('table', { class: 'data alarms', id: 'alarms-hidden' },
+          h('thead', {}, h('tr', {}, [...ALARM_HEADERS.map((t) => h('th', { scope: 'col', text: t })), h('th', { scope: 'col', text: 'Actions' })])),
+          hiddenBody))));
+      let hiddenTimer = null;
+      let gone = false;
+      const loadHidden = () => {
+        if (hiddenTimer || gone) return;
+        // At most once a second, whatever the rate of alarm changes.
+        hiddenTimer = setTimeout(async () => {
+          hiddenTimer = null;
+          try {
+            const r = await get(`/api/alarms${qs({ state: 'shelved,out_of_service' })}`);
+            if (gone) return;
+            hiddenCount.textContent = r.count ? '' : 'None.';
+            drawAlarmRows(hiddenBody, sortAlarms(r.alarms), { extra: actions });
+          } catch { /* the next change retries */ }
+        }, 300);
+      };
 
       const actions = (a) => {
         const out = [];
@@ -72,7 +97,16 @@ export default {
             ? h('button', { type: 'button', class: 'btn btn-small', onclick: () => unshelve(a), text: 'Unshelve' })
             : h('button', { type: 'button', class: 'btn btn-small', dataset: { shelve: String(a.id) }, onclick: () => shelve(a), text: 'Shelve' }));
         }
+        if (canShelve) {
+          out.push(a.out_of_service
+            ? h('button', { type: 'button', class: 'btn btn-small', dataset: { inService: String(a.id) }, onclick: () => inService(a), text: 'Return to service' })
+            : h('button', { type: 'button', class: 'btn btn-small', dataset: { outOfService: String(a.id) }, onclick: () => outOfService(a), text: 'Out of service' }));
+        }
         if (a.shelved && a.shelved.reason) out.push(h('span', { class: 'hint', text: ` shelved: ${a.shelved.reason}` }));
+        if (a.out_of_service) {
+          const until = a.out_of_service.until ? ` until ${fmtTime(a.out_of_service.until)}` : '';
+          out.push(h('span', { class: 'hint', text: ` out of service${until} by ${a.out_of_service.by}: ${a.out_of_service.reason}` }));
+        }
         return out;
       };
       let summaryKey = '';
@@ -112,16 +146,31 @@ export default {
         { submitLabel: 'Shelve' });
         if (!data) return;
         const r = await attempt('Shelve', () => post(`/api/alarms/${a.id}/shelve`, { minutes: Number(data.get('minutes')), reason: String(data.get('reason')) }));
-        if (r) toast(`Shelved until ${fmtTime(r.shelved_until)}.`, 'ok');
+        if (r) { toast(`Shelved until ${fmtTime(r.shelved_until)}.`, 'ok'); loadHidden(); }
+      }
+      // Out of service (maintenance, a faulty instrument): a reason and an end are required.
+      async function outOfService(a) {
+        const data = await formDialog(`Out of service: ${a.message}`, (f) => f.append(
+          h('label', { class: 'field' }, h('span', { class: 'field-label', text: 'Hours (it returns to service by itself then)' }), h('input', { type: 'number', name: 'hours', min: 1, max: 2160, value: 8, required: true, id: 'oos-hours' })),
+          h('label', { class: 'field' }, h('span', { class: 'field-label', text: 'Reason (required)' }), h('input', { name: 'reason', required: true, minlength: 3, id: 'oos-reason' }))),
+        { submitLabel: 'Take out of service' });
+        if (!data) return;
+        const r = await attempt('Out of service', () => post(`/api/alarms/${a.id}/out-of-service`, { hours: Number(data.get('hours')), reason: String(data.get('reason')) }));
+        if (r) { toast(`Out of service until ${fmtTime(r.until)}.`, 'ok'); loadHidden(); }
+      }
+      async function inService(a) {
+        const r = await attempt('Return to service', () => del(`/api/alarms/${a.id}/out-of-service`));
+        if (r !== undefined) { toast('Returned to service.', 'ok'); loadHidden(); }
       }
       async function unshelve(a) {
         const r = await attempt('Unshelve', () => del(`/api/alarms/${a.id}/shelve`));
-        if (r !== undefined) toast('Unshelved.', 'ok');
+        if (r !== undefined) { toast('Unshelved.', 'ok'); loadHidden(); }
       }
 
-      const off1 = live.onAlarms(draw);
+      const off1 = live.onAlarms(() => { draw(); loadHidden(); });
       draw();
-      return () => off1();
+      loadHidden();
+      return () => { gone = true; clearTimeout(hiddenTimer); off1(); };
     }
 
     function historyView() {

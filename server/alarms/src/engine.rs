@@ -368,7 +368,21 @@ impl AlarmEngine {
         out_of_service: bool,
         reason: &str,
     ) -> Result<bool, AlarmError> {
-        self.op(|s, now, out| s.set_out_of_service(id, user, out_of_service, reason, now, out))
+        self.op(|s, now, out| {
+            s.set_out_of_service(id, user, out_of_service, reason, None, now, out)
+        })
+    }
+
+    /// Takes alarm `id` out of service until `until` (then it returns by
+    /// itself, recorded as the cause `in_service` with no user).
+    pub fn out_of_service_until(
+        &self,
+        id: AlarmId,
+        user: &str,
+        reason: &str,
+        until: gridscada_tagdb::Timestamp,
+    ) -> Result<bool, AlarmError> {
+        self.op(|s, now, out| s.set_out_of_service(id, user, true, reason, Some(until), now, out))
     }
 
     /// Raises system alarm `key` (sequence lockout, dispatch fallback,

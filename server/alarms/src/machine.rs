@@ -259,7 +259,8 @@ impl Alarm {
         }
     }
 
-    /// Runs timers: a finished delay, an expired shelving.
+    /// Runs timers: a finished delay, an expired shelving, the end of an
+    /// out-of-service period.
     pub fn tick(&mut self, now: Timestamp, out: &mut Vec<AlarmTransition>) {
         if let Some((want, since)) = self.pending {
             let delay = if want {
@@ -280,6 +281,18 @@ impl Alarm {
                 });
             }
         }
+        if self
+            .out_of_service
+            .as_ref()
+            .and_then(|s| s.until)
+            .is_some_and(|u| now >= u)
+        {
+            // Back in service by itself: no user.
+            self.transition(now, TransitionCause::InService, None, out, |a| {
+                a.out_of_service = None;
+                a.after_release();
+            });
+        }
     }
 
     /// The earliest time [`Alarm::tick`] has something to do.
@@ -292,10 +305,8 @@ impl Alarm {
             })
         });
         let shelve = self.shelved.as_ref().map(|s| s.until);
-        match (delay, shelve) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
-        }
+        let service = self.out_of_service.as_ref().and_then(|s| s.until);
+        [delay, shelve, service].into_iter().flatten().min()
     }
 
     fn set_active(&mut self, active: bool, now: Timestamp, out: &mut Vec<AlarmTransition>) {
@@ -372,6 +383,7 @@ impl Alarm {
         out_of_service: bool,
         user: &str,
         reason: &str,
+        until: Option<Timestamp>,
         now: Timestamp,
         out: &mut Vec<AlarmTransition>,
     ) -> bool {
@@ -389,6 +401,7 @@ impl Alarm {
                     by: user.to_owned(),
                     reason: reason.to_owned(),
                     since: now,
+                    until,
                 });
                 a.acked = true;
             } else {
@@ -547,6 +560,7 @@ impl Alarm {
             out_of_service_by: self.out_of_service.as_ref().map(|s| s.by.clone()),
             out_of_service_since: self.out_of_service.as_ref().map(|s| s.since),
             out_of_service_reason: self.out_of_service.as_ref().map(|s| s.reason.clone()),
+            out_of_service_until: self.out_of_service.as_ref().and_then(|s| s.until),
             activation_value: self.activation_value.clone(),
         }
     }
@@ -582,6 +596,7 @@ impl Alarm {
             by: r.out_of_service_by.clone().unwrap_or_default(),
             reason: r.out_of_service_reason.clone().unwrap_or_default(),
             since: r.out_of_service_since.unwrap_or(r.last_change),
+            until: r.out_of_service_until,
         });
         // A hidden alarm never waits for an ack, whatever the record says.
         self.acked = r.acked || self.is_hidden();

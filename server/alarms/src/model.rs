@@ -308,6 +308,8 @@ pub struct AlarmStateRecord {
     pub out_of_service_by: Option<String>,
     pub out_of_service_since: Option<Timestamp>,
     pub out_of_service_reason: Option<String>,
+    #[serde(default)]
+    pub out_of_service_until: Option<Timestamp>,
     /// The tag's value at the latest activation (what the message's `{value}`
     /// shows), kept after the alarm clears, so the alarm list can label it
     /// beside the value now also after a restart.
@@ -324,12 +326,15 @@ pub struct ShelveInfo {
     pub until: Timestamp,
 }
 
-/// Who took an alarm out of service, why, and since when.
+/// Who took an alarm out of service, why, since when and until when.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ServiceInfo {
     pub by: String,
     pub reason: String,
     pub since: Timestamp,
+    /// When it returns to service by itself; `None`: only by hand.
+    #[serde(default)]
+    pub until: Option<Timestamp>,
 }
 
 /// An alarm as the alarm list shows it.

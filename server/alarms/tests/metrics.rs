@@ -144,6 +144,7 @@ fn record(key: &str, active: bool, since_ms: Option<i64>) -> AlarmStateRecord {
         out_of_service_by: None,
         out_of_service_since: None,
         out_of_service_reason: None,
+        out_of_service_until: None,
         activation_value: None,
     }
 }

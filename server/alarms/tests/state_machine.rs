@@ -393,7 +393,7 @@ fn shelve_checks_its_arguments() {
         .is_err());
     assert!(r
         .set
-        .set_out_of_service(id, "sue", true, &long, ts(0.0), &mut out)
+        .set_out_of_service(id, "sue", true, &long, None, ts(0.0), &mut out)
         .is_err());
     assert!(out.transitions.is_empty() && out.events.is_empty());
 }
@@ -404,19 +404,19 @@ fn out_of_service_hides_until_returned() {
     let id = r.id(HI);
     assert!(
         r.set
-            .set_out_of_service(id, "tech", true, "", ts(0.0), &mut r.out)
+            .set_out_of_service(id, "tech", true, "", None, ts(0.0), &mut r.out)
             .is_err(),
         "a reason is required"
     );
     assert!(r
         .set
-        .set_out_of_service(id, "tech", true, "calibration", ts(0.0), &mut r.out)
+        .set_out_of_service(id, "tech", true, "calibration", None, ts(0.0), &mut r.out)
         .unwrap());
     assert_eq!(r.out.events[0].kind, EventType::OutOfService);
     assert_eq!(r.take(), vec![(C::OutOfService, Normal, OutOfService)]);
     assert!(!r
         .set
-        .set_out_of_service(id, "tech", true, "again", ts(0.5), &mut r.out)
+        .set_out_of_service(id, "tech", true, "again", None, ts(0.5), &mut r.out)
         .unwrap());
     r.feed(V, 270.0, 1.0);
     assert_eq!(r.state(HI), OutOfService);
@@ -430,9 +430,68 @@ fn out_of_service_hides_until_returned() {
     r.take();
     assert!(r
         .set
-        .set_out_of_service(id, "tech", false, "", ts(4.0), &mut r.out)
+        .set_out_of_service(id, "tech", false, "", None, ts(4.0), &mut r.out)
         .unwrap());
     assert_eq!(r.take(), vec![(C::InService, OutOfService, UnackActive)]);
+}
+
+#[test]
+fn out_of_service_ends_by_itself_at_its_expiry() {
+    let mut r = Rig::new(vec![limit(V, AlarmKind::Hi, 253.0, 0.0, 0.0, 0.0)]);
+    let id = r.id(HI);
+    assert!(
+        r.set
+            .set_out_of_service(
+                id,
+                "sue",
+                true,
+                "sensor swap",
+                Some(ts(0.0)),
+                ts(1.0),
+                &mut r.out
+            )
+            .is_err(),
+        "an end in the past"
+    );
+    assert!(r
+        .set
+        .set_out_of_service(
+            id,
+            "sue",
+            true,
+            "sensor swap",
+            Some(ts(10.0)),
+            ts(1.0),
+            &mut r.out
+        )
+        .unwrap());
+    assert!(r.out.events[0]
+        .message
+        .starts_with("Out of service until 1970-01-01 00:00 UTC (sensor swap)"));
+    r.take();
+    r.feed(V, 270.0, 2.0);
+    assert_eq!(r.state(HI), OutOfService);
+    assert_eq!(r.set.next_deadline(), Some(ts(10.0)));
+    r.tick(9.9);
+    assert_eq!(r.state(HI), OutOfService);
+    r.out.events.clear();
+    r.take();
+    r.tick(10.0);
+    assert!(r
+        .out
+        .events
+        .iter()
+        .any(|e| e.kind == EventType::OutOfService
+            && e.message.starts_with("Out of service expired")));
+    // Back in service with the condition still active: annunciated anew.
+    assert_eq!(r.take(), vec![(C::InService, OutOfService, UnackActive)]);
+    // The expiry survives a restart through the record.
+    let mut r2 = Rig::new(vec![limit(V, AlarmKind::Hi, 253.0, 0.0, 0.0, 0.0)]);
+    r2.set
+        .set_out_of_service(id, "sue", true, "x", Some(ts(20.0)), ts(11.0), &mut r2.out)
+        .unwrap();
+    let rec = r2.set.records().into_iter().find(|x| x.key == HI).unwrap();
+    assert_eq!(rec.out_of_service_until, Some(ts(20.0)));
 }
 
 fn elcb_rig(release_s: f64) -> Rig {

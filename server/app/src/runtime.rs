@@ -262,6 +262,8 @@ pub struct Stack {
     pair_keeper: Option<(watch::Sender<bool>, tokio::task::JoinHandle<()>)>,
     /// The MQTT Sparkplug B edge node (`[mqtt.edge]`), once started.
     pub mqtt_edge: Option<gridscada_sparkplug::edge::EdgeNode>,
+    /// The alarm notifier's figures, if `[[notify]]` routes run.
+    pub notify: Option<gridscada_notify::NotifyHandle>,
     field: gridscada_modbus::FieldIo,
     /// The central Sparkplug B host (`[mqtt.host]`), if configured.
     sparkplug_host: Option<gridscada_sparkplug::host::Host>,
@@ -291,6 +293,9 @@ pub struct StackOptions {
     pub restore_panels: bool,
     /// The data folder in use: the audit spool lives in it.
     pub data_dir: PathBuf,
+    /// Send alarm notifications (`[[notify]]`); off for replay, whose
+    /// alarms are not the plant's.
+    pub notify: bool,
 }
 
 impl Stack {
@@ -366,7 +371,18 @@ impl Stack {
         let transitions_rx = crate::pair::gate(transitions_rx, &leadership);
         let alarm_events_rx = crate::pair::gate(alarm_events_rx, &leadership);
         let states_rx = crate::pair::gate(states_rx, &leadership);
-        tasks.spawn(sinks::alarm_transitions(audit.handle(), transitions_rx));
+        // A copy of each transition for the notifier, if it runs.
+        let (notify_tx, notify_rx) = if opts.notify && !plant.notify.is_empty() {
+            let (tx, rx) = mpsc::channel(4096);
+            (Some(tx), Some(rx))
+        } else {
+            (None, None)
+        };
+        tasks.spawn(sinks::alarm_transitions(
+            audit.handle(),
+            transitions_rx,
+            notify_tx,
+        ));
         tasks.spawn(sinks::alarm_events(alarm_events_rx, events_tx.clone()));
         tasks.spawn(sinks::alarm_states(store.clone(), states_rx));
         let alarms = gridscada_alarms::AlarmEngine::new(
@@ -411,6 +427,23 @@ impl Stack {
         }
         tasks.spawn(alarms.clone().run());
         tasks.spawn(sinks::audit_spool_alarm(audit.handle(), alarms.clone()));
+        let notify = match notify_rx {
+            Some(rx) => {
+                let (notifier, handle) = gridscada_notify::Notifier::new(
+                    &plant,
+                    store.clone(),
+                    alarms.clone(),
+                    clock.clone(),
+                    events_tx.clone(),
+                    rx,
+                    &|name| std::env::var(name).ok(),
+                )
+                .map_err(|e| anyhow!("starting alarm notification: {e}"))?;
+                tasks.spawn(notifier.run());
+                Some(handle)
+            }
+            None => None,
+        };
 
         // The historian.
         let historian = gridscada_store::Historian::spawn(store.clone(), Default::default());
@@ -617,6 +650,7 @@ impl Stack {
             pair,
             pair_keeper,
             mqtt_edge: None,
+            notify,
             field,
             sparkplug_host,
             historian,
@@ -720,6 +754,7 @@ async fn run(
             // A scenario starts from its own initial state.
             restore_panels: scenario.is_none(),
             data_dir: data.to_path_buf(),
+            notify: true,
         },
     )
     .await?;
@@ -886,6 +921,7 @@ pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
                 .as_ref()
                 .map(|h| Arc::new(h.stats_source()) as sparkplug_host::HostStatsSource),
             mqtt: stack.mqtt_edge.as_ref().map(|e| e.metrics()),
+            notify: stack.notify.clone(),
         })),
         screens: Default::default(),
         tag_index: Arc::new(gridscada_web::access::TagIndex::new(&stack.plant)),

@@ -58,12 +58,20 @@ pub async fn alarm_events(
     }
 }
 
-/// Alarm history into the audit trail, in the order the engine made it.
+/// Alarm history into the audit trail, in the order the engine made it,
+/// and a copy to the alarm notifier if it runs (never waited for: a
+/// notifier that falls 4096 transitions behind loses the surplus, logged).
 pub async fn alarm_transitions(
     audit: AuditHandle,
     mut rx: mpsc::Receiver<gridscada_alarms::AlarmTransition>,
+    notify: Option<mpsc::Sender<gridscada_alarms::AlarmTransition>>,
 ) {
     while let Some(t) = rx.recv().await {
+        if let Some(n) = &notify {
+            if let Err(mpsc::error::TrySendError::Full(t)) = n.try_send(t.clone()) {
+                tracing::error!(alarm = %t.key, "alarm notifier behind: transition not notified");
+            }
+        }
         audit.record(AuditBody::Transition((&t).into())).await;
     }
 }

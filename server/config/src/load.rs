@@ -43,6 +43,9 @@ pub struct Plant {
     pub opcua: Option<OpcUaConfig>,
     /// `[redundancy]`: one of a redundant pair, if configured.
     pub redundancy: Option<RedundancyConfig>,
+    /// `[[notify]]`: alarm notification routes (none: no alarm leaves the
+    /// server).
+    pub notify: Vec<NotifyConfig>,
 }
 
 /// Where HTTPS takes its certificate and key, and its other settings.
@@ -226,6 +229,7 @@ pub fn load_with(
         mqtt: main_cfg.mqtt,
         opcua: main_cfg.opcua,
         redundancy: main_cfg.redundancy,
+        notify: main_cfg.notify,
     })
 }
 
@@ -325,6 +329,7 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
     let mut mqtt = None;
     let mut opcua = None;
     let mut redundancy = None;
+    let mut notify = vec![];
     let before = diags.len();
     for (key, value) in root.iter() {
         match key.get_ref().as_ref() {
@@ -336,10 +341,11 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
             "mqtt" => mqtt = de(file, value, "[mqtt]", diags),
             "opcua" => opcua = de(file, value, "[opcua]", diags),
             "redundancy" => redundancy = de(file, value, "[redundancy]", diags),
+            "notify" => notify = de_each(file, value, "notify", diags),
             other => diags.push(file.error_at(
                 key.span(),
                 format!(
-                    "unknown key '{other}' in the main file; expected one of tag_files, server, storage, panel, microgrid, mqtt, opcua, redundancy"
+                    "unknown key '{other}' in the main file; expected one of tag_files, server, storage, panel, microgrid, mqtt, opcua, redundancy, notify"
                 ),
             )),
         }
@@ -366,6 +372,7 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
         mqtt,
         opcua,
         redundancy,
+        notify,
     })
 }
 

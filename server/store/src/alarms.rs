@@ -136,6 +136,7 @@ type StateRow = (
     (Option<String>, Option<i64>, Option<i64>, Option<String>),
     (bool, Option<String>, Option<i64>, Option<String>),
     Option<String>,
+    Option<i64>,
 );
 
 fn ts(v: Option<i64>) -> Option<Timestamp> {
@@ -234,9 +235,9 @@ impl Store {
                        active_since, last_change, message, priority, selection, shelved_by, \
                        shelved_at, shelved_until, shelve_reason, out_of_service, \
                        out_of_service_by, out_of_service_since, out_of_service_reason, \
-                       activation_value) \
+                       activation_value, out_of_service_until) \
                      VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, \
-                       $16, $17, $18, $19) \
+                       $16, $17, $18, $19, $20) \
                      ON CONFLICT (alarm_key) DO UPDATE SET kind = excluded.kind, \
                        state = excluded.state, active = excluded.active, acked = excluded.acked, \
                        active_since = excluded.active_since, last_change = excluded.last_change, \
@@ -248,7 +249,8 @@ impl Store {
                        out_of_service_by = excluded.out_of_service_by, \
                        out_of_service_since = excluded.out_of_service_since, \
                        out_of_service_reason = excluded.out_of_service_reason, \
-                       activation_value = excluded.activation_value \
+                       activation_value = excluded.activation_value, \
+                       out_of_service_until = excluded.out_of_service_until \
                      WHERE excluded.last_change >= alarm_states.last_change",
                 )
                 .bind(&s.key)
@@ -270,6 +272,7 @@ impl Store {
                 .bind(s.out_of_service_since.map(Timestamp::as_millis))
                 .bind(s.out_of_service_reason.as_deref())
                 .bind(s.activation_value.as_ref().and_then(encode_value))
+                .bind(s.out_of_service_until.map(Timestamp::as_millis))
                 .execute(&mut *tx)
                 .await
                 .map_err(db("saving alarm states"))?;
@@ -301,7 +304,7 @@ impl Store {
                 "SELECT alarm_key, kind, state, active, acked, active_since, last_change, \
                    message, priority, selection, shelved_by, shelved_at, shelved_until, \
                    shelve_reason, out_of_service, out_of_service_by, out_of_service_since, \
-                   out_of_service_reason, activation_value \
+                   out_of_service_reason, activation_value, out_of_service_until \
                  FROM alarm_states ORDER BY alarm_key",
             )
             .fetch_all(p)
@@ -333,6 +336,7 @@ impl Store {
                             r.try_get(17)?,
                         ),
                         r.try_get(18)?,
+                        r.try_get(19)?,
                     ))
                 })
                 .collect::<std::result::Result<Vec<_>, _>>()
@@ -364,6 +368,7 @@ impl Store {
                     out_of_service_by: r.11 .1,
                     out_of_service_since: ts(r.11 .2),
                     out_of_service_reason: r.11 .3,
+                    out_of_service_until: ts(r.13),
                     // Only shown beside the value now: an unreadable one is
                     // dropped rather than failing the restore of every alarm.
                     activation_value: r.12.as_deref().and_then(decode_value),

@@ -50,6 +50,7 @@ mod error;
 mod events;
 mod historian;
 mod lease;
+mod notifications;
 mod panels;
 mod recorder;
 mod screens;
@@ -72,6 +73,7 @@ pub use historian::{
     TrendBucket, MAX_TREND_BUCKETS,
 };
 pub use lease::{Fence, Lease, LeaseState};
+pub use notifications::{LastNotified, NewNotification, Notification, NotificationStatus};
 pub use recorder::{RecordPolicy, Recorder};
 pub use screens::{ScreenRecord, MAX_SCREEN_BYTES};
 pub use sessions::{SessionKey, SessionRecord};

@@ -152,6 +152,11 @@ const SQLITE_MIGRATIONS: &[(i64, &str, &str)] = &[
         "leadership",
         include_str!("../migrations/sqlite/0008_leadership.sql"),
     ),
+    (
+        10,
+        "notifications, out-of-service ends",
+        include_str!("../migrations/sqlite/0010_notifications.sql"),
+    ),
 ];
 const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
     (
@@ -193,6 +198,11 @@ const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
         8,
         "leadership",
         include_str!("../migrations/postgres/0008_leadership.sql"),
+    ),
+    (
+        10,
+        "notifications, out-of-service ends",
+        include_str!("../migrations/postgres/0010_notifications.sql"),
     ),
 ];
 

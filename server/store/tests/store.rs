@@ -483,6 +483,7 @@ fn alarm_state(key: &str) -> AlarmStateRecord {
         out_of_service_by: None,
         out_of_service_since: None,
         out_of_service_reason: None,
+        out_of_service_until: None,
         activation_value: Some(gridscada_tagdb::Value::Float(412.5)),
     }
 }
@@ -509,6 +510,7 @@ async fn alarm_states_survive_restart(mut db: TestDb) {
     b2.out_of_service_by = Some("sup".into());
     b2.out_of_service_since = Some(ts(2500));
     b2.out_of_service_reason = Some("under repair".into());
+    b2.out_of_service_until = Some(ts(9_000_000));
     // The value at activation keeps its type, an integer beyond 2^53 exactly.
     b2.activation_value = Some(gridscada_tagdb::Value::Int(9_007_199_254_740_993));
     let mut c = alarm_state("SS1.Zone3.I:hi");

@@ -292,6 +292,20 @@ pub fn table() -> Vec<Route> {
             doc::<api::alarms::__path_unshelve>,
         ),
         r(
+            Method::POST,
+            "/api/alarms/{id}/out-of-service",
+            Perm::Role(Supervisor),
+            || post(api::alarms::out_of_service),
+            doc::<api::alarms::__path_out_of_service>,
+        ),
+        r(
+            Method::DELETE,
+            "/api/alarms/{id}/out-of-service",
+            Perm::Role(Supervisor),
+            || delete(api::alarms::in_service),
+            doc::<api::alarms::__path_in_service>,
+        ),
+        r(
             Method::GET,
             "/api/alarms/history",
             Perm::Screen("alarms"),

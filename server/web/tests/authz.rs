@@ -153,6 +153,18 @@ async fn key_rules_hold_independently_of_the_table() {
         ),
         (
             Method::POST,
+            "/api/alarms/7/out-of-service",
+            json!({"hours": 1, "reason": "test"}),
+            Supervisor,
+        ),
+        (
+            Method::DELETE,
+            "/api/alarms/7/out-of-service",
+            json!(null),
+            Supervisor,
+        ),
+        (
+            Method::POST,
             "/api/panels/ss1/mode",
             json!({"mode": "manual"}),
             Supervisor,

@@ -491,6 +491,103 @@ async fn a_refused_shelve_changes_nothing_and_claims_nothing() {
     assert_eq!(to_shelved, 1, "{history:?}");
 }
 
+/// Issue 20: a supervisor takes an alarm out of service with a reason and
+/// an end; bad input is refused with the field named, an operator is
+/// refused, the end is kept in the store, it is audited with the user, and
+/// the alarm returns to service by hand (twice is a conflict).
+#[tokio::test]
+async fn out_of_service_with_a_reason_and_an_end() {
+    let h = Harness::new(Options::default()).await;
+    h.run_alarms();
+    let engine = h.state.components.alarms.clone().unwrap();
+    let key = "test.sensor_fault";
+    let id = engine.raise(key, 500, "Plant", "Sensor fault").unwrap();
+    let sup = h.login("supervisor", PASSWORD).await;
+    let op = h.login("operator", PASSWORD).await;
+    let path = format!("/api/alarms/{}/out-of-service", id.0);
+    let body = json!({"reason": "sensor swap", "hours": 2});
+
+    let r = h
+        .call(Method::POST, &path, Some(&op), Some(body.clone()))
+        .await;
+    assert_eq!(r.status, StatusCode::FORBIDDEN, "{}", r.text());
+    for (bad, want) in [
+        (
+            json!({"reason": "x", "hours": 0}),
+            "hours: 0 must be more than 0",
+        ),
+        (json!({"reason": "x", "hours": 3000}), "at most 2160"),
+        (json!({"reason": " ", "hours": 1}), "a reason is required"),
+        (json!({"reason": "x"}), "hours"),
+    ] {
+        let r = h
+            .call(Method::POST, &path, Some(&sup), Some(bad.clone()))
+            .await;
+        assert_eq!(r.status, StatusCode::BAD_REQUEST, "{bad}: {}", r.text());
+        assert!(r.text().contains(want), "{bad}: {}", r.text());
+    }
+    assert_eq!(alarm_view(&h, &sup, key).await["state"], "unack_active");
+
+    let before = h.state.clock.now().as_millis();
+    let r = h
+        .call(Method::POST, &path, Some(&sup), Some(body.clone()))
+        .await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text());
+    let until = r.json()["until"].as_i64().unwrap();
+    assert!(
+        (until - before - 7_200_000).abs() < 60_000,
+        "{until} vs {before}"
+    );
+    let a = alarm_view(&h, &sup, key).await;
+    assert_eq!(a["state"], "out_of_service", "{a}");
+    assert_eq!(a["out_of_service"]["reason"], "sensor swap", "{a}");
+    assert_eq!(a["out_of_service"]["by"], "supervisor", "{a}");
+    assert_eq!(a["out_of_service"]["until"], until, "{a}");
+    let stored = h.state.store.alarm_states().await.unwrap();
+    let rec = stored.iter().find(|r| r.key == key).unwrap();
+    assert!(rec.out_of_service);
+    assert_eq!(rec.out_of_service_until.map(|t| t.as_millis()), Some(until));
+    let r = h.call(Method::POST, &path, Some(&sup), Some(body)).await;
+    assert_eq!(r.status, StatusCode::CONFLICT, "{}", r.text());
+
+    let admin = h.login("administrator", PASSWORD).await;
+    let (hr, admin) = (&h, admin.as_str());
+    let events = eventually(
+        "the out-of-service event is logged",
+        std::time::Duration::from_secs(5),
+        move || async move {
+            let ev = hr
+                .call(
+                    Method::GET,
+                    &format!("/api/events?type=out_of_service&source={key}"),
+                    Some(admin),
+                    None,
+                )
+                .await
+                .json();
+            let ev: Vec<Value> = ev["events"].as_array().unwrap().clone();
+            (!ev.is_empty()).then_some(ev)
+        },
+    )
+    .await;
+    assert_eq!(events[0]["user"], "supervisor");
+    assert!(
+        events[0]["message"]
+            .as_str()
+            .unwrap()
+            .contains("Out of service until"),
+        "{events:?}"
+    );
+
+    let r = h.call(Method::DELETE, &path, Some(&op), None).await;
+    assert_eq!(r.status, StatusCode::FORBIDDEN, "{}", r.text());
+    let r = h.call(Method::DELETE, &path, Some(&sup), None).await;
+    assert_eq!(r.status, StatusCode::NO_CONTENT, "{}", r.text());
+    assert_eq!(alarm_view(&h, &sup, key).await["state"], "unack_active");
+    let r = h.call(Method::DELETE, &path, Some(&sup), None).await;
+    assert_eq!(r.status, StatusCode::CONFLICT, "{}", r.text());
+}
+
 /// Issue 22 #15: a write outside the tag's engineering limits (-50 to 50 kW
 /// in the test plant) answers `out_of_limits`, nothing reaches the device
 /// and the value stays, and each refusal is in the event log. A value on

@@ -85,6 +85,14 @@ impl AlarmSet {
                     format!("Shelving expired: {}", t.message),
                 ));
             }
+            if t.cause == TransitionCause::InService && t.user.is_none() {
+                out.events.push(Event::new(
+                    now,
+                    EventType::OutOfService,
+                    &t.key,
+                    format!("Out of service expired: back in service: {}", t.message),
+                ));
+            }
         }
         if !self.rules.is_empty() {
             self.update_rules(now, out);

@@ -218,25 +218,51 @@ impl AlarmSet {
         Ok(())
     }
 
-    /// Takes alarm `id` out of service (`out_of_service = true`) or returns it.
-    /// Ok(false) if it already was in that state.
+    /// Takes alarm `id` out of service (`out_of_service = true`, until
+    /// `until` if given) or returns it. Ok(false) if it already was in that
+    /// state.
+    #[allow(clippy::too_many_arguments)]
     pub fn set_out_of_service(
         &mut self,
         id: AlarmId,
         user: &str,
         out_of_service: bool,
         reason: &str,
+        until: Option<Timestamp>,
         now: Timestamp,
         out: &mut Outputs,
     ) -> Result<bool, AlarmError> {
         let user = check_user(user)?;
         let reason = check_reason("out of service", reason, out_of_service)?;
+        if out_of_service && until.is_some_and(|u| u <= now) {
+            return Err(AlarmError::invalid(
+                "out of service",
+                "the end must be in the future",
+            ));
+        }
         let alarm = self.get_mut(id)?;
-        if !alarm.set_out_of_service(out_of_service, user, reason, now, &mut out.transitions) {
+        let until = until.filter(|_| out_of_service);
+        if !alarm.set_out_of_service(
+            out_of_service,
+            user,
+            reason,
+            until,
+            now,
+            &mut out.transitions,
+        ) {
             return Ok(false);
         }
         let what = if out_of_service {
-            format!("Out of service ({reason})")
+            match until {
+                Some(u) => {
+                    let c = u.civil_utc();
+                    format!(
+                        "Out of service until {:04}-{:02}-{:02} {:02}:{:02} UTC ({reason})",
+                        c.year, c.month, c.day, c.hour, c.minute
+                    )
+                }
+                None => format!("Out of service ({reason})"),
+            }
         } else {
             "Returned to service".to_owned()
         };

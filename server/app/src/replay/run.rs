@@ -117,6 +117,7 @@ async fn run_stack(
             dispatch_policy: policy,
             restore_panels: false,
             data_dir: data.to_path_buf(),
+            notify: false,
         },
     )
     .await?;

@@ -151,6 +151,7 @@ async fn postgres_down_during_fault_isolation_and_an_alarm_flood_loses_nothing()
             dispatch_policy: Default::default(),
             restore_panels: false,
             data_dir: dir.path().to_path_buf(),
+            notify: false,
         },
     )
     .await

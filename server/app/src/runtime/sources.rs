@@ -144,6 +144,7 @@ pub(super) struct StackMetrics {
     pub(super) sparkplug_host: Option<super::sparkplug_host::HostStatsSource>,
     /// The Sparkplug B edge node's figures, when it runs.
     pub(super) mqtt: Option<Arc<gridscada_sparkplug::edge::EdgeMetrics>>,
+    pub(super) notify: Option<gridscada_notify::NotifyHandle>,
 }
 
 impl StackMetrics {
@@ -268,6 +269,56 @@ impl StackMetrics {
             M::get(&m.buffered) as f64,
         );
     }
+
+    /// Alarm notification, per route: sent, failed attempts, given up,
+    /// held by the flood limit, failing now; and the outbox's backlog.
+    fn render_notify(&self, out: &mut gridscada_web::metrics::Prom) {
+        use std::sync::atomic::Ordering::Relaxed;
+        let Some(n) = &self.notify else {
+            return;
+        };
+        let f = &n.figures;
+        let failing = f.failing.lock().clone();
+        for (route, c) in &f.routes {
+            let l = [("route", route.as_str())];
+            for (name, help, v) in [
+                (
+                    "gridscada_notifications_sent_total",
+                    "Alarm notifications delivered.",
+                    &c.sent,
+                ),
+                (
+                    "gridscada_notifications_failed_attempts_total",
+                    "Alarm notification delivery attempts that failed (retried with back-off).",
+                    &c.failed_attempts,
+                ),
+                (
+                    "gridscada_notifications_given_up_total",
+                    "Alarm notifications given up after retrying.",
+                    &c.given_up,
+                ),
+                (
+                    "gridscada_notifications_held_total",
+                    "Alarm notifications held by the flood limit and told in a summary.",
+                    &c.held,
+                ),
+            ] {
+                out.counter(name, help, &l, v.load(Relaxed) as f64);
+            }
+            out.gauge(
+                "gridscada_notifications_failing",
+                "1 while the route cannot deliver (its system alarm stands).",
+                &l,
+                f64::from(u8::from(failing.get(route).copied().unwrap_or(false))),
+            );
+        }
+        out.gauge(
+            "gridscada_notifications_pending",
+            "Alarm notifications waiting in the outbox.",
+            &[],
+            f.pending.load(Relaxed) as f64,
+        );
+    }
 }
 
 impl gridscada_web::metrics::MetricsSource for StackMetrics {
@@ -280,6 +331,7 @@ impl gridscada_web::metrics::MetricsSource for StackMetrics {
             super::sparkplug_host::render(&host(), out);
         }
         self.render_mqtt(out);
+        self.render_notify(out);
         let poll = self.poll.stats();
         for d in &poll.devices {
             let l = [("device", d.device.as_str())];

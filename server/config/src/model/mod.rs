@@ -10,7 +10,7 @@
 //! `devices.rs`, tags `tags.rs`, a tag's alarms and history `alarms.rs`,
 //! panels `panels.rs`, the microgrid `microgrid.rs`, the MQTT Sparkplug B
 //! northbound `mqtt.rs`, the OPC UA server `opcua.rs`, the redundant pair
-//! `redundancy.rs`.
+//! `redundancy.rs`, alarm notification routes `notify.rs`.
 
 use serde::Deserialize;
 use serde_spanned::Spanned;
@@ -19,6 +19,7 @@ mod alarms;
 mod devices;
 mod microgrid;
 mod mqtt;
+mod notify;
 mod opcua;
 mod panels;
 mod proxy;
@@ -30,6 +31,7 @@ pub use alarms::*;
 pub use devices::*;
 pub use microgrid::*;
 pub use mqtt::*;
+pub use notify::*;
 pub use opcua::*;
 pub use panels::*;
 pub use proxy::*;
@@ -53,6 +55,9 @@ pub struct MainFile {
     pub mqtt: Option<MqttConfig>,
     pub opcua: Option<OpcUaConfig>,
     pub redundancy: Option<RedundancyConfig>,
+    /// `[[notify]]`: alarm notification routes.
+    #[serde(default)]
+    pub notify: Vec<NotifyConfig>,
 }
 
 /// A tag file: devices and the tags read from them.

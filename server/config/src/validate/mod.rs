@@ -7,7 +7,8 @@
 //! `tags.rs`, their alarms `alarms.rs`, register overlaps `overlaps.rs`,
 //! device clocks `clocks.rs`, panels `panels.rs`, the microgrid
 //! `microgrid.rs`, the redundant pair and the site `redundancy.rs`, the MQTT northbound `mqtt.rs` and
-//! `mqtt_host.rs`, the OPC UA server `opcua.rs`.
+//! `mqtt_host.rs`, the OPC UA server `opcua.rs`, alarm notification
+//! routes `notify.rs`.
 
 use std::collections::HashMap;
 use std::net::SocketAddr;
@@ -26,6 +27,7 @@ mod microgrid;
 mod mqtt;
 mod mqtt_host;
 mod opcua;
+mod notify;
 mod overlaps;
 mod panels;
 mod redundancy;
@@ -36,6 +38,7 @@ use devices::check_device;
 use microgrid::check_microgrid;
 use mqtt_host::check_mqtt_host;
 use opcua::check_opcua;
+use notify::check_notify;
 use overlaps::check_overlaps;
 use panels::check_panel;
 use tags::{check_tag, check_tag_name};
@@ -68,6 +71,7 @@ pub(crate) fn check(
 ) {
     let mut cx = Ctx { files, diags };
     check_main(&mut cx, main);
+    check_notify(&mut cx, main);
 
     let mut device_by_name: HashMap<&str, (usize, &DeviceConfig)> = HashMap::new();
     for (f, d) in devices {

@@ -241,6 +241,86 @@ pub async fn unshelve(
     Ok(StatusCode::NO_CONTENT)
 }
 
+/// The longest an alarm may be out of service before it returns by itself.
+pub const MAX_OUT_OF_SERVICE_HOURS: f64 = 2160.0;
+
+#[derive(Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct OutOfServiceBody {
+    /// Why (required): it is audited and shown in the alarm list.
+    pub reason: String,
+    /// Hours until it returns to service by itself (more than 0, at most
+    /// 2160: 90 days).
+    pub hours: f64,
+}
+
+/// An alarm taken out of service.
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct OutOfService {
+    pub id: u32,
+    #[schema(value_type = shapes::Timestamp)]
+    pub until: Timestamp,
+}
+
+#[utoipa::path(post, path = "/api/alarms/{id}/out-of-service", tag = "alarms",
+    summary = "Take an alarm out of service, with a reason, until a set time",
+    params(("id" = u32, Path, description = "Alarm id")),
+    request_body = OutOfServiceBody,
+    responses((status = 200, description = "OK", body = inline(OutOfService)),
+        (status = 400), (status = 404), (status = 409, description = "Already out of service"), (status = 503)))]
+pub async fn out_of_service(
+    State(s): State<WebState>,
+    Extension(who): Extension<Principal>,
+    Path(id): Path<u32>,
+    body: Result<Json<OutOfServiceBody>, axum::extract::rejection::JsonRejection>,
+) -> ApiResult<Json<OutOfService>> {
+    let Json(b) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
+    if !(b.hours.is_finite() && b.hours > 0.0 && b.hours <= MAX_OUT_OF_SERVICE_HOURS) {
+        return Err(ApiError::bad_request(format!(
+            "hours: {} must be more than 0 and at most {MAX_OUT_OF_SERVICE_HOURS} (90 days)",
+            b.hours
+        )));
+    }
+    let e = engine(&s)?;
+    // The engine records it through the audit trail: not unless durable.
+    crate::api::audit_ready(&s).await?;
+    let until = Timestamp::from_millis(s.clock.now().as_millis() + (b.hours * 3_600_000.0) as i64);
+    if !e
+        .out_of_service_until(AlarmId(id), &who.audit_name(), &b.reason, until)
+        .map_err(alarm_error)?
+    {
+        return Err(ApiError::conflict(
+            "the alarm is already out of service; return it to service first",
+        ));
+    }
+    persist(&s, e, &[AlarmId(id)]).await?;
+    Ok(Json(OutOfService { id, until }))
+}
+
+#[utoipa::path(delete, path = "/api/alarms/{id}/out-of-service", tag = "alarms",
+    summary = "Return an alarm to service",
+    params(("id" = u32, Path, description = "Alarm id")),
+    responses((status = 204, description = "Returned to service"), (status = 404),
+        (status = 409, description = "Not out of service"), (status = 503)))]
+pub async fn in_service(
+    State(s): State<WebState>,
+    Extension(who): Extension<Principal>,
+    Path(id): Path<u32>,
+) -> ApiResult<StatusCode> {
+    let e = engine(&s)?;
+    // The engine records it through the audit trail: not unless durable.
+    crate::api::audit_ready(&s).await?;
+    if !e
+        .set_out_of_service(AlarmId(id), &who.audit_name(), false, "")
+        .map_err(alarm_error)?
+    {
+        return Err(ApiError::conflict("the alarm is not out of service"));
+    }
+    persist(&s, e, &[AlarmId(id)]).await?;
+    Ok(StatusCode::NO_CONTENT)
+}
+
 #[derive(Deserialize, Default, IntoParams)]
 #[into_params(parameter_in = Query)]
 #[serde(deny_unknown_fields)]
