@@ -432,7 +432,11 @@ impl Sites {
                             string_prop(props, &["Documentation", "description", "Description"])
                                 .unwrap_or_default(),
                         )
-                        .writable(bool_prop(props, "writable") == Some(true));
+                        // gridscada's edge says "Writable"; other edges "writable".
+                        .writable(
+                            bool_prop(props, "Writable").or_else(|| bool_prop(props, "writable"))
+                                == Some(true),
+                        );
                     match db.add(meta) {
                         Ok(id) => {
                             fx.added += 1;
