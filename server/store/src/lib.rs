@@ -50,6 +50,7 @@ mod events;
 mod historian;
 mod panels;
 mod recorder;
+mod rollup;
 mod screens;
 #[macro_use]
 mod sessions;

@@ -147,6 +147,11 @@ const SQLITE_MIGRATIONS: &[(i64, &str, &str)] = &[
         "audit ids",
         include_str!("../migrations/sqlite/0007_audit_ids.sql"),
     ),
+    (
+        9,
+        "historian roll-ups",
+        include_str!("../migrations/sqlite/0009_rollups.sql"),
+    ),
 ];
 const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
     (
@@ -183,6 +188,11 @@ const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
         7,
         "audit ids",
         include_str!("../migrations/postgres/0007_audit_ids.sql"),
+    ),
+    (
+        9,
+        "historian roll-ups",
+        include_str!("../migrations/postgres/0009_rollups.sql"),
     ),
 ];
 

@@ -194,13 +194,15 @@ pub struct StorageConfig {
     /// Global historian retention, in days; a tag's own setting wins.
     #[serde(default = "default_retention_days")]
     pub retention_days: u32,
-    /// `[storage.retention]`: how long the audit trail is kept.
+    /// `[storage.retention]`: how long the audit trail and the historian's
+    /// roll-ups are kept.
     #[serde(default)]
     pub retention: AuditRetention,
 }
 
-/// How long the event log, the alarm history and the dispatch records are
-/// kept, in days; 0 keeps them for ever. Pruned daily, in small batches.
+/// How long the event log, the alarm history, the dispatch records and the
+/// historian's roll-ups are kept, in days; 0 keeps them for ever. Pruned
+/// daily, in small batches.
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct AuditRetention {
@@ -210,6 +212,12 @@ pub struct AuditRetention {
     pub alarm_history_days: Spanned<u32>,
     #[serde(default = "default_dispatch_days")]
     pub dispatch_days: Spanned<u32>,
+    /// The historian's per-minute roll-ups (trends over days to months).
+    #[serde(default = "default_minute_days")]
+    pub minute_days: Spanned<u32>,
+    /// The historian's per-hour roll-ups (trends over months to decades).
+    #[serde(default = "default_hour_days")]
+    pub hour_days: Spanned<u32>,
 }
 
 impl Default for AuditRetention {
@@ -218,6 +226,8 @@ impl Default for AuditRetention {
             events_days: default_audit_days(),
             alarm_history_days: default_audit_days(),
             dispatch_days: default_dispatch_days(),
+            minute_days: default_minute_days(),
+            hour_days: default_hour_days(),
         }
     }
 }
@@ -225,6 +235,14 @@ impl Default for AuditRetention {
 /// Two years: an incident is often investigated, or audited, a year later.
 fn default_audit_days() -> Spanned<u32> {
     Spanned::new(0..0, 730)
+}
+/// Minute roll-ups: a few hundred bytes per tag and hour, two years.
+fn default_minute_days() -> Spanned<u32> {
+    Spanned::new(0..0, 730)
+}
+/// Hour roll-ups: the plant's long history, twenty years.
+fn default_hour_days() -> Spanned<u32> {
+    Spanned::new(0..0, 7300)
 }
 /// A dispatch record every period adds up fast, and is of use for weeks.
 fn default_dispatch_days() -> Spanned<u32> {

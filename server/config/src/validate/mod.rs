@@ -251,6 +251,8 @@ fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
         ("events_days", &r.events_days),
         ("alarm_history_days", &r.alarm_history_days),
         ("dispatch_days", &r.dispatch_days),
+        ("minute_days", &r.minute_days),
+        ("hour_days", &r.hour_days),
     ] {
         if *days.get_ref() > 36_500 {
             cx.err(
