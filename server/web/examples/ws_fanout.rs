@@ -266,8 +266,9 @@ async fn main() {
     let clients = args.get(1).copied().unwrap_or(100);
     let secs = args.get(2).copied().unwrap_or(15) as u64;
     println!(
-        "ws_fanout: {tags} tags at 1 Hz (10 batches/s), {clients} clients, {secs} s measured per run, {} CPUs",
-        std::thread::available_parallelism().map_or(0, |n| n.get())
+        "ws_fanout: {tags} tags at 1 Hz (10 batches/s), {clients} clients, {secs} s measured per run, {} CPUs, live_merge_ms {}",
+        std::thread::available_parallelism().map_or(0, |n| n.get()),
+        std::env::var("LIVE_MERGE_MS").unwrap_or_else(|_| "default".into())
     );
 
     let db = Arc::new(

@@ -46,6 +46,19 @@ pub struct ServerConfig {
     /// The sub-path everything is served under (`/scada`); empty: the root.
     #[serde(default)]
     pub base_path: Option<Spanned<String>>,
+    /// Live push (`/api/live`): how long changes are gathered after the
+    /// first one before they are sent, in ms; 0 sends each batch of changes
+    /// as it comes. Longer windows send fewer, larger messages.
+    #[serde(default = "default_live_merge_ms")]
+    pub live_merge_ms: Spanned<u32>,
+}
+
+/// Short enough that a change reaches the screen within a few frames, long
+/// enough to gather the batches of several devices polled together.
+pub const DEFAULT_LIVE_MERGE_MS: u32 = 20;
+
+fn default_live_merge_ms() -> Spanned<u32> {
+    Spanned::new(0..0, DEFAULT_LIVE_MERGE_MS)
 }
 
 /// The reverse-proxy settings in their normal forms (values that failed
@@ -173,6 +186,7 @@ impl Default for ServerConfig {
             public_origin: None,
             trusted_proxies: vec![],
             base_path: None,
+            live_merge_ms: default_live_merge_ms(),
         }
     }
 }

@@ -246,6 +246,17 @@ fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
             format!("[storage] url: '{u}' must start with sqlite:, postgres:// or postgresql://"),
         );
     }
+    let merge = &main.server.live_merge_ms;
+    if *merge.get_ref() > 1_000 {
+        cx.err(
+            0,
+            merge.span(),
+            format!(
+                "[server] live_merge_ms: {} ms is more than a second; screens would lag (0 sends each change at once)",
+                merge.get_ref()
+            ),
+        );
+    }
     let r = &main.storage.retention;
     for (key, days) in [
         ("events_days", &r.events_days),
