@@ -320,8 +320,11 @@ pub(crate) async fn maintain_pg(
         let (tags, buckets): (Vec<i64>, Vec<i64>) =
             batch.iter().map(|a| (a.tag_id, a.bucket)).unzip();
         let found: Vec<AggRow> = sqlx::query_as(&format!(
-            "SELECT {COLUMNS} FROM {} JOIN UNNEST($1::bigint[], $2::bigint[]) AS k(t, b) \
-             ON tag_id = k.t AND bucket = k.b",
+            // LATERAL: one primary-key look-up per bucket, whatever the
+            // planner would guess of an UNNEST's size.
+            "SELECT r.* FROM UNNEST($1::bigint[], $2::bigint[]) AS k(t, b) \
+             CROSS JOIN LATERAL (SELECT {COLUMNS} FROM {} \
+             WHERE tag_id = k.t AND bucket = k.b) r",
             level.table()
         ))
         .bind(&tags)

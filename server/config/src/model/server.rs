@@ -53,9 +53,10 @@ pub struct ServerConfig {
     pub live_merge_ms: Spanned<u32>,
 }
 
-/// Short enough that a change reaches the screen within a few frames, long
-/// enough to gather the batches of several devices polled together.
-pub const DEFAULT_LIVE_MERGE_MS: u32 = 20;
+/// Each batch as it comes: a message is serialized once per feed, whatever
+/// the number of sockets, so merging saves little and costs latency (the
+/// `ws_fanout` bench, docs/BENCHMARKS.md).
+pub const DEFAULT_LIVE_MERGE_MS: u32 = 0;
 
 fn default_live_merge_ms() -> Spanned<u32> {
     Spanned::new(0..0, DEFAULT_LIVE_MERGE_MS)
