@@ -70,7 +70,11 @@ impl LiveFeeds {
             return (feed, rx);
         }
         let (tx, rx) = tokio::sync::broadcast::channel(FEED_RING);
-        let task = tokio::spawn(feed(db.clone(), ids.clone(), tx.clone(), merge));
+        // Subscribed here, not in the task: a change made after `join`
+        // returns (and after the caller's snapshot) must reach the feed even
+        // if its task has not run yet.
+        let sub = db.subscribe(&ids);
+        let task = tokio::spawn(feed(db.clone(), sub, tx.clone(), merge));
         let feed = Arc::new(Feed { tx, task });
         feeds.insert(ids, Arc::downgrade(&feed));
         (feed, rx)
@@ -94,11 +98,10 @@ impl LiveFeeds {
 /// first, serializes them once, and hands the text to every socket.
 async fn feed(
     db: Arc<TagDb>,
-    ids: Arc<[TagId]>,
+    mut sub: gridscada_tagdb::Subscription,
     tx: tokio::sync::broadcast::Sender<Utf8Bytes>,
     merge: Duration,
 ) {
-    let mut sub = db.subscribe(&ids);
     let mut pending: BTreeMap<TagId, Sample> = BTreeMap::new();
     let mut snapshot = false;
     let take = |update: Update, pending: &mut BTreeMap<TagId, Sample>, snapshot: &mut bool| {
