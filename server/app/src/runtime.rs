@@ -932,6 +932,7 @@ pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
             rates: Default::default(),
         })),
         tls: stack.plant.tls.is_some(),
+        live: Default::default(),
     }
 }
 

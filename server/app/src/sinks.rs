@@ -504,7 +504,11 @@ pub async fn historian_feed(
             .iter()
             .filter_map(|(id, s)| recorder.offer(*id, s)),
     );
+    // 0 keeps a roll-up level for ever.
+    let level_days = |d: u32| (d > 0).then_some(d);
     let retention = RetentionPolicy {
+        minute_days: level_days(*plant.storage.retention.minute_days.get_ref()),
+        hour_days: level_days(*plant.storage.retention.hour_days.get_ref()),
         default_days: Some(plant.storage.retention_days),
         per_tag_days: plant
             .tags

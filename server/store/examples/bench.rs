@@ -1,6 +1,7 @@
 //! Historian benchmark: ingest rate through the writer task vs. a plain
-//! batched INSERT into the same engine, and the time of a downsampled trend
-//! query over a day of 1 s data for 10 tags (864,000 rows).
+//! batched INSERT and (PostgreSQL) a plain COPY into the same table, and the
+//! time of a 500-point trend of 10 tags over a day of 1 s data (864,000
+//! rows) and over a year of 5 min data (1,051,200 rows).
 //!
 //! cargo run --release -p gridscada-store --example bench [-- INGEST_SAMPLES]
 //! PostgreSQL runs too when GRIDSCADA_TEST_PG_URL is set (in a throwaway schema).
@@ -14,14 +15,14 @@ use sqlx::{Connection, QueryBuilder};
 
 const DAY_S: i64 = 86_400;
 
-fn samples(prefix: &str, n: usize, tags: usize, t0: i64) -> Vec<HistorySample> {
+fn samples(prefix: &str, n: usize, tags: usize, t0: i64, step_ms: i64) -> Vec<HistorySample> {
     let names: Vec<Arc<str>> = (0..tags)
         .map(|k| Arc::from(format!("{prefix}.{k}")))
         .collect();
     (0..n)
         .map(|i| HistorySample {
             tag: names[i % tags].clone(),
-            ts: Timestamp::from_millis(t0 + (i / tags) as i64 * 1000),
+            ts: Timestamp::from_millis(t0 + (i / tags) as i64 * step_ms),
             value: Some((i as f64 * 0.001).sin() * 230.0),
             exact: None,
             quality: QualityCode::Good,
@@ -74,8 +75,37 @@ async fn plain_insert(raw: &mut Raw, n: usize) -> Duration {
     started.elapsed()
 }
 
+/// The peer on PostgreSQL: COPY in text format straight into the samples
+/// table with known tag ids, 5,000 rows per transaction (the writer's batch),
+/// nothing else.
+async fn plain_copy(c: &mut sqlx::PgConnection, n: usize) -> Duration {
+    use std::fmt::Write;
+    let started = Instant::now();
+    for chunk in (0..n).collect::<Vec<_>>().chunks(5_000) {
+        let mut text = String::with_capacity(chunk.len() * 40);
+        for &i in chunk {
+            let v = (i as f64 * 0.001).sin() * 230.0;
+            let _ = writeln!(
+                text,
+                "{}\t{}\t{v}\t\\N\t0",
+                2_000_000 + (i % 10) as i64,
+                (i / 10) as i64 * 1000
+            );
+        }
+        let mut tx = c.begin().await.unwrap();
+        let mut copy = tx
+            .copy_in_raw("COPY samples (tag_id, ts, value, exact, quality) FROM STDIN")
+            .await
+            .unwrap();
+        copy.send(text.as_bytes()).await.unwrap();
+        copy.finish().await.unwrap();
+        tx.commit().await.unwrap();
+    }
+    started.elapsed()
+}
+
 async fn through_writer(store: &Store, n: usize) -> Duration {
-    let data = samples("bench.w", n, 10, 0);
+    let data = samples("bench.w", n, 10, 0, 1000);
     let hist = Historian::spawn(
         store.clone(),
         HistorianConfig {
@@ -103,52 +133,92 @@ struct Row {
     backend: &'static str,
     writer: f64,
     plain: f64,
+    copy: Option<f64>,
     load: f64,
     trend_ms: Vec<f64>,
+    year_load: f64,
+    year_ms: Vec<f64>,
+}
+
+/// Five timed 500-point trends of `tags` over `from..from + span_ms`, sorted;
+/// checks every sample is counted.
+async fn trends(store: &Store, tags: &[&str], from: i64, span_ms: i64, rows: u64) -> Vec<f64> {
+    let mut ms = Vec::new();
+    for _ in 0..5 {
+        let started = Instant::now();
+        let t = store
+            .trend(
+                tags,
+                Timestamp::from_millis(from),
+                Timestamp::from_millis(from + span_ms),
+                500,
+            )
+            .await
+            .unwrap();
+        ms.push(started.elapsed().as_secs_f64() * 1000.0);
+        assert_eq!(
+            t.iter()
+                .map(|t| t.buckets.iter().map(|b| b.count).sum::<u64>())
+                .sum::<u64>(),
+            rows
+        );
+    }
+    ms.sort_by(f64::total_cmp);
+    ms
 }
 
 async fn run(backend: &'static str, url: &str, options: OpenOptions, raw: Raw, n: usize) -> Row {
     let store = Store::open(url, &options).await.expect("open");
     let mut raw = raw;
     let plain = plain_insert(&mut raw, n).await;
+    let copy = match &mut raw {
+        Raw::Pg(c) => Some(n as f64 / plain_copy(c, n).await.as_secs_f64()),
+        Raw::Sqlite(_) => None,
+    };
     let writer = through_writer(&store, n).await;
-    // A day of 1 s data for 10 tags.
-    let day = samples("bench.day", 10 * DAY_S as usize, 10, 1_700_000_000_000);
+    // A day of 1 s data for 10 tags; the day starts on a minute, so a
+    // minute-aligned trend holds exactly the day.
+    let t0 = 1_700_000_040_000;
+    let day = samples("bench.day", 10 * DAY_S as usize, 10, t0, 1000);
     let started = Instant::now();
     for chunk in day.chunks(20_000) {
         store.insert_samples(chunk).await.unwrap();
     }
     let load = started.elapsed();
+    drop(day);
     let tags: Vec<String> = (0..10).map(|k| format!("bench.day.{k}")).collect();
     let tag_refs: Vec<&str> = tags.iter().map(String::as_str).collect();
-    let mut trend_ms = Vec::new();
-    for _ in 0..5 {
-        let started = Instant::now();
-        let t = store
-            .trend(
-                &tag_refs,
-                Timestamp::from_millis(1_700_000_000_000),
-                Timestamp::from_millis(1_700_000_000_000 + DAY_S * 1000),
-                500,
-            )
-            .await
-            .unwrap();
-        trend_ms.push(started.elapsed().as_secs_f64() * 1000.0);
-        assert_eq!(
-            t.iter()
-                .map(|t| t.buckets.iter().map(|b| b.count).sum::<u64>())
-                .sum::<u64>(),
-            864_000
-        );
+    let trend_ms = trends(&store, &tag_refs, t0, DAY_S * 1000, 864_000).await;
+    // A year of 5 min data for 10 tags, starting on an hour.
+    let y0 = 1_699_999_200_000;
+    let per_tag = 365 * 288;
+    let year = samples("bench.year", 10 * per_tag, 10, y0, 300_000);
+    let started = Instant::now();
+    for chunk in year.chunks(20_000) {
+        store.insert_samples(chunk).await.unwrap();
     }
-    trend_ms.sort_by(f64::total_cmp);
+    let year_load = started.elapsed();
+    drop(year);
+    let tags: Vec<String> = (0..10).map(|k| format!("bench.year.{k}")).collect();
+    let tag_refs: Vec<&str> = tags.iter().map(String::as_str).collect();
+    let year_ms = trends(
+        &store,
+        &tag_refs,
+        y0,
+        365 * DAY_S * 1000,
+        10 * per_tag as u64,
+    )
+    .await;
     store.close().await;
     Row {
         backend,
         writer: n as f64 / writer.as_secs_f64(),
         plain: n as f64 / plain.as_secs_f64(),
+        copy,
         load: 864_000.0 / load.as_secs_f64(),
         trend_ms,
+        year_load: (10 * per_tag) as f64 / year_load.as_secs_f64(),
+        year_ms,
     }
 }
 
@@ -209,20 +279,27 @@ async fn main() {
         Err(_) => eprintln!("GRIDSCADA_TEST_PG_URL not set: PostgreSQL skipped"),
     }
 
-    println!("\nhistorian ingest of {n} samples (10 tags), and a 500-point trend of 10 tags x 1 day of 1 s data (864,000 rows)\n");
+    println!("\nhistorian ingest of {n} samples (10 tags); 500-point trends of 10 tags over a day of 1 s data (864,000 rows) and a year of 5 min data (1,051,200 rows)\n");
     println!(
-        "| backend | writer task samples/s | plain batched INSERT samples/s | day load samples/s | trend 500 pts, 10 tags: min / median ms |"
+        "| backend | writer task samples/s | plain batched INSERT samples/s | plain COPY samples/s | writer / COPY | day load samples/s | year load samples/s | trend, day: min / median ms | trend, year: min / median ms |"
     );
-    println!("|---|---:|---:|---:|---:|");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
     for r in rows {
+        let (copy, ratio) = match r.copy {
+            Some(c) => (format!("{c:.0}"), format!("{:.2}", r.writer / c)),
+            None => ("—".into(), "—".into()),
+        };
         println!(
-            "| {} | {:.0} | {:.0} | {:.0} | {:.1} / {:.1} |",
+            "| {} | {:.0} | {:.0} | {copy} | {ratio} | {:.0} | {:.0} | {:.1} / {:.1} | {:.1} / {:.1} |",
             r.backend,
             r.writer,
             r.plain,
             r.load,
+            r.year_load,
             r.trend_ms[0],
-            r.trend_ms[r.trend_ms.len() / 2]
+            r.trend_ms[r.trend_ms.len() / 2],
+            r.year_ms[0],
+            r.year_ms[r.year_ms.len() / 2]
         );
     }
 }

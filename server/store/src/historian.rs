@@ -13,6 +13,7 @@ use sqlx::QueryBuilder;
 use tokio::io::{AsyncWrite, AsyncWriteExt};
 
 use crate::error::db;
+use crate::rollup::{self, Level};
 use crate::{Result, Store, StoreError};
 
 /// The most buckets one trend query may ask for (a screen is a few thousand
@@ -77,6 +78,10 @@ pub struct TrendBucket {
     pub last: Option<f64>,
     pub last_ts: Timestamp,
     pub last_quality: QualityCode,
+    /// Time the tag was Bad in the bucket, in ms: each Bad sample held until
+    /// the next sample, or the end of its roll-up period (of the bucket, for
+    /// a trend read from raw samples).
+    pub bad_ms: u64,
 }
 
 /// The downsampled trend of one tag.
@@ -89,10 +94,15 @@ pub struct TagTrend {
 /// How long samples are kept.
 #[derive(Debug, Clone, Default)]
 pub struct RetentionPolicy {
-    /// Days for tags without their own setting; `None` keeps them forever.
+    /// Days of raw samples for tags without their own setting; `None` keeps
+    /// them forever.
     pub default_days: Option<u32>,
-    /// A tag's own retention (from its `history.retention_days`).
+    /// A tag's own retention of raw samples (its `history.retention_days`).
     pub per_tag_days: HashMap<String, u32>,
+    /// Days of the per-minute roll-ups, every tag; `None` keeps them forever.
+    pub minute_days: Option<u32>,
+    /// Days of the per-hour roll-ups, every tag; `None` keeps them forever.
+    pub hour_days: Option<u32>,
 }
 
 /// Stored quality code: 0 good, 1 uncertain, 2 bad.
@@ -124,7 +134,7 @@ fn check_range(from: Timestamp, to: Timestamp) -> Result<()> {
     Ok(())
 }
 
-/// bucket, count, min, max, avg, last_ts, last value, last quality.
+/// bucket, count, min, max, avg, last_ts, last value, last quality, Bad ms.
 type BucketRow = (
     i64,
     i64,
@@ -134,6 +144,22 @@ type BucketRow = (
     i64,
     Option<f64>,
     i32,
+    i64,
+);
+
+/// From a roll-up: bucket, count, min, max, sum, values, last_ts, last value,
+/// last quality, Bad ms.
+type LevelRow = (
+    i64,
+    i64,
+    Option<f64>,
+    Option<f64>,
+    Option<f64>,
+    i64,
+    i64,
+    Option<f64>,
+    i32,
+    i64,
 );
 
 /// A raw sample as selected: tag id, ts, value, exact digits, quality.
@@ -148,9 +174,10 @@ struct Row {
 }
 
 impl Store {
-    /// Writes samples in one transaction, as multi-row inserts (SQLite) or one
-    /// array insert (PostgreSQL). A second sample for the same tag and
-    /// millisecond replaces the first. Returns the number of rows written.
+    /// Writes samples in one transaction, as multi-row inserts (SQLite) or a
+    /// COPY (PostgreSQL), and brings the roll-ups up to date. A second sample
+    /// for the same tag and millisecond replaces the first. Returns the number
+    /// of rows written.
     pub async fn insert_samples(&self, samples: &[HistorySample]) -> Result<u64> {
         if samples.is_empty() {
             return Ok(0);
@@ -183,6 +210,10 @@ impl Store {
             }
         }
         let n = deduped.len() as u64;
+        let keys: Vec<(i64, i64, Option<f64>, i32)> = deduped
+            .iter()
+            .map(|r| (r.tag_id, r.ts, r.value, r.quality))
+            .collect();
         match &self.inner.backend {
             crate::store::Backend::Sqlite(s) => {
                 let mut tx = s
@@ -210,47 +241,87 @@ impl Store {
                         .await
                         .map_err(db("inserting historian samples"))?;
                 }
+                rollup::maintain_sqlite(&mut tx, &keys).await?;
                 tx.commit()
                     .await
                     .map_err(db("inserting historian samples"))?;
             }
             crate::store::Backend::Postgres(p) => {
-                let (mut t, mut ts, mut v, mut x, mut q) = (
-                    Vec::with_capacity(deduped.len()),
-                    Vec::with_capacity(deduped.len()),
-                    Vec::with_capacity(deduped.len()),
-                    Vec::with_capacity(deduped.len()),
-                    Vec::with_capacity(deduped.len()),
-                );
-                for r in deduped {
-                    t.push(r.tag_id);
-                    ts.push(r.ts);
-                    v.push(r.value);
-                    x.push(r.exact);
-                    q.push(r.quality);
-                }
+                let text = copy_text(&deduped);
+                let mut tx = p.begin().await.map_err(db("inserting historian samples"))?;
+                // One historian writer at a time per schema (several servers
+                // may share a database): roll-ups are read, merged and written.
                 sqlx::query(
-                    "INSERT INTO samples (tag_id, ts, value, exact, quality) \
-                     SELECT * FROM UNNEST($1::bigint[], $2::bigint[], $3::float8[], $4::text[], $5::int4[]) \
-                     ON CONFLICT (tag_id, ts) DO UPDATE SET \
-                     value = EXCLUDED.value, exact = EXCLUDED.exact, quality = EXCLUDED.quality",
+                    "SELECT pg_advisory_xact_lock(hashtext(current_schema() || '.historian'))",
                 )
-                .bind(t)
-                .bind(ts)
-                .bind(v)
-                .bind(x)
-                .bind(q)
-                .execute(p)
+                .execute(&mut *tx)
                 .await
-                .map_err(db("inserting historian samples"))?;
+                .map_err(db("locking the historian"))?;
+                // A plain COPY into the table: as fast as PostgreSQL ingests.
+                // A repeated sample makes it fail on the primary key; then the
+                // batch goes through a staging table and is merged instead.
+                sqlx::query("SAVEPOINT historian_copy")
+                    .execute(&mut *tx)
+                    .await
+                    .map_err(db("inserting historian samples"))?;
+                match copy_in(
+                    &mut tx,
+                    "COPY samples (tag_id, ts, value, exact, quality) FROM STDIN",
+                    &text,
+                )
+                .await
+                {
+                    Ok(()) => {}
+                    Err(e)
+                        if e.as_database_error()
+                            .is_some_and(|d| d.is_unique_violation()) =>
+                    {
+                        sqlx::query("ROLLBACK TO SAVEPOINT historian_copy")
+                            .execute(&mut *tx)
+                            .await
+                            .map_err(db("inserting historian samples"))?;
+                        sqlx::query(
+                            "CREATE TEMP TABLE IF NOT EXISTS samples_in \
+                             (tag_id BIGINT, ts BIGINT, value DOUBLE PRECISION, exact TEXT, quality INTEGER) \
+                             ON COMMIT DELETE ROWS",
+                        )
+                        .execute(&mut *tx)
+                        .await
+                        .map_err(db("inserting historian samples"))?;
+                        copy_in(&mut tx, "COPY samples_in FROM STDIN", &text)
+                            .await
+                            .map_err(db("inserting historian samples"))?;
+                        sqlx::query(
+                            "INSERT INTO samples (tag_id, ts, value, exact, quality) \
+                             SELECT tag_id, ts, value, exact, quality FROM samples_in \
+                             ON CONFLICT (tag_id, ts) DO UPDATE SET \
+                             value = EXCLUDED.value, exact = EXCLUDED.exact, quality = EXCLUDED.quality",
+                        )
+                        .execute(&mut *tx)
+                        .await
+                        .map_err(db("inserting historian samples"))?;
+                    }
+                    Err(e) => return Err(db("inserting historian samples")(e)),
+                }
+                rollup::maintain_pg(&mut tx, &keys).await?;
+                tx.commit()
+                    .await
+                    .map_err(db("inserting historian samples"))?;
             }
         }
         Ok(n)
     }
 
-    /// Downsamples `from..to` into `buckets` equal buckets, for each tag,
-    /// computed by the database: per bucket count, min, max, avg and the last
-    /// sample. Tags never logged come back with no buckets.
+    /// Downsamples `from..to` into `buckets` buckets, for each tag, computed
+    /// by the database: per bucket count, min, max, avg, the last sample and
+    /// the Bad time. Tags never logged come back with no buckets.
+    ///
+    /// Reads the coarsest roll-up (hour, then minute) that still gives at
+    /// least `buckets` points; then the bucket edges are whole minutes or
+    /// hours, the first may start before `from` and the last end after `to`
+    /// by less than one roll-up period, and each bucket says its edges.
+    /// Shorter ranges read raw samples into equal buckets over exactly
+    /// `from..to`.
     pub async fn trend(
         &self,
         tags: &[&str],
@@ -268,20 +339,10 @@ impl Store {
         let (f, t, n) = (from.as_millis(), to.as_millis(), buckets as i64);
         // i128: (to - from) * buckets may not fit i64 for absurd ranges. The
         // SQL does the same product in i64, so refuse what would overflow there.
-        if (t as i128 - f as i128) * n as i128 > i64::MAX as i128 {
+        if (t as i128 - f as i128 + 1) * n as i128 > i64::MAX as i128 {
             return Err(StoreError::Invalid("trend time range too long".into()));
         }
-        // Bucket of a sample = (ts - from) * n / (to - from), integer division
-        // on both engines. The newest sample per bucket is found by joining
-        // back on the primary key (tag_id, ts), which makes it unique.
-        const SQL: &str = "WITH b AS ( \
-               SELECT (ts - $2) * $4 / ($3 - $2) AS bucket, count(*) AS n, \
-                      min(value) AS mn, max(value) AS mx, avg(value) AS av, max(ts) AS last_ts \
-               FROM samples WHERE tag_id = $1 AND ts >= $2 AND ts < $3 \
-               GROUP BY (ts - $2) * $4 / ($3 - $2)) \
-             SELECT b.bucket, b.n, b.mn, b.mx, b.av, b.last_ts, s.value, s.quality \
-             FROM b JOIN samples s ON s.tag_id = $1 AND s.ts = b.last_ts \
-             ORDER BY b.bucket";
+        let level = Level::for_trend(t - f, n);
         let mut out = Vec::with_capacity(tags.len());
         for &tag in tags {
             let Some(&id) = ids.get(tag) else {
@@ -291,40 +352,135 @@ impl Store {
                 });
                 continue;
             };
-            let raw: Vec<BucketRow> = on_backend!(self, reader, |p| {
-                sqlx::query_as(SQL)
-                    .bind(id)
-                    .bind(f)
-                    .bind(t)
-                    .bind(n)
-                    .fetch_all(p)
-                    .await
-                    .map_err(db("querying a historian trend"))?
-            });
-            let span = (t - f) as i128;
-            let edge =
-                |i: i64| Timestamp::from_millis((f as i128 + span * i as i128 / n as i128) as i64);
-            let buckets = raw
-                .into_iter()
-                .map(|(b, cnt, mn, mx, av, last_ts, last, q)| TrendBucket {
-                    index: b as u32,
-                    start: edge(b),
-                    end: edge(b + 1),
-                    count: cnt.max(0) as u64,
-                    min: mn,
-                    max: mx,
-                    avg: av,
-                    last,
-                    last_ts: Timestamp::from_millis(last_ts),
-                    last_quality: quality_from_code(q),
-                })
-                .collect();
+            let buckets = match level {
+                Some(level) => self.trend_from_rollup(level, id, f, t, n).await?,
+                None => self.trend_from_raw(id, f, t, n).await?,
+            };
             out.push(TagTrend {
                 tag: tag.to_string(),
                 buckets,
             });
         }
         Ok(out)
+    }
+
+    /// A trend of one tag from raw samples (short ranges).
+    async fn trend_from_raw(&self, id: i64, f: i64, t: i64, n: i64) -> Result<Vec<TrendBucket>> {
+        // Bucket of a sample = (ts - from) * n / (to - from), integer division
+        // on both engines. The newest sample per bucket is found by joining
+        // back on the primary key (tag_id, ts), which makes it unique. A Bad
+        // sample is held until the next sample in its bucket, or the bucket's
+        // end (the first ts of the next bucket).
+        const SQL: &str = "WITH s AS ( \
+               SELECT ts, value, quality, (ts - $2) * $4 / ($3 - $2) AS bucket \
+               FROM samples WHERE tag_id = $1 AND ts >= $2 AND ts < $3), \
+             h AS (SELECT bucket, ts, value, quality, \
+                      lead(ts) OVER (PARTITION BY bucket ORDER BY ts) AS nts FROM s), \
+             b AS ( \
+               SELECT bucket, count(*) AS n, min(value) AS mn, max(value) AS mx, \
+                      avg(value) AS av, max(ts) AS last_ts, \
+                      CAST(sum(CASE WHEN quality NOT IN (0, 1) THEN \
+                          coalesce(nts, $2 + (($3 - $2) * (bucket + 1) + $4 - 1) / $4) - ts \
+                          ELSE 0 END) AS BIGINT) AS bad \
+               FROM h GROUP BY bucket) \
+             SELECT b.bucket, b.n, b.mn, b.mx, b.av, b.last_ts, s.value, s.quality, b.bad \
+             FROM b JOIN samples s ON s.tag_id = $1 AND s.ts = b.last_ts \
+             ORDER BY b.bucket";
+        let raw: Vec<BucketRow> = on_backend!(self, reader, |p| {
+            sqlx::query_as(SQL)
+                .bind(id)
+                .bind(f)
+                .bind(t)
+                .bind(n)
+                .fetch_all(p)
+                .await
+                .map_err(db("querying a historian trend"))?
+        });
+        let span = (t - f) as i128;
+        let edge =
+            |i: i64| Timestamp::from_millis((f as i128 + span * i as i128 / n as i128) as i64);
+        Ok(raw
+            .into_iter()
+            .map(|(b, cnt, mn, mx, av, last_ts, last, q, bad)| TrendBucket {
+                index: b as u32,
+                start: edge(b),
+                end: edge(b + 1),
+                count: cnt.max(0) as u64,
+                min: mn,
+                max: mx,
+                avg: av,
+                last,
+                last_ts: Timestamp::from_millis(last_ts),
+                last_quality: quality_from_code(q),
+                bad_ms: bad.max(0) as u64,
+            })
+            .collect())
+    }
+
+    /// A trend of one tag from a roll-up level: each trend bucket gathers
+    /// whole level buckets, so its edges are whole minutes or hours (see
+    /// [`rollup::edges`]) and its min, max, count and last are exactly those
+    /// of the raw samples between those edges.
+    async fn trend_from_rollup(
+        &self,
+        level: Level,
+        id: i64,
+        f: i64,
+        t: i64,
+        n: i64,
+    ) -> Result<Vec<TrendBucket>> {
+        let table = level.table();
+        // The counts of one level bucket fit 32 bits (an hour holds 3.6 M
+        // ms), and PostgreSQL sums 32-bit integers into 64 bits far faster
+        // than 64-bit ones into numeric.
+        // A level bucket starting before `from` (at most one) divides to 0:
+        // SQL integer division truncates towards zero, and it starts less
+        // than one trend bucket before `from`.
+        let sql = format!(
+            "WITH g AS ( \
+               SELECT (bucket - $2) * $4 / ($3 - $2) AS idx, \
+                      CAST(sum(CAST(n AS INTEGER)) AS BIGINT) AS n, \
+                      min(min_value) AS mn, max(max_value) AS mx, sum(sum_value) AS sm, \
+                      CAST(sum(CAST(n_value AS INTEGER)) AS BIGINT) AS nv, max(bucket) AS lastb, \
+                      CAST(sum(CAST(bad_ms AS INTEGER)) AS BIGINT) AS bad \
+               FROM {table} WHERE tag_id = $1 AND bucket >= $5 AND bucket < $3 \
+               GROUP BY (bucket - $2) * $4 / ($3 - $2)) \
+             SELECT g.idx, g.n, g.mn, g.mx, g.sm, g.nv, r.last_ts, r.last_value, \
+                    r.last_quality, g.bad \
+             FROM g JOIN {table} r ON r.tag_id = $1 AND r.bucket = g.lastb \
+             ORDER BY g.idx"
+        );
+        let first = rollup::bucket_of(f, level.width());
+        let rows: Vec<LevelRow> = on_backend!(self, reader, |p| {
+            sqlx::query_as(&sql)
+                .bind(id)
+                .bind(f)
+                .bind(t)
+                .bind(n)
+                .bind(first)
+                .fetch_all(p)
+                .await
+                .map_err(db("querying a historian trend"))?
+        });
+        let edge = rollup::edges(level, f, t, n);
+        Ok(rows
+            .into_iter()
+            .map(
+                |(b, cnt, mn, mx, sm, nv, last_ts, last, q, bad)| TrendBucket {
+                    index: b as u32,
+                    start: Timestamp::from_millis(edge(b)),
+                    end: Timestamp::from_millis(edge(b + 1)),
+                    count: cnt.max(0) as u64,
+                    min: mn,
+                    max: mx,
+                    avg: sm.filter(|_| nv > 0).map(|s| s / nv as f64),
+                    last,
+                    last_ts: Timestamp::from_millis(last_ts),
+                    last_quality: quality_from_code(q),
+                    bad_ms: bad.max(0) as u64,
+                },
+            )
+            .collect())
     }
 
     /// Raw samples of `tags` in `from..to`, oldest first, at most `limit` rows.
@@ -473,7 +629,8 @@ impl Store {
         Ok(deleted)
     }
 
-    /// Applies a retention policy at `now`. Returns the number of rows deleted.
+    /// Applies a retention policy at `now`: raw samples per tag, roll-ups per
+    /// level. Returns the number of rows deleted (raw and roll-up).
     pub async fn apply_retention(&self, policy: &RetentionPolicy, now: Timestamp) -> Result<u64> {
         const DAY_MS: i64 = 86_400_000;
         let all: Vec<(i64, String)> = on_backend!(self, reader, |p| {
@@ -483,23 +640,46 @@ impl Store {
                 .map_err(db("listing historian tags"))?
         });
         let mut deleted = 0;
-        for (id, name) in all {
+        for (id, name) in &all {
             let days = policy
                 .per_tag_days
-                .get(&name)
+                .get(name)
                 .copied()
                 .or(policy.default_days);
             let Some(days) = days else { continue };
             let cutoff = now.as_millis().saturating_sub(days as i64 * DAY_MS);
             deleted += on_backend!(self, writer, |p| {
                 sqlx::query("DELETE FROM samples WHERE tag_id = $1 AND ts < $2")
-                    .bind(id)
+                    .bind(*id)
                     .bind(cutoff)
                     .execute(p)
                     .await
                     .map_err(db("applying historian retention"))?
                     .rows_affected()
             });
+        }
+        for (level, days) in [
+            (Level::Minute, policy.minute_days),
+            (Level::Hour, policy.hour_days),
+        ] {
+            let Some(days) = days else { continue };
+            // Only buckets wholly older than the cutoff go.
+            let cutoff = rollup::bucket_of(
+                now.as_millis().saturating_sub(days as i64 * DAY_MS),
+                level.width(),
+            );
+            let sql = rollup::delete_sql(level);
+            for (id, _) in &all {
+                deleted += on_backend!(self, writer, |p| {
+                    sqlx::query(&sql)
+                        .bind(*id)
+                        .bind(cutoff)
+                        .execute(p)
+                        .await
+                        .map_err(db("applying historian roll-up retention"))?
+                        .rows_affected()
+                });
+            }
         }
         if deleted > 0 {
             tracing::info!(deleted, "historian retention applied");
@@ -525,6 +705,39 @@ impl Store {
                 .map_err(db("listing historian tags"))?
         }))
     }
+}
+
+/// Rows in PostgreSQL's COPY text format (tab-separated, `\\N` for NULL).
+/// Values print as Rust's shortest round-trip decimal, which PostgreSQL
+/// reads back to the same float; exact integers are plain digits.
+fn copy_text(rows: &[Row]) -> Vec<u8> {
+    use std::fmt::Write;
+    let mut out = String::with_capacity(rows.len() * 40);
+    for r in rows {
+        let _ = write!(out, "{}\t{}\t", r.tag_id, r.ts);
+        match r.value {
+            Some(v) => {
+                let _ = write!(out, "{v}");
+            }
+            None => out.push_str("\\N"),
+        }
+        out.push('\t');
+        out.push_str(r.exact.as_deref().unwrap_or("\\N"));
+        let _ = writeln!(out, "\t{}", r.quality);
+    }
+    out.into_bytes()
+}
+
+/// Runs one `COPY ... FROM STDIN` with `data` on the transaction's connection.
+async fn copy_in(
+    tx: &mut sqlx::Transaction<'_, sqlx::Postgres>,
+    statement: &str,
+    data: &[u8],
+) -> std::result::Result<(), sqlx::Error> {
+    let mut copy = (**tx).copy_in_raw(statement).await?;
+    copy.send(data).await?;
+    copy.finish().await?;
+    Ok(())
 }
 
 /// The keyset cursor that starts at `from` inclusive.

@@ -53,6 +53,7 @@ mod lease;
 mod notifications;
 mod panels;
 mod recorder;
+mod rollup;
 mod screens;
 #[macro_use]
 mod sessions;

@@ -153,6 +153,11 @@ const SQLITE_MIGRATIONS: &[(i64, &str, &str)] = &[
         include_str!("../migrations/sqlite/0008_leadership.sql"),
     ),
     (
+        9,
+        "historian roll-ups",
+        include_str!("../migrations/sqlite/0009_rollups.sql"),
+    ),
+    (
         10,
         "notifications, out-of-service ends",
         include_str!("../migrations/sqlite/0010_notifications.sql"),
@@ -198,6 +203,11 @@ const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
         8,
         "leadership",
         include_str!("../migrations/postgres/0008_leadership.sql"),
+    ),
+    (
+        9,
+        "historian roll-ups",
+        include_str!("../migrations/postgres/0009_rollups.sql"),
     ),
     (
         10,

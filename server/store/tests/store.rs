@@ -290,6 +290,7 @@ async fn retention_deletes_old_rows(db: TestDb) {
     let policy = RetentionPolicy {
         default_days: Some(30),
         per_tag_days: HashMap::from([("keep_long".to_string(), 50), ("forever".to_string(), 365)]),
+        ..Default::default()
     };
     let deleted = s.apply_retention(&policy, ts(now)).await.unwrap();
     assert_eq!(deleted, 1 + 2); // keep_long: the 99-day row; global: 40 and 99

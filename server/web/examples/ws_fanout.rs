@@ -147,12 +147,26 @@ struct Run {
     measuring: Arc<std::sync::atomic::AtomicBool>,
 }
 
-async fn client(url: String, cookie: Option<String>, subscribe: bool, run: Arc<Run>) {
-    let mut req = url.into_client_request().expect("request");
+/// Client `k`: from loopback address 127.0.0.(2 + k / 32), as the server
+/// allows 64 live sockets per address (and 8 per session: the caller gives
+/// each client a cookie of its own session group).
+async fn client(k: usize, url: String, cookie: Option<String>, subscribe: bool, run: Arc<Run>) {
+    let mut req = url.clone().into_client_request().expect("request");
     if let Some(c) = cookie {
         req.headers_mut().insert("cookie", c.parse().unwrap());
+        // A logged-in socket must say where it comes from, as a browser does.
+        let origin = url.replace("ws://", "http://");
+        let origin = &origin[..origin.find("/api").unwrap_or(origin.len())];
+        req.headers_mut().insert("origin", origin.parse().unwrap());
     }
-    let (mut ws, _) = tokio_tungstenite::connect_async(req)
+    let host = req.uri().authority().expect("host").as_str().to_string();
+    let server: SocketAddr = host.parse().expect("server address");
+    let socket = tokio::net::TcpSocket::new_v4().expect("socket");
+    socket
+        .bind(SocketAddr::from(([127, 0, 0, 2 + (k / 32) as u8], 0)))
+        .expect("bind a loopback source address");
+    let stream = socket.connect(server).await.expect("tcp connect");
+    let (mut ws, _) = tokio_tungstenite::client_async(req, stream)
         .await
         .expect("connect");
     if subscribe {
@@ -210,7 +224,7 @@ fn producer(db: Arc<TagDb>, ids: Vec<TagId>, stop: Arc<std::sync::atomic::Atomic
 async fn measure(
     name: &str,
     url: String,
-    cookie: Option<String>,
+    cookies: Option<Vec<String>>,
     subscribe: bool,
     clients: usize,
     secs: u64,
@@ -221,10 +235,11 @@ async fn measure(
         measuring: Arc::new(false.into()),
     });
     let mut handles = vec![];
-    for _ in 0..clients {
+    for k in 0..clients {
         handles.push(tokio::spawn(client(
+            k,
             url.clone(),
-            cookie.clone(),
+            cookies.as_ref().map(|c| c[k / 8 % c.len()].clone()),
             subscribe,
             run.clone(),
         )));
@@ -266,8 +281,9 @@ async fn main() {
     let clients = args.get(1).copied().unwrap_or(100);
     let secs = args.get(2).copied().unwrap_or(15) as u64;
     println!(
-        "ws_fanout: {tags} tags at 1 Hz (10 batches/s), {clients} clients, {secs} s measured per run, {} CPUs",
-        std::thread::available_parallelism().map_or(0, |n| n.get())
+        "ws_fanout: {tags} tags at 1 Hz (10 batches/s), {clients} clients, {secs} s measured per run, {} CPUs, live_merge_ms {}",
+        std::thread::available_parallelism().map_or(0, |n| n.get()),
+        std::env::var("LIVE_MERGE_MS").unwrap_or_else(|_| "default".into())
     );
 
     let db = Arc::new(
@@ -277,6 +293,22 @@ async fn main() {
     let ids: Vec<TagId> = (0..tags).map(|i| TagId(i as u32)).collect();
     let dir = tempfile::tempdir().expect("temp dir");
     let (state, cookie) = bench_state::web_state(db.clone(), dir.path()).await;
+    // A session per 8 clients (the server's cap per session).
+    let mut cookies = vec![cookie];
+    for _ in 0..clients.div_ceil(8) {
+        let token = state
+            .auth
+            .sessions
+            .create(
+                "bench",
+                gridscada_config::Role::Operator,
+                None,
+                Default::default(),
+            )
+            .await
+            .expect("session");
+        cookies.push(format!("{}={token}", gridscada_web::auth::COOKIE));
+    }
 
     let any: SocketAddr = "127.0.0.1:0".parse().unwrap();
     let (addr, server) = gridscada_web::bind(any, gridscada_web::router(state))
@@ -297,7 +329,7 @@ async fn main() {
     measure(
         "gridscada /api/live",
         format!("ws://{addr}/api/live"),
-        Some(cookie),
+        Some(cookies),
         true,
         clients,
         secs,

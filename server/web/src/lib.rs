@@ -64,6 +64,8 @@ pub struct WebState {
     /// This server itself speaks HTTPS (`[server.tls]`): responses carry
     /// HSTS. (Cookies are `Secure` through [`Auth::secure_cookies`].)
     pub tls: bool,
+    /// The live push's shared feeds (`/api/live`); start with the default.
+    pub live: Arc<api::live::LiveFeeds>,
 }
 
 /// The application's routes.

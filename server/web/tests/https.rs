@@ -24,6 +24,7 @@ fn https_app(h: &Harness, hsts_max_age_s: u64) -> axum::Router {
         plant: std::sync::Arc::new(plant),
         auth,
         tls: true,
+        live: Default::default(),
         ..h.state.clone()
     })
 }

@@ -155,3 +155,96 @@ async fn heartbeats_and_a_visible_screen_keep_a_watch_session() {
     }
     assert_eq!(closed, json!({"closed": 4001}));
 }
+
+/// Sockets subscribed to the same tags share one feed (one subscription,
+/// each message serialized once); another set of tags gets its own.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sockets_with_the_same_tags_share_one_feed() {
+    let h = Harness::new(Options::default()).await;
+    let addr = h.serve().await;
+    let cookie = h.login("operator", PASSWORD).await;
+    let subscribe =
+        |tags: &[&str]| Message::Text(json!({"subscribe": {"tags": tags}}).to_string().into());
+    let mut sockets = Vec::new();
+    for tags in [&[TAG_RO][..], &[TAG_RO], &[TAG_SUP, TAG_RO]] {
+        let mut ws = live_socket(addr, &cookie).await.unwrap();
+        assert_eq!(next_message(&mut ws).await.unwrap()["type"], "hello");
+        ws.send(subscribe(tags)).await.unwrap();
+        let snap = next_message(&mut ws).await.unwrap();
+        assert_eq!(snap["snapshot"], true);
+        assert_eq!(snap["values"].as_array().unwrap().len(), tags.len());
+        sockets.push(ws);
+    }
+    assert_eq!(h.state.live.len(), 2, "two distinct sets of tags");
+    let ro = h.state.db.id(TAG_RO).unwrap();
+    let t = Timestamp::from_millis(1_800_000_000_000);
+    h.state.db.apply([(ro, Sample::good(7.0, t))]);
+    for ws in &mut sockets {
+        let push = next_message(ws).await.unwrap();
+        assert_eq!(push["snapshot"], false);
+        assert_eq!(push["values"][0]["name"], TAG_RO);
+        assert_eq!(push["values"][0]["value"], 7.0);
+    }
+    // The feed goes with its last socket.
+    drop(sockets);
+    for _ in 0..100 {
+        if h.state.live.is_empty() {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert!(h.state.live.is_empty(), "feeds end with their sockets");
+}
+
+/// A socket that does not read falls behind its feed: it is sent a fresh
+/// snapshot, not every message it missed, and ends on the current value.
+/// With `live_merge_ms = 0` each batch is its own message.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_slow_socket_gets_a_snapshot_instead_of_a_backlog() {
+    let h = Harness::new(Options::default()).await;
+    let app = h.app_with_plant(|p| p.server.live_merge_ms = serde_spanned::Spanned::new(0..0, 0));
+    let (addr, server) = gridscada_web::bind("127.0.0.1:0".parse().unwrap(), app)
+        .await
+        .unwrap();
+    tokio::spawn(server);
+    let cookie = h.login("operator", PASSWORD).await;
+    let mut ws = live_socket(addr, &cookie).await.unwrap();
+    assert_eq!(next_message(&mut ws).await.unwrap()["type"], "hello");
+    ws.send(Message::Text(
+        json!({"subscribe": {"tags": [TAG_SUP]}}).to_string().into(),
+    ))
+    .await
+    .unwrap();
+    assert_eq!(next_message(&mut ws).await.unwrap()["snapshot"], true);
+    // Far more than the socket buffers and the feed's ring hold, unread.
+    let id = h.state.db.id(TAG_SUP).unwrap();
+    const CHANGES: u32 = 200_000;
+    for i in 1..=CHANGES {
+        let t = Timestamp::from_millis(1_800_000_000_000 + i as i64);
+        h.state.db.apply([(id, Sample::good(i as f64, t))]);
+        if i % 100 == 0 {
+            tokio::task::yield_now().await;
+        }
+    }
+    let (mut messages, mut snapshots) = (0u32, 0u32);
+    loop {
+        let m = next_message(&mut ws)
+            .await
+            .expect("messages until the last value");
+        if m["type"] != "tags" {
+            continue;
+        }
+        messages += 1;
+        if m["snapshot"] == true {
+            snapshots += 1;
+        }
+        if m["values"][0]["value"] == CHANGES as f64 {
+            break;
+        }
+    }
+    assert!(snapshots >= 1, "a snapshot replaced the backlog");
+    assert!(
+        messages < CHANGES / 2,
+        "{messages} messages for {CHANGES} changes: the backlog was dropped"
+    );
+}

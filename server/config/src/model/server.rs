@@ -51,6 +51,20 @@ pub struct ServerConfig {
     /// sites on the same database only read its history. Default `main`.
     #[serde(default)]
     pub site: Option<Spanned<String>>,
+    /// Live push (`/api/live`): how long changes are gathered after the
+    /// first one before they are sent, in ms; 0 sends each batch of changes
+    /// as it comes. Longer windows send fewer, larger messages.
+    #[serde(default = "default_live_merge_ms")]
+    pub live_merge_ms: Spanned<u32>,
+}
+
+/// Each batch as it comes: a message is serialized once per feed, whatever
+/// the number of sockets, so merging saves little and costs latency (the
+/// `ws_fanout` bench, docs/BENCHMARKS.md).
+pub const DEFAULT_LIVE_MERGE_MS: u32 = 0;
+
+fn default_live_merge_ms() -> Spanned<u32> {
+    Spanned::new(0..0, DEFAULT_LIVE_MERGE_MS)
 }
 
 /// The site of a server that names none.
@@ -190,6 +204,7 @@ impl Default for ServerConfig {
             trusted_proxies: vec![],
             base_path: None,
             site: None,
+            live_merge_ms: default_live_merge_ms(),
         }
     }
 }
@@ -211,13 +226,15 @@ pub struct StorageConfig {
     /// Global historian retention, in days; a tag's own setting wins.
     #[serde(default = "default_retention_days")]
     pub retention_days: u32,
-    /// `[storage.retention]`: how long the audit trail is kept.
+    /// `[storage.retention]`: how long the audit trail and the historian's
+    /// roll-ups are kept.
     #[serde(default)]
     pub retention: AuditRetention,
 }
 
-/// How long the event log, the alarm history and the dispatch records are
-/// kept, in days; 0 keeps them for ever. Pruned daily, in small batches.
+/// How long the event log, the alarm history, the dispatch records and the
+/// historian's roll-ups are kept, in days; 0 keeps them for ever. Pruned
+/// daily, in small batches.
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct AuditRetention {
@@ -227,6 +244,12 @@ pub struct AuditRetention {
     pub alarm_history_days: Spanned<u32>,
     #[serde(default = "default_dispatch_days")]
     pub dispatch_days: Spanned<u32>,
+    /// The historian's per-minute roll-ups (trends over days to months).
+    #[serde(default = "default_minute_days")]
+    pub minute_days: Spanned<u32>,
+    /// The historian's per-hour roll-ups (trends over months to decades).
+    #[serde(default = "default_hour_days")]
+    pub hour_days: Spanned<u32>,
 }
 
 impl Default for AuditRetention {
@@ -235,6 +258,8 @@ impl Default for AuditRetention {
             events_days: default_audit_days(),
             alarm_history_days: default_audit_days(),
             dispatch_days: default_dispatch_days(),
+            minute_days: default_minute_days(),
+            hour_days: default_hour_days(),
         }
     }
 }
@@ -242,6 +267,14 @@ impl Default for AuditRetention {
 /// Two years: an incident is often investigated, or audited, a year later.
 fn default_audit_days() -> Spanned<u32> {
     Spanned::new(0..0, 730)
+}
+/// Minute roll-ups: a few hundred bytes per tag and hour, two years.
+fn default_minute_days() -> Spanned<u32> {
+    Spanned::new(0..0, 730)
+}
+/// Hour roll-ups: the plant's long history, twenty years.
+fn default_hour_days() -> Spanned<u32> {
+    Spanned::new(0..0, 7300)
 }
 /// A dispatch record every period adds up fast, and is of use for weeks.
 fn default_dispatch_days() -> Spanned<u32> {

@@ -267,11 +267,24 @@ fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
             format!("[storage] url: '{u}' must start with sqlite:, postgres:// or postgresql://"),
         );
     }
+    let merge = &main.server.live_merge_ms;
+    if *merge.get_ref() > 1_000 {
+        cx.err(
+            0,
+            merge.span(),
+            format!(
+                "[server] live_merge_ms: {} ms is more than a second; screens would lag (0 sends each change at once)",
+                merge.get_ref()
+            ),
+        );
+    }
     let r = &main.storage.retention;
     for (key, days) in [
         ("events_days", &r.events_days),
         ("alarm_history_days", &r.alarm_history_days),
         ("dispatch_days", &r.dispatch_days),
+        ("minute_days", &r.minute_days),
+        ("hour_days", &r.hour_days),
     ] {
         if *days.get_ref() > 36_500 {
             cx.err(

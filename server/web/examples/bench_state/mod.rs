@@ -19,7 +19,11 @@ const TAGS: &str = "[[device]]\nname = \"D1\"\nprotocol = \"tcp\"\naddress = \"1
 pub async fn web_state(db: Arc<TagDb>, dir: &Path) -> (WebState, String) {
     let read = |p: &Path| -> std::io::Result<String> {
         match p.file_name().and_then(|f| f.to_str()) {
-            Some("gridscada.toml") => Ok(MAIN.into()),
+            // LIVE_MERGE_MS sets `[server] live_merge_ms` (the ws_fanout bench).
+            Some("gridscada.toml") => Ok(match std::env::var("LIVE_MERGE_MS") {
+                Ok(ms) => format!("{MAIN}[server]\nlive_merge_ms = {ms}\n"),
+                Err(_) => MAIN.into(),
+            }),
             Some("tags.toml") => Ok(TAGS.into()),
             _ => Err(std::io::ErrorKind::NotFound.into()),
         }
@@ -71,6 +75,7 @@ pub async fn web_state(db: Arc<TagDb>, dir: &Path) -> (WebState, String) {
         tag_index: Arc::new(gridscada_web::access::TagIndex::new(&plant_ref)),
         devices: None,
         tls: false,
+        live: Default::default(),
     };
     (state, format!("{}={token}", auth::COOKIE))
 }

@@ -1,20 +1,23 @@
 //! `/api/live`: the WebSocket push of tag changes and the alarm summary.
 //!
-//! Each socket has its own tag-database subscription. Changes are merged per
-//! tag and flushed at most every 100 ms. A client too slow to take them falls
-//! behind its subscription's ring and gets a fresh snapshot instead of an
+//! Sockets subscribed to the same set of tags share one feed: one
+//! tag-database subscription that merges changes per tag over the merge
+//! window (`[server] live_merge_ms`; 0 sends each batch as it comes) and
+//! serializes each message once for all of them. A socket too slow to take
+//! them falls behind the feed's ring and gets a fresh snapshot instead of an
 //! unbounded queue. When the session ends (logout, expiry, user blocked), the
 //! socket is closed.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
+use std::sync::{Arc, Weak};
 use std::time::Duration;
 
-use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade};
+use axum::extract::ws::{CloseFrame, Message, Utf8Bytes, WebSocket, WebSocketUpgrade};
 use axum::extract::State;
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::Extension;
-use gridscada_tagdb::{Quality, Sample, TagId, Timestamp, Update, Value};
+use gridscada_tagdb::{Quality, Sample, TagDb, TagId, Timestamp, Update, Value};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
@@ -25,7 +28,116 @@ use crate::WebState;
 
 /// Longest a client message may be.
 const MAX_MESSAGE: usize = 64 * 1024;
-const FLUSH: Duration = Duration::from_millis(100);
+/// How often a socket sends its heartbeat and alarm summary and checks its
+/// session.
+const TICK: Duration = Duration::from_millis(100);
+/// Messages a feed keeps for its slowest socket; one further behind is sent
+/// a snapshot instead.
+const FEED_RING: usize = 64;
+
+/// The live feeds: one per distinct set of tags subscribed to, shared by
+/// every socket subscribed to exactly that set, gone with its last socket.
+#[derive(Default)]
+pub struct LiveFeeds {
+    feeds: parking_lot::Mutex<HashMap<Arc<[TagId]>, Weak<Feed>>>,
+}
+
+/// One feed: its task and the ring of serialized `tags` messages.
+struct Feed {
+    tx: tokio::sync::broadcast::Sender<Utf8Bytes>,
+    task: tokio::task::JoinHandle<()>,
+}
+
+impl Drop for Feed {
+    fn drop(&mut self) {
+        self.task.abort();
+    }
+}
+
+impl LiveFeeds {
+    /// The feed of `ids` (sorted, unique), started if none runs, and a
+    /// receiver of its messages from now on.
+    fn join(
+        &self,
+        db: &Arc<TagDb>,
+        ids: Arc<[TagId]>,
+        merge: Duration,
+    ) -> (Arc<Feed>, tokio::sync::broadcast::Receiver<Utf8Bytes>) {
+        let mut feeds = self.feeds.lock();
+        feeds.retain(|_, f| f.strong_count() > 0);
+        if let Some(feed) = feeds.get(&ids).and_then(Weak::upgrade) {
+            let rx = feed.tx.subscribe();
+            return (feed, rx);
+        }
+        let (tx, rx) = tokio::sync::broadcast::channel(FEED_RING);
+        // Subscribed here, not in the task: a change made after `join`
+        // returns (and after the caller's snapshot) must reach the feed even
+        // if its task has not run yet.
+        let sub = db.subscribe(&ids);
+        let task = tokio::spawn(feed(db.clone(), sub, tx.clone(), merge));
+        let feed = Arc::new(Feed { tx, task });
+        feeds.insert(ids, Arc::downgrade(&feed));
+        (feed, rx)
+    }
+
+    /// Feeds running (distinct subscriptions with at least one socket).
+    pub fn len(&self) -> usize {
+        self.feeds
+            .lock()
+            .values()
+            .filter(|f| f.strong_count() > 0)
+            .count()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// A feed's task: gathers the changes of its tags for `merge` after the
+/// first, serializes them once, and hands the text to every socket.
+async fn feed(
+    db: Arc<TagDb>,
+    mut sub: gridscada_tagdb::Subscription,
+    tx: tokio::sync::broadcast::Sender<Utf8Bytes>,
+    merge: Duration,
+) {
+    let mut pending: BTreeMap<TagId, Sample> = BTreeMap::new();
+    let mut snapshot = false;
+    let take = |update: Update, pending: &mut BTreeMap<TagId, Sample>, snapshot: &mut bool| {
+        if let Update::Snapshot(_) = &update {
+            // The feed itself fell behind: its next message replaces all.
+            pending.clear();
+            *snapshot = true;
+        }
+        for (id, sample) in &update.batch().changes {
+            pending.insert(*id, sample.clone());
+        }
+    };
+    loop {
+        let Some(update) = sub.recv().await else {
+            return;
+        };
+        take(update, &mut pending, &mut snapshot);
+        if !merge.is_zero() {
+            let until = tokio::time::Instant::now() + merge;
+            loop {
+                tokio::select! {
+                    update = sub.recv() => match update {
+                        Some(u) => take(u, &mut pending, &mut snapshot),
+                        None => return,
+                    },
+                    _ = tokio::time::sleep_until(until) => break,
+                }
+            }
+        }
+        let text = tags_message(&db, &pending, snapshot);
+        pending.clear();
+        snapshot = false;
+        // No socket listening (the last one is leaving): nothing to do.
+        let _ = tx.send(text.into());
+    }
+}
 
 #[utoipa::path(get, path = "/api/live", tag = "live",
     summary = "WebSocket push of tag changes and the alarm summary",
@@ -102,12 +214,16 @@ struct TagsMessage<'a> {
     values: Vec<TagOut<'a>>,
 }
 
-fn tags_message(s: &WebState, pending: &BTreeMap<TagId, Sample>, snapshot: bool) -> String {
-    let values = pending
-        .iter()
+fn tags_message<'a>(
+    db: &TagDb,
+    samples: impl IntoIterator<Item = (&'a TagId, &'a Sample)>,
+    snapshot: bool,
+) -> String {
+    let values = samples
+        .into_iter()
         .filter_map(|(id, smp)| {
             Some(TagOut {
-                name: s.db.meta(*id)?.name.as_ref(),
+                name: db.meta(*id)?.name.as_ref(),
                 value: &smp.value,
                 quality: &smp.quality,
                 timestamp: smp.timestamp,
@@ -148,19 +264,43 @@ async fn readable_now(s: &WebState, who: &Principal) -> Readable {
     s.readable(&now)
 }
 
+/// A message with the current sample of every tag of `ids`.
+fn snapshot_message(db: &TagDb, ids: &[TagId]) -> Utf8Bytes {
+    let snap = db.snapshot(ids);
+    tags_message(db, snap.changes.iter().map(|(id, s)| (id, s)), true).into()
+}
+
+/// A socket's place on a feed: the feed (kept alive by it), its tags, and
+/// the receiver of its messages.
+struct Joined {
+    _feed: Arc<Feed>,
+    ids: Arc<[TagId]>,
+    rx: tokio::sync::broadcast::Receiver<Utf8Bytes>,
+}
+
+/// The next message of the socket's feed; never, without one.
+async fn next_message(
+    joined: &mut Option<Joined>,
+) -> Result<Utf8Bytes, tokio::sync::broadcast::error::RecvError> {
+    match joined {
+        Some(j) => j.rx.recv().await,
+        None => std::future::pending().await,
+    }
+}
+
 async fn run(
     s: WebState,
     who: Principal,
     token: Option<String>,
     mut socket: WebSocket,
 ) -> Result<(), axum::Error> {
-    let mut sub = s.db.subscribe(&[]);
+    use tokio::sync::broadcast::error::RecvError;
+    let merge = Duration::from_millis(*s.plant.server.live_merge_ms.get_ref() as u64);
+    let mut feed = None;
     let mut ended = s.auth.sessions.watch_ended();
     let mut alarms_wanted = false;
     let mut alarm_version = None::<u64>;
-    let mut pending: BTreeMap<TagId, Sample> = BTreeMap::new();
-    let mut pending_snapshot = false;
-    let mut tick = tokio::time::interval(FLUSH);
+    let mut tick = tokio::time::interval(TICK);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let mut last_heartbeat = std::time::Instant::now();
 
@@ -191,12 +331,15 @@ async fn run(
                             }
                             ids.sort();
                             ids.dedup();
-                            let snap = sub.watch(Some(&ids));
-                            pending.clear();
-                            pending.extend(snap.batch().changes.iter().cloned());
-                            pending_snapshot = true;
+                            let ids: Arc<[TagId]> = ids.into();
+                            // Join first, then take the snapshot: a change
+                            // between the two comes again in a later message.
+                            let (f, rx) = s.live.join(&s.db, ids.clone(), merge);
+                            let snap = snapshot_message(&s.db, &ids);
+                            feed = Some(Joined { _feed: f, ids, rx });
                             alarms_wanted = sub_req.alarms;
                             alarm_version = None;
+                            socket.send(Message::Text(snap)).await?;
                         }
                         Ok(_) => {}
                         Err(e) => {
@@ -208,16 +351,20 @@ async fn run(
                     _ => {}
                 }
             }
-            update = sub.recv() => {
-                let Some(update) = update else { return Ok(()) };
-                if let Update::Snapshot(_) = &update {
-                    pending.clear();
-                    pending_snapshot = true;
+            msg = next_message(&mut feed) => match msg {
+                Ok(text) => socket.send(Message::Text(text)).await?,
+                Err(RecvError::Lagged(_)) => {
+                    // Too slow for the feed: drop the backlog, send what
+                    // holds now, and go on from here.
+                    if let Some(j) = &mut feed {
+                        j.rx = j.rx.resubscribe();
+                        let snap = snapshot_message(&s.db, &j.ids);
+                        socket.send(Message::Text(snap)).await?;
+                    }
                 }
-                for (id, sample) in &update.batch().changes {
-                    pending.insert(*id, sample.clone());
-                }
-            }
+                // The tag database is gone: the server is stopping.
+                Err(RecvError::Closed) => return Ok(()),
+            },
             _ = ended.changed() => {
                 let live = token.as_deref().is_some_and(|t| s.auth.sessions.is_live(t));
                 if !live {
@@ -230,12 +377,6 @@ async fn run(
                     last_heartbeat = std::time::Instant::now();
                     let beat = json!({"type": "heartbeat", "ts": s.clock.now()});
                     socket.send(Message::Text(beat.to_string().into())).await?;
-                }
-                if !pending.is_empty() || pending_snapshot {
-                    let msg = tags_message(&s, &pending, pending_snapshot);
-                    pending.clear();
-                    pending_snapshot = false;
-                    socket.send(Message::Text(msg.into())).await?;
                 }
                 if alarms_wanted {
                     if let Some((version, summary)) = crate::api::alarms::live_summary(&s, alarm_version) {

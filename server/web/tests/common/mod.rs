@@ -355,6 +355,7 @@ impl Harness {
             tag_index,
             devices: None,
             tls: false,
+            live: Default::default(),
         };
         let h = Harness {
             app: gridscada_web::router(state.clone()),

@@ -1,0 +1,485 @@
+//! Historian roll-ups: per tag, per minute and per hour, the count, min, max,
+//! sum, first and last sample and the Bad time, kept as samples are written,
+//! so a trend over a month or a year reads thousands of rows, not millions.
+//!
+//! **Owns:** the `samples_minute` and `samples_hour` tables, and how a trend
+//! picks its level. **Must not touch:** the raw `samples` table (only reads
+//! it back to redo a bucket that a late or repeated sample changed).
+//!
+//! Maintenance is incremental: a batch is rolled up in memory, and each of
+//! its buckets is either new, appended to the stored bucket (all its samples
+//! after the stored last one: merged without reading raw rows), or, for a
+//! late or repeated sample, recomputed from the raw rows of that one bucket.
+
+use sqlx::{PgConnection, QueryBuilder, SqliteConnection};
+
+use crate::error::db;
+use crate::Result;
+
+/// A roll-up level: the width of its buckets and its table.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Level {
+    Minute,
+    Hour,
+}
+
+impl Level {
+    pub(crate) const ALL: [Level; 2] = [Level::Minute, Level::Hour];
+
+    /// Bucket width in ms.
+    pub(crate) fn width(self) -> i64 {
+        match self {
+            Level::Minute => 60_000,
+            Level::Hour => 3_600_000,
+        }
+    }
+
+    pub(crate) fn table(self) -> &'static str {
+        match self {
+            Level::Minute => "samples_minute",
+            Level::Hour => "samples_hour",
+        }
+    }
+
+    /// The coarsest level whose buckets still give at least `buckets`
+    /// points over `span_ms`; `None`: the range is short, read raw samples.
+    pub(crate) fn for_trend(span_ms: i64, buckets: i64) -> Option<Level> {
+        // Level bucket width <= span / buckets, in integers.
+        [Level::Hour, Level::Minute]
+            .into_iter()
+            .find(|l| l.width() as i128 * buckets as i128 <= span_ms as i128)
+    }
+}
+
+/// Start of the bucket of width `w` holding `ts` (floor, also before 1970).
+pub(crate) fn bucket_of(ts: i64, w: i64) -> i64 {
+    ts - ts.rem_euclid(w)
+}
+
+/// Quality codes other than good (0) and uncertain (1) read as Bad.
+fn is_bad(code: i32) -> bool {
+    !matches!(code, 0 | 1)
+}
+
+/// The columns of a roll-up row, in table order.
+const COLUMNS: &str = "tag_id, bucket, n, n_value, min_value, max_value, sum_value, \
+                       first_ts, first_value, last_ts, last_value, last_quality, bad_ms";
+
+type AggRow = (
+    i64,
+    i64,
+    i64,
+    i64,
+    Option<f64>,
+    Option<f64>,
+    Option<f64>,
+    i64,
+    Option<f64>,
+    i64,
+    Option<f64>,
+    i32,
+    i64,
+);
+
+/// One roll-up bucket of one tag.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Agg {
+    pub tag_id: i64,
+    pub bucket: i64,
+    /// Samples, and those of them with a value (min, max, sum are over these).
+    pub n: i64,
+    pub n_value: i64,
+    pub min: Option<f64>,
+    pub max: Option<f64>,
+    pub sum: Option<f64>,
+    pub first_ts: i64,
+    pub first_value: Option<f64>,
+    pub last_ts: i64,
+    pub last_value: Option<f64>,
+    pub last_quality: i32,
+    /// Time Bad within the bucket: each sample held until the next sample in
+    /// the bucket, the last one until the bucket's end.
+    pub bad_ms: i64,
+}
+
+impl Agg {
+    fn start(tag_id: i64, bucket: i64, w: i64, ts: i64, v: Option<f64>, q: i32) -> Agg {
+        Agg {
+            tag_id,
+            bucket,
+            n: 1,
+            n_value: v.is_some() as i64,
+            min: v,
+            max: v,
+            sum: v,
+            first_ts: ts,
+            first_value: v,
+            last_ts: ts,
+            last_value: v,
+            last_quality: q,
+            bad_ms: if is_bad(q) { bucket + w - ts } else { 0 },
+        }
+    }
+
+    /// Adds a sample newer than every sample already in.
+    fn push(&mut self, w: i64, ts: i64, v: Option<f64>, q: i32) {
+        let end = self.bucket + w;
+        // The previous last sample was held to the bucket's end; it ends here.
+        if is_bad(self.last_quality) {
+            self.bad_ms -= end - ts;
+        }
+        if is_bad(q) {
+            self.bad_ms += end - ts;
+        }
+        self.n += 1;
+        if let Some(v) = v {
+            self.n_value += 1;
+            self.min = Some(self.min.map_or(v, |m| m.min(v)));
+            self.max = Some(self.max.map_or(v, |m| m.max(v)));
+            self.sum = Some(self.sum.map_or(v, |s| s + v));
+        }
+        self.last_ts = ts;
+        self.last_value = v;
+        self.last_quality = q;
+    }
+
+    /// `self` followed by `later`, whose samples all come after `self`'s.
+    fn append(&mut self, w: i64, later: &Agg) {
+        let end = self.bucket + w;
+        if is_bad(self.last_quality) {
+            self.bad_ms -= end - later.first_ts;
+        }
+        self.bad_ms += later.bad_ms;
+        self.n += later.n;
+        self.n_value += later.n_value;
+        self.min = opt(self.min, later.min, f64::min);
+        self.max = opt(self.max, later.max, f64::max);
+        self.sum = opt(self.sum, later.sum, |a, b| a + b);
+        self.last_ts = later.last_ts;
+        self.last_value = later.last_value;
+        self.last_quality = later.last_quality;
+    }
+
+    fn from_row(r: AggRow) -> Agg {
+        Agg {
+            tag_id: r.0,
+            bucket: r.1,
+            n: r.2,
+            n_value: r.3,
+            min: r.4,
+            max: r.5,
+            sum: r.6,
+            first_ts: r.7,
+            first_value: r.8,
+            last_ts: r.9,
+            last_value: r.10,
+            last_quality: r.11,
+            bad_ms: r.12,
+        }
+    }
+}
+
+fn opt(a: Option<f64>, b: Option<f64>, f: impl Fn(f64, f64) -> f64) -> Option<f64> {
+    match (a, b) {
+        (Some(a), Some(b)) => Some(f(a, b)),
+        (a, b) => a.or(b),
+    }
+}
+
+/// Rolls up samples `(tag_id, ts, value, quality)` sorted by tag then time,
+/// one per key, into buckets of width `w`.
+pub(crate) fn roll_up(
+    rows: impl IntoIterator<Item = (i64, i64, Option<f64>, i32)>,
+    w: i64,
+) -> Vec<Agg> {
+    let mut out: Vec<Agg> = Vec::new();
+    for (tag_id, ts, v, q) in rows {
+        let bucket = bucket_of(ts, w);
+        match out.last_mut() {
+            Some(a) if a.tag_id == tag_id && a.bucket == bucket => a.push(w, ts, v, q),
+            _ => out.push(Agg::start(tag_id, bucket, w, ts, v, q)),
+        }
+    }
+    out
+}
+
+/// What a batch's bucket becomes, given the stored bucket (if any): merged
+/// when the batch only appends, else `None` (recompute it from raw rows).
+fn combine(stored: Option<&Agg>, batch: &Agg, w: i64) -> Option<Agg> {
+    match stored {
+        None => Some(batch.clone()),
+        Some(s) if batch.first_ts > s.last_ts => {
+            let mut m = s.clone();
+            m.append(w, batch);
+            Some(m)
+        }
+        Some(_) => None,
+    }
+}
+
+/// Raw rows of SQLite per roll-up statement: 13 parameters each.
+const SQLITE_ROWS: usize = 500;
+
+/// Brings both levels up to date with a batch already inserted in the raw
+/// table in the same transaction. `rows`: `(tag_id, ts, value, quality)`,
+/// sorted by tag then time, one per key.
+pub(crate) async fn maintain_sqlite(
+    conn: &mut SqliteConnection,
+    rows: &[(i64, i64, Option<f64>, i32)],
+) -> Result<()> {
+    for level in Level::ALL {
+        let w = level.width();
+        let batch = roll_up(rows.iter().copied(), w);
+        let mut stored = std::collections::HashMap::new();
+        for chunk in batch.chunks(SQLITE_ROWS) {
+            let mut qb = QueryBuilder::new(format!(
+                "SELECT {COLUMNS} FROM {} WHERE (tag_id, bucket) IN (VALUES ",
+                level.table()
+            ));
+            let mut sep = qb.separated(", ");
+            for a in chunk {
+                sep.push("(")
+                    .push_bind_unseparated(a.tag_id)
+                    .push_unseparated(", ")
+                    .push_bind_unseparated(a.bucket)
+                    .push_unseparated(")");
+            }
+            qb.push(")");
+            let found: Vec<AggRow> = qb
+                .build_query_as()
+                .fetch_all(&mut *conn)
+                .await
+                .map_err(db("reading historian roll-ups"))?;
+            for r in found {
+                stored.insert((r.0, r.1), Agg::from_row(r));
+            }
+        }
+        let mut out = Vec::with_capacity(batch.len());
+        for a in &batch {
+            match combine(stored.get(&(a.tag_id, a.bucket)), a, w) {
+                Some(m) => out.push(m),
+                None => {
+                    let raw: Vec<(i64, i64, Option<f64>, i32)> = sqlx::query_as(
+                        "SELECT tag_id, ts, value, quality FROM samples \
+                         WHERE tag_id = $1 AND ts >= $2 AND ts < $3 ORDER BY ts",
+                    )
+                    .bind(a.tag_id)
+                    .bind(a.bucket)
+                    .bind(a.bucket + w)
+                    .fetch_all(&mut *conn)
+                    .await
+                    .map_err(db("re-reading a historian bucket"))?;
+                    out.extend(roll_up(raw, w));
+                }
+            }
+        }
+        for chunk in out.chunks(SQLITE_ROWS) {
+            let mut qb = QueryBuilder::new(format!("INSERT INTO {} ({COLUMNS}) ", level.table()));
+            qb.push_values(chunk, |mut b, a| {
+                b.push_bind(a.tag_id)
+                    .push_bind(a.bucket)
+                    .push_bind(a.n)
+                    .push_bind(a.n_value)
+                    .push_bind(a.min)
+                    .push_bind(a.max)
+                    .push_bind(a.sum)
+                    .push_bind(a.first_ts)
+                    .push_bind(a.first_value)
+                    .push_bind(a.last_ts)
+                    .push_bind(a.last_value)
+                    .push_bind(a.last_quality)
+                    .push_bind(a.bad_ms);
+            });
+            qb.push(UPSERT);
+            qb.build()
+                .execute(&mut *conn)
+                .await
+                .map_err(db("writing historian roll-ups"))?;
+        }
+    }
+    Ok(())
+}
+
+const UPSERT: &str = " ON CONFLICT (tag_id, bucket) DO UPDATE SET \
+    n = excluded.n, n_value = excluded.n_value, min_value = excluded.min_value, \
+    max_value = excluded.max_value, sum_value = excluded.sum_value, \
+    first_ts = excluded.first_ts, first_value = excluded.first_value, \
+    last_ts = excluded.last_ts, last_value = excluded.last_value, \
+    last_quality = excluded.last_quality, bad_ms = excluded.bad_ms";
+
+/// [`maintain_sqlite`] for PostgreSQL: one read and one upsert per level,
+/// as arrays. The caller holds the historian's advisory lock, so two writers
+/// never merge into the same bucket at once.
+pub(crate) async fn maintain_pg(
+    conn: &mut PgConnection,
+    rows: &[(i64, i64, Option<f64>, i32)],
+) -> Result<()> {
+    for level in Level::ALL {
+        let w = level.width();
+        let batch = roll_up(rows.iter().copied(), w);
+        let (tags, buckets): (Vec<i64>, Vec<i64>) =
+            batch.iter().map(|a| (a.tag_id, a.bucket)).unzip();
+        let found: Vec<AggRow> = sqlx::query_as(&format!(
+            // LATERAL: one primary-key look-up per bucket, whatever the
+            // planner would guess of an UNNEST's size.
+            "SELECT r.* FROM UNNEST($1::bigint[], $2::bigint[]) AS k(t, b) \
+             CROSS JOIN LATERAL (SELECT {COLUMNS} FROM {} \
+             WHERE tag_id = k.t AND bucket = k.b) r",
+            level.table()
+        ))
+        .bind(&tags)
+        .bind(&buckets)
+        .fetch_all(&mut *conn)
+        .await
+        .map_err(db("reading historian roll-ups"))?;
+        let stored: std::collections::HashMap<(i64, i64), Agg> = found
+            .into_iter()
+            .map(|r| ((r.0, r.1), Agg::from_row(r)))
+            .collect();
+        let mut out = Vec::with_capacity(batch.len());
+        for a in &batch {
+            match combine(stored.get(&(a.tag_id, a.bucket)), a, w) {
+                Some(m) => out.push(m),
+                None => {
+                    let raw: Vec<(i64, i64, Option<f64>, i32)> = sqlx::query_as(
+                        "SELECT tag_id, ts, value, quality FROM samples \
+                         WHERE tag_id = $1 AND ts >= $2 AND ts < $3 ORDER BY ts",
+                    )
+                    .bind(a.tag_id)
+                    .bind(a.bucket)
+                    .bind(a.bucket + w)
+                    .fetch_all(&mut *conn)
+                    .await
+                    .map_err(db("re-reading a historian bucket"))?;
+                    out.extend(roll_up(raw, w));
+                }
+            }
+        }
+        macro_rules! col {
+            ($f:ident) => {
+                out.iter().map(|a| a.$f).collect::<Vec<_>>()
+            };
+        }
+        sqlx::query(&format!(
+            "INSERT INTO {} ({COLUMNS}) SELECT * FROM UNNEST($1::bigint[], $2::bigint[], \
+             $3::bigint[], $4::bigint[], $5::float8[], $6::float8[], $7::float8[], $8::bigint[], \
+             $9::float8[], $10::bigint[], $11::float8[], $12::int4[], $13::bigint[]){UPSERT}",
+            level.table()
+        ))
+        .bind(col!(tag_id))
+        .bind(col!(bucket))
+        .bind(col!(n))
+        .bind(col!(n_value))
+        .bind(col!(min))
+        .bind(col!(max))
+        .bind(col!(sum))
+        .bind(col!(first_ts))
+        .bind(col!(first_value))
+        .bind(col!(last_ts))
+        .bind(col!(last_value))
+        .bind(col!(last_quality))
+        .bind(col!(bad_ms))
+        .execute(&mut *conn)
+        .await
+        .map_err(db("writing historian roll-ups"))?;
+    }
+    Ok(())
+}
+
+/// The edges of a trend of `n` buckets over `f..t` read from `level`: bucket
+/// `i` holds the level's buckets whose start `b` has
+/// `(b - f) * n / (t - f) == i` (the raw trend's rule applied to `b`), so its
+/// edges are whole minutes or hours: the first starts at the level bucket
+/// holding `f`, the last ends at the first level edge at or after `t`. A
+/// trend read from roll-ups therefore has exactly the min, max and count a
+/// raw query over the same edges gives.
+pub(crate) fn edges(level: Level, f: i64, t: i64, n: i64) -> impl Fn(i64) -> i64 {
+    let w = level.width();
+    let span = (t - f) as i128;
+    move |i: i64| {
+        if i <= 0 {
+            return bucket_of(f, w);
+        }
+        if i >= n {
+            return bucket_of(t - 1, w) + w;
+        }
+        // The first ts with (ts - f) * n >= span * i, rounded up to the level.
+        let x = f as i128 + (span * i as i128 + n as i128 - 1) / n as i128;
+        let x = x as i64;
+        let b = bucket_of(x, w);
+        if b == x {
+            b
+        } else {
+            b + w
+        }
+    }
+}
+
+/// The statement deleting one tag's (`$1`) roll-up rows of `level` whose
+/// bucket starts before `$2` (a range scan of the primary key).
+pub(crate) fn delete_sql(level: Level) -> String {
+    format!(
+        "DELETE FROM {} WHERE tag_id = $1 AND bucket < $2",
+        level.table()
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn appending_equals_rolling_up_at_once() {
+        let w = 60_000;
+        let rows: Vec<(i64, i64, Option<f64>, i32)> = vec![
+            (1, 0, Some(1.0), 0),
+            (1, 10_000, Some(5.0), 2),
+            (1, 20_000, None, 2),
+            (1, 30_000, Some(-1.0), 0),
+            (1, 50_000, Some(2.0), 2),
+        ];
+        let whole = roll_up(rows.clone(), w);
+        assert_eq!(whole.len(), 1);
+        assert_eq!(whole[0].bad_ms, 20_000 + 10_000);
+        for cut in 1..rows.len() {
+            let mut a = roll_up(rows[..cut].to_vec(), w).remove(0);
+            let b = roll_up(rows[cut..].to_vec(), w).remove(0);
+            a.append(w, &b);
+            assert_eq!(a, whole[0], "cut at {cut}");
+        }
+    }
+
+    #[test]
+    fn buckets_floor_before_1970_too() {
+        assert_eq!(bucket_of(-1, 60_000), -60_000);
+        assert_eq!(bucket_of(59_999, 60_000), 0);
+        assert_eq!(bucket_of(60_000, 60_000), 60_000);
+    }
+
+    #[test]
+    fn levels_give_at_least_the_points_asked() {
+        const DAY: i64 = 86_400_000;
+        assert_eq!(Level::for_trend(DAY, 500), Some(Level::Minute));
+        assert_eq!(Level::for_trend(365 * DAY, 500), Some(Level::Hour));
+        assert_eq!(Level::for_trend(8 * 3_600_000, 500), None);
+        assert_eq!(Level::for_trend(500 * 60_000, 500), Some(Level::Minute));
+    }
+
+    #[test]
+    fn edges_are_on_the_grid_and_match_the_rule() {
+        let (f, t, n) = (1_700_000_012_345i64, 1_700_000_012_345 + 86_400_000, 500);
+        let e = edges(Level::Minute, f, t, n);
+        assert_eq!(e(0) % 60_000, 0);
+        assert!(e(0) <= f && e(n) >= t);
+        for i in 0..n {
+            assert!(e(i) < e(i + 1));
+            // Every level bucket in [e(i), e(i+1)) maps to i by the raw rule.
+            let mut b = e(i);
+            while b < e(i + 1) {
+                let idx = ((b - f).max(0) as i128 * n as i128 / (t - f) as i128) as i64;
+                assert_eq!(idx, i, "bucket {b}");
+                b += 60_000;
+            }
+        }
+    }
+}
