@@ -54,8 +54,8 @@ write_role = "guest"
 "#;
     let got = load(main).unwrap_err();
     let want = [
-        "DIR/gridscada.toml:2:10: error: [mqtt] broker: 'http://127.0.0.1:1883' must be like mqtt://host:1883 (the central host connects without TLS)",
-        "DIR/gridscada.toml:3:9: error: [mqtt] group: 'Grid/1' must be a non-empty name without '/', '+' or '#'",
+        "DIR/gridscada.toml:2:10: error: [mqtt] broker: 'http://127.0.0.1:1883' must start with mqtt:// or mqtts://, like mqtt://broker.example:1883",
+        "DIR/gridscada.toml:3:9: error: [mqtt] group: 'Grid/1' must be a topic level: not empty, without '/', '+' or '#'",
         "DIR/gridscada.toml:5:11: error: [mqtt.host] host_id: '' must be a non-empty name without '/', '+' or '#'",
         "DIR/gridscada.toml:6:15: error: [mqtt.host] nodes: 'a' is listed twice",
         "DIR/gridscada.toml:6:20: error: [mqtt.host] nodes: 'b#' must be a non-empty name without '/', '+' or '#'",
