@@ -28,7 +28,7 @@ import sparkplug_central as c  # the HTTP client, process and wait helpers
 
 ROOT = c.ROOT
 SITES = ["site-1", "site-2", "site-3"]
-GROUP = "Grid"
+GROUP = "gridscada"  # the group `demo --mqtt` publishes under
 
 
 def site_plant(tmp, i):
@@ -134,7 +134,10 @@ write_timeout_s = 15
                  if n not in remote
                  or remote[n]["quality"]["code"] != t["quality"]["code"]
                  or (isinstance(t["value"], (bool, str)) and remote[n]["value"] != t["value"])]
-        return (len(wrong) <= len(local) // 50, wrong[:5])
+        detail = [(n, (local[n]["quality"]["code"], local[n]["value"]),
+                   (remote[n]["quality"]["code"], remote[n]["value"]) if n in remote else None)
+                  for n in wrong[:5]]
+        return (len(wrong) <= len(local) // 50, detail)
     for i, s in enumerate(SITES):
         good, wrong = c.wait_for(lambda: agree(i)[0], 20, 0.5)[0], agree(i)[1]
         c.check(good, f"{s}: qualities and discrete values at the centre equal the edge's", wrong)
