@@ -50,6 +50,12 @@ pub(super) fn start(
         return Ok(None);
     };
     let opts = HostOptions {
+        mqtt: mqtt.clone(),
+        config_dir: plant
+            .main_path
+            .parent()
+            .map(std::path::Path::to_path_buf)
+            .unwrap_or_default(),
         broker: mqtt.broker.get_ref().clone(),
         host_id: host.host_id.get_ref().clone(),
         sites: SitesPolicy {
@@ -60,7 +66,6 @@ pub(super) fn start(
         },
         max_message_bytes: *host.max_message_bytes.get_ref(),
         write_timeout: Duration::from_secs_f64(*host.write_timeout_s.get_ref()),
-        keep_alive: Duration::from_secs(10),
     };
     let (notices_tx, mut notices) = mpsc::channel::<SiteNotice>(256);
     let started = Host::start(opts, db, clock.clone(), Some(notices_tx))

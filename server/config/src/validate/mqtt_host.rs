@@ -18,25 +18,10 @@ fn sparkplug_id(cx: &mut Ctx<'_>, field: &str, id: &Spanned<String>) {
     }
 }
 
-/// `[mqtt.host]`. The broker URL, group and the other connection keys are
-/// checked once for both modes (`mqtt.rs`); here only what the central host
-/// does not do yet: TLS and a broker login.
+/// `[mqtt.host]`. The connection keys (broker, TLS, credentials, group)
+/// are checked once for both modes (`mqtt.rs`).
 pub(super) fn check_mqtt_host(cx: &mut Ctx<'_>, mqtt: &MqttConfig) {
     let Some(host) = &mqtt.host else { return };
-    if mqtt.broker.get_ref().starts_with("mqtts://") {
-        cx.err(
-            0,
-            mqtt.broker.span(),
-            "[mqtt] broker: the central host ([mqtt.host]) connects without TLS for now; give an mqtt:// broker",
-        );
-    }
-    if let Some(user) = &mqtt.username {
-        cx.err(
-            0,
-            user.span(),
-            "[mqtt] username: the central host ([mqtt.host]) does not log in to the broker yet",
-        );
-    }
     check_rest(cx, host);
 }
 

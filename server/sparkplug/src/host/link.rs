@@ -1,10 +1,9 @@
 //! The host's MQTT session: connect, subscribe, publish `STATE`, and feed
 //! every message of the group through [`Sites`] into the tag database.
 //!
-//! MERGE NOTE: the connection options here (broker URL, client id, keep
-//! alive, will) are the host's minimal own; they belong in the crate's
-//! shared `connection.rs` (TLS, credentials, `[mqtt]` keys) once both
-//! parts are on one branch. Only [`HostOptions::mqtt_options`] builds them.
+//! The connection (broker, client id, credentials, keep-alive, TLS) is the
+//! crate's shared one (`connection.rs`, from `[mqtt]`); the host adds its
+//! `STATE` will.
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -26,7 +25,11 @@ use crate::topic::{MessageType, Topic, NAMESPACE};
 /// How to run the central host (from `[mqtt]` and `[mqtt.host]`).
 #[derive(Debug, Clone)]
 pub struct HostOptions {
-    /// `mqtt://host:port` (or `tcp://`).
+    /// `[mqtt]`: the broker connection, shared with the edge node.
+    pub mqtt: gridscada_config::MqttConfig,
+    /// Where a relative `[mqtt] ca_file` is taken from (the main file's folder).
+    pub config_dir: std::path::PathBuf,
+    /// The broker's URL, for messages.
     pub broker: String,
     pub host_id: String,
     pub sites: SitesPolicy,
@@ -34,34 +37,31 @@ pub struct HostOptions {
     pub max_message_bytes: usize,
     /// How long a write waits for the edge to report the value.
     pub write_timeout: Duration,
-    /// The host's own MQTT keep-alive.
-    pub keep_alive: Duration,
 }
 
 impl HostOptions {
     fn mqtt_options(&self, will: Vec<u8>) -> Result<MqttOptions, String> {
-        let rest = self
-            .broker
-            .strip_prefix("mqtt://")
-            .or_else(|| self.broker.strip_prefix("tcp://"))
-            .ok_or_else(|| format!("broker '{}' must be mqtt://host:port", self.broker))?;
-        let (host, port) = rest
-            .rsplit_once(':')
-            .and_then(|(h, p)| Some((h, p.parse::<u16>().ok()?)))
-            .ok_or_else(|| format!("broker '{}' needs a port", self.broker))?;
-        let mut o = MqttOptions::new(format!("gridscada-host-{}", self.host_id), host, port);
-        o.set_keep_alive(self.keep_alive)
-            .set_clean_session(true)
-            // The protocol's own limit: refusing larger messages is ours to
-            // do (counted, the session kept), not the client's (which would
-            // drop the connection).
-            .set_max_packet_size(256 * 1024 * 1024, 1024 * 1024)
-            .set_last_will(LastWill::new(
-                self.state_topic(),
-                will,
-                QoS::AtLeastOnce,
-                true,
-            ));
+        let client_id = self
+            .mqtt
+            .client_id
+            .as_ref()
+            .map(|c| c.get_ref().clone())
+            .unwrap_or_else(|| format!("gridscada-host-{}", self.host_id));
+        let mut o = crate::connection::options(&self.mqtt, &client_id, &self.config_dir)
+            .map_err(|e| e.to_string())?;
+        // The protocol's own limit: refusing larger messages is ours to do
+        // (counted, the session kept), not the client's (which would drop
+        // the connection).
+        o.set_max_packet_size(
+            crate::connection::MQTT_MAX_PACKET,
+            crate::connection::MQTT_MAX_PACKET,
+        )
+        .set_last_will(LastWill::new(
+            self.state_topic(),
+            will,
+            QoS::AtLeastOnce,
+            true,
+        ));
         Ok(o)
     }
 
