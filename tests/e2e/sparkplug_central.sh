@@ -27,4 +27,6 @@ fail_setup() {
 "$python" -c 'import paho.mqtt.client, google.protobuf' 2>/dev/null ||
     fail_setup "$python has no paho-mqtt or protobuf (pip install -r tests/requirements.txt)"
 
-GRIDSCADA_BIN="$bin" MOSQUITTO="$mosquitto" exec "$python" "$here/sparkplug_central.py"
+# The checks: sparkplug_central.py, or the script given (sparkplug_sites.sh
+# runs sparkplug_sites.py with the same setup).
+GRIDSCADA_BIN="$bin" MOSQUITTO="$mosquitto" exec "$python" "$here/${1:-sparkplug_central.py}"
