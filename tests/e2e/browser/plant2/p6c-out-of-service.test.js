@@ -46,6 +46,8 @@ test('a supervisor takes an alarm out of service and returns it', async () => {
     await api.call('POST', `/api/sim/devices/${device}/online`, {});
     const a = await find().catch(() => null);
     if (a?.state === 'out_of_service') await api.call('DELETE', `/api/alarms/${a.id}/out-of-service`);
+    // Leave the device answering and its comm alarm clear for the next test.
+    await until('the device answers again', async () => !(await find())?.active, 30_000).catch(() => {});
     await b.close();
   }
 });

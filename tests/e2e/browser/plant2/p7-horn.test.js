@@ -14,7 +14,13 @@ test('the horn sounds until silenced or acknowledged; mute belongs to the sessio
   const page = b.page;
   const footer = page.locator('#alarm-footer');
   const beeps = async () => Number(await footer.getAttribute('data-horn-beeps'));
+  // A test before this one may have left the device just back on line,
+  // its comm alarm still active: acknowledged then, it would not sound again.
+  const ALL = 'normal,unack_active,ack_active,unack_rtn,shelved,suppressed,out_of_service';
+  const commActive = async () => requireOk(await api.call('GET', `/api/alarms?state=${ALL}`), 'alarms').alarms
+    .some((a) => a.tag === `${device}.Comm.Connected` && a.active);
   try {
+    await until('the device answers (its comm alarm clear)', async () => !(await commActive()), 30_000);
     await login(page, c.user, c.password);
     await page.locator('#ack-all').click();
     await until('no alarm waits', async () => (await footer.getAttribute('data-horn')) === 'quiet');
