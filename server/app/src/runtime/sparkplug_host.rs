@@ -56,7 +56,6 @@ pub(super) fn start(
             .parent()
             .map(std::path::Path::to_path_buf)
             .unwrap_or_default(),
-        broker: mqtt.broker.get_ref().clone(),
         host_id: host.host_id.get_ref().clone(),
         sites: SitesPolicy {
             group: mqtt.group.get_ref().clone(),

@@ -29,8 +29,6 @@ pub struct HostOptions {
     pub mqtt: gridscada_config::MqttConfig,
     /// Where a relative `[mqtt] ca_file` is taken from (the main file's folder).
     pub config_dir: std::path::PathBuf,
-    /// The broker's URL, for messages.
-    pub broker: String,
     pub host_id: String,
     pub sites: SitesPolicy,
     /// A larger message is counted and dropped, not decoded.
@@ -208,10 +206,13 @@ async fn run(
                     shared.notice(
                         "broker",
                         true,
-                        format!("central host connected to the broker {} again", opts.broker),
+                        format!(
+                            "central host connected to the broker {} again",
+                            opts.mqtt.broker.get_ref()
+                        ),
                     );
                 }
-                tracing::info!(broker = %opts.broker, group = %opts.sites.group, "Sparkplug host connected");
+                tracing::info!(broker = %opts.mqtt.broker.get_ref(), group = %opts.sites.group, "Sparkplug host connected");
                 connected = true;
                 ever_connected = true;
                 shared.counters.set_connected(true);
@@ -248,7 +249,7 @@ async fn run(
                 if connected {
                     connected = false;
                     shared.counters.set_connected(false);
-                    tracing::warn!(broker = %opts.broker, error = %e, "Sparkplug host lost the broker; remote tags are Bad until their sites are born again");
+                    tracing::warn!(broker = %opts.mqtt.broker.get_ref(), error = %e, "Sparkplug host lost the broker; remote tags are Bad until their sites are born again");
                     let now = shared.clock.now();
                     let bad = shared.sites.lock().host_offline(&shared.db, now);
                     shared.db.apply(bad);
@@ -260,7 +261,7 @@ async fn run(
                         .counters
                         .set_sites(0, shared.counters.snapshot().tags as usize);
                 } else {
-                    tracing::debug!(broker = %opts.broker, error = %e, "Sparkplug host cannot reach the broker");
+                    tracing::debug!(broker = %opts.mqtt.broker.get_ref(), error = %e, "Sparkplug host cannot reach the broker");
                 }
                 // rumqttc reconnects on the next poll; do not spin.
                 tokio::select! {
