@@ -117,6 +117,28 @@ class Api:
         return out
 
 
+def login(base, data, start_timeout=60, health_timeout=30):
+    """Waits for a `demo` server's credentials and /healthz, then logs in as
+    its administrator: (Api, None), or (None, why: "no credentials",
+    "no healthz", or the login's HTTP status)."""
+    creds = os.path.join(data, "credentials.txt")
+    if not wait_for(lambda: os.path.exists(creds) and os.path.getsize(creds) > 0, start_timeout)[0]:
+        return None, "no credentials"
+
+    def healthy():
+        try:
+            with urllib.request.urlopen(base + "/healthz", timeout=2) as r:
+                return r.status == 200
+        except (OSError, urllib.error.URLError):
+            return False
+    if not wait_for(healthy, health_timeout, 0.2)[0]:
+        return None, "no healthz"
+    user, password = next(l.split()[1:3] for l in open(creds) if l.startswith("administrator"))
+    api = Api(base)
+    status, _ = api.call("POST", "/api/session", {"username": user, "password": password})
+    return (api, None) if status == 200 else (None, status)
+
+
 def site_alarm(api, node):
     """(status, [the system alarm of `node`]) from /api/alarms."""
     status, body = api.call("GET", "/api/alarms")
@@ -185,23 +207,14 @@ rebirth_interval_s = 1
     data = os.path.join(tmp, "data")
     server = start([BIN, "demo", "--config", conf, "--http", f"127.0.0.1:{hport}", "--data", data],
                    os.path.join(tmp, "central.log"))
-    creds = os.path.join(data, "credentials.txt")
-    if not wait_for(lambda: os.path.exists(creds) and os.path.getsize(creds) > 0, 60)[0]:
+    api, why = login(base, data)
+    if why == "no credentials":
         bad("the central server never started (central.log)")
         return
-    def healthy():
-        try:
-            with urllib.request.urlopen(base + "/healthz", timeout=2) as r:
-                return r.status == 200
-        except (OSError, urllib.error.URLError):
-            return False
-    if not wait_for(healthy, 30, 0.2)[0]:
+    if why == "no healthz":
         bad("the central server never answered /healthz (central.log)")
         return
-    user, password = next(l.split()[1:3] for l in open(creds) if l.startswith("administrator"))
-    api = Api(base)
-    status, _ = api.call("POST", "/api/session", {"username": user, "password": password})
-    if not check(status == 200, "log in to the central server", status):
+    if not check(api is not None, "log in to the central server", why):
         return
 
     state = retained_state(mport, "central")

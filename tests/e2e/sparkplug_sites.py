@@ -46,23 +46,8 @@ def site_plant(tmp, i):
     return os.path.join(dst, "gridscada.toml")
 
 
-def login(base, data, timeout=90):
-    creds = os.path.join(data, "credentials.txt")
-    if not c.wait_for(lambda: os.path.exists(creds) and os.path.getsize(creds) > 0, timeout)[0]:
-        return None
-
-    def healthy():
-        try:
-            with c.urllib.request.urlopen(base + "/healthz", timeout=2) as r:
-                return r.status == 200
-        except (OSError, c.urllib.error.URLError):
-            return False
-    if not c.wait_for(healthy, 60, 0.2)[0]:
-        return None
-    user, password = next(l.split()[1:3] for l in open(creds) if l.startswith("administrator"))
-    api = c.Api(base)
-    status, _ = api.call("POST", "/api/session", {"username": user, "password": password})
-    return api if status == 200 else None
+def login(base, data):
+    return c.login(base, data, 90, 60)[0]
 
 
 def start_edge(tmp, i, mport, hport):
