@@ -784,17 +784,21 @@ impl Link {
         };
         // The fence: the epoch is taken as the frame goes out, so a server
         // whose lease ran out (by its own monotonic clock) sends nothing.
-        // Each write is logged with server and epoch, the record that the
-        // pair's tests check.
+        // In a redundant pair each write is logged with server and epoch,
+        // the record that the pair's tests check (alone, it is debug detail).
         let epoch = self.leadership.permit().map_err(WriteError::NotActive)?;
-        tracing::info!(
-            target: "gridscada::field_write",
-            server = self.leadership.server(),
-            epoch,
-            tag = %name,
-            value = %cmd.value,
-            "field write"
-        );
+        if self.leadership.is_pair() {
+            tracing::info!(
+                target: "gridscada::field_write",
+                server = self.leadership.server(),
+                epoch,
+                tag = %name,
+                value = %cmd.value,
+                "field write"
+            );
+        } else {
+            tracing::debug!(target: "gridscada::field_write", tag = %name, value = %cmd.value, "field write");
+        }
         match self.request(d, &req).await {
             Ok(Ok(_)) => {}
             Ok(Err(code)) => return Err(exception(code)),
