@@ -46,6 +46,30 @@ impl SimHandle {
         })
     }
 
+    /// Puts a transient fault on a zone that clears by itself after
+    /// `clears_after` of plant time (1 s to 1 h); until then it trips the
+    /// ELCB on every reclose, afterwards a reclose holds.
+    pub fn inject_timed_fault(
+        &self,
+        panel: &str,
+        zone: u8,
+        clears_after: Duration,
+    ) -> Result<(), Error> {
+        if !(Duration::from_secs(1)..=Duration::from_secs(3600)).contains(&clears_after) {
+            return Err(Error::BadValue(format!(
+                "a transient fault clears after 1 s to 1 h; {} s is out of range",
+                clears_after.as_secs_f64()
+            )));
+        }
+        self.shared.with_plant(|p| {
+            let (pi, z) = zone_of(p, panel, zone, true)?;
+            let now = p.now();
+            p.panels[pi].inject_timed_fault(z, clears_after, now);
+            p.after_change();
+            Ok(())
+        })
+    }
+
     /// Removes the fault of a zone (0 = busbar). The ELCB stays as it is.
     pub fn repair_zone(&self, panel: &str, zone: u8) -> Result<(), Error> {
         self.shared.with_plant(|p| {

@@ -15,7 +15,9 @@
 //! - The ELCB recloses on a rising edge of its reset output, after the same
 //!   mechanical delay; if it closes onto a faulted energised path it trips
 //!   again at once.
-//! - A transient fault is gone once it has tripped the ELCB.
+//! - A transient fault is gone once it has tripped the ELCB, or, when it
+//!   was given a clearing time, once that plant time has passed (until then
+//!   it trips the ELCB on every reclose, like a permanent one).
 
 use std::f64::consts::PI;
 use std::time::Duration;
@@ -29,7 +31,8 @@ use serde::{Deserialize, Serialize};
 pub enum FaultKind {
     /// Stays until repaired.
     Permanent,
-    /// Clears by itself after it has tripped the ELCB once.
+    /// Clears by itself: after it has tripped the ELCB once, or at its
+    /// clearing time when it has one.
     Transient,
 }
 
@@ -118,6 +121,8 @@ pub(crate) struct PanelModel {
     pub zone: Vec<Breaker>,
     /// Index 0 = busbar (load 0), 1..=zones.
     pub faults: Vec<Option<FaultKind>>,
+    /// When a timed transient fault of each path clears by itself.
+    pub fault_clears_at: Vec<Option<Timestamp>>,
     /// How often each faulted path was energised (each one tripped the ELCB).
     pub fault_energisations: Vec<u64>,
     pub door_open: bool,
@@ -150,6 +155,7 @@ impl PanelModel {
             mccb: Breaker::new(start_closed),
             zone: (0..zones).map(|_| Breaker::new(start_closed)).collect(),
             faults: vec![None; zones + 1],
+            fault_clears_at: vec![None; zones + 1],
             fault_energisations: vec![0; zones + 1],
             door_open: false,
             loads: (1..=zones).map(ZoneLoad::default_for).collect(),
@@ -190,6 +196,9 @@ impl PanelModel {
                 }
             };
             consider(self.reclose_due, Event::Reclose);
+            for (z, at) in self.fault_clears_at.iter().enumerate() {
+                consider(*at, Event::FaultClears(z));
+            }
             consider(self.mccb.due, Event::Mccb);
             for (i, z) in self.zone.iter().enumerate() {
                 consider(z.due, Event::Zone(i));
@@ -203,6 +212,10 @@ impl PanelModel {
                 }
                 Event::Mccb => settle(&mut self.mccb),
                 Event::Zone(i) => settle(&mut self.zone[i]),
+                Event::FaultClears(z) => {
+                    self.fault_clears_at[z] = None;
+                    self.faults[z] = None;
+                }
             }
             self.check_trip(t);
         }
@@ -240,6 +253,19 @@ impl PanelModel {
         self.advance_to(now);
         if let Some(f) = self.faults.get_mut(zone) {
             *f = Some(kind);
+            self.fault_clears_at[zone] = None;
+        }
+        self.check_trip(now);
+    }
+
+    /// Puts a transient fault on path `zone` that stays (tripping the ELCB
+    /// on every reclose onto it) until `clears_after` of plant time has
+    /// passed, so a reclose after that succeeds.
+    pub fn inject_timed_fault(&mut self, zone: usize, clears_after: Duration, now: Timestamp) {
+        self.advance_to(now);
+        if let Some(f) = self.faults.get_mut(zone) {
+            *f = Some(FaultKind::Transient);
+            self.fault_clears_at[zone] = Some(now.add(clears_after));
         }
         self.check_trip(now);
     }
@@ -248,6 +274,7 @@ impl PanelModel {
         self.advance_to(now);
         if let Some(f) = self.faults.get_mut(zone) {
             *f = None;
+            self.fault_clears_at[zone] = None;
         }
     }
 
@@ -288,7 +315,7 @@ impl PanelModel {
         self.elcb_trips += 1;
         for &z in &faulted {
             self.fault_energisations[z] += 1;
-            if self.faults[z] == Some(FaultKind::Transient) {
+            if self.faults[z] == Some(FaultKind::Transient) && self.fault_clears_at[z].is_none() {
                 self.faults[z] = None;
             }
         }
@@ -383,6 +410,7 @@ enum Event {
     Reclose,
     Mccb,
     Zone(usize),
+    FaultClears(usize),
 }
 
 fn settle(b: &mut Breaker) {
@@ -469,6 +497,39 @@ mod tests {
         p.advance_to(t(100));
         assert!(p.elcb_closed);
         assert!(p.zone_energised(4));
+    }
+
+    #[test]
+    fn timed_transient_fault_retrips_until_it_clears_then_a_reclose_holds() {
+        let mut p = panel();
+        p.inject_timed_fault(3, Duration::from_secs(2), t(0));
+        assert!(!p.elcb_closed, "it trips at once");
+        assert_eq!(p.faults[3], Some(FaultKind::Transient));
+        // A reclose before the clearing time closes onto it again.
+        p.command_reset(true, t(100));
+        p.command_reset(false, t(200));
+        p.advance_to(t(500));
+        assert!(!p.elcb_closed);
+        assert_eq!(p.elcb_trips, 2);
+        // After it, the fault is gone and a reclose holds.
+        p.advance_to(t(2_000));
+        assert_eq!(p.faults[3], None);
+        p.command_reset(true, t(2_100));
+        p.advance_to(t(2_300));
+        assert!(p.elcb_closed);
+        assert!(p.zone_energised(3));
+        assert_eq!(p.elcb_trips, 2);
+    }
+
+    #[test]
+    fn repair_cancels_a_timed_fault() {
+        let mut p = panel();
+        p.inject_timed_fault(1, Duration::from_secs(60), t(0));
+        p.repair(1, t(10));
+        assert_eq!(p.fault_clears_at[1], None);
+        p.command_reset(true, t(20));
+        p.advance_to(t(200));
+        assert!(p.elcb_closed);
     }
 
     #[test]

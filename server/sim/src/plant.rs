@@ -257,6 +257,7 @@ impl PlantSim {
                         breaker: BreakerSnapshot::of(&p.zone[z - 1]),
                         energised: p.zone_energised(z),
                         fault: p.faults[z],
+                        fault_clears_at: p.fault_clears_at[z],
                         fault_energisations: p.fault_energisations[z],
                         load: p.loads[z - 1],
                         load_kw_now: p.zone_power(z, t).0,
@@ -273,6 +274,9 @@ impl PlantSim {
             supply_kw: mg.supply_kw,
             irradiance_w_m2: mg.irradiance_w_m2,
             wind_speed_m_s: mg.wind_speed_m_s,
+            irradiance_profile: mg.irradiance.clone(),
+            wind_speed_profile: mg.wind_speed.clone(),
+            demand_profile: mg.demand.clone(),
             energy: mg.counters.clone(),
             units: mg
                 .units
@@ -441,6 +445,8 @@ pub struct ZoneSnapshot {
     pub breaker: BreakerSnapshot,
     pub energised: bool,
     pub fault: Option<FaultKind>,
+    /// When a timed transient fault clears by itself (plant time).
+    pub fault_clears_at: Option<Timestamp>,
     /// Times the zone was energised while faulted (each tripped the ELCB).
     pub fault_energisations: u64,
     pub load: ZoneLoad,
@@ -457,6 +463,10 @@ pub struct MicrogridSnapshot {
     pub supply_kw: f64,
     pub irradiance_w_m2: f64,
     pub wind_speed_m_s: f64,
+    /// The profiles in force (a trainer may have overridden or scaled them).
+    pub irradiance_profile: crate::profile::Profile,
+    pub wind_speed_profile: crate::profile::Profile,
+    pub demand_profile: crate::profile::Profile,
     pub energy: BalanceCounters,
     pub units: Vec<UnitSnapshot>,
 }

@@ -18,6 +18,9 @@ pub enum Profile {
     Builtin,
     /// A fixed value.
     Constant(f64),
+    /// The built-in curve times a factor (0.5: half the sun, 2: double the
+    /// demand).
+    Scaled(f64),
     /// `(hour of day UTC, value)` points, linearly interpolated and wrapping
     /// around midnight. Hours are in [0, 24).
     Daily(Vec<(f64, f64)>),
@@ -30,6 +33,8 @@ impl Profile {
             Profile::Builtin => Ok(()),
             Profile::Constant(v) if v.is_finite() => Ok(()),
             Profile::Constant(v) => Err(format!("constant {v} is not a finite number")),
+            Profile::Scaled(f) if f.is_finite() && (0.0..=10.0).contains(f) => Ok(()),
+            Profile::Scaled(f) => Err(format!("scale factor {f} must be between 0 and 10")),
             Profile::Daily(points) => {
                 if points.is_empty() {
                     return Err("a daily profile needs at least one point".into());
@@ -52,6 +57,7 @@ impl Profile {
         match self {
             Profile::Builtin => builtin(h),
             Profile::Constant(v) => *v,
+            Profile::Scaled(f) => f * builtin(h),
             Profile::Daily(points) => interpolate_daily(points, h),
         }
     }
@@ -116,5 +122,16 @@ mod tests {
         assert!(Profile::Daily(vec![]).check().is_err());
         assert!(Profile::Daily(vec![(24.0, 1.0)]).check().is_err());
         assert!(Profile::Daily(vec![(1.0, 1.0)]).check().is_ok());
+        assert!(Profile::Scaled(-0.5).check().is_err());
+        assert!(Profile::Scaled(f64::INFINITY).check().is_err());
+        assert!(Profile::Scaled(0.0).check().is_ok());
+    }
+
+    #[test]
+    fn scaled_profile_follows_the_builtin_curve() {
+        let noon = Timestamp::from_millis(12 * 3_600_000);
+        let p = Profile::Scaled(0.5);
+        assert!((p.value(noon, builtin_irradiance) - 500.0).abs() < 1e-9);
+        assert_eq!(Profile::Scaled(2.0).value(noon, |_| 30.0), 60.0);
     }
 }
