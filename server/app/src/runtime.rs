@@ -32,6 +32,7 @@ mod opcua;
 mod shutdown_tests;
 mod sources;
 mod sparkplug_host;
+mod training;
 
 use sources::{StackDevices, StackMetrics};
 
@@ -237,6 +238,34 @@ impl gridscada_web::api::sim::SimControl for SimAdapter {
         self.0
             .set_device_offline(device, offline)
             .map_err(|e| e.to_string())
+    }
+    fn inject_timed_fault(
+        &self,
+        panel: &str,
+        zone: u8,
+        clears_after: std::time::Duration,
+    ) -> Result<(), String> {
+        training::inject_timed_fault(&self.0, panel, zone, clears_after)
+    }
+    fn set_link(
+        &self,
+        device: &str,
+        link: &gridscada_web::api::sim::LinkFaults,
+    ) -> Result<(), String> {
+        training::set_link(&self.0, device, link)
+    }
+    fn set_input(
+        &self,
+        input: gridscada_web::api::sim::PlantInput,
+        profile: &gridscada_web::api::sim::InputProfile,
+    ) -> Result<(), String> {
+        training::set_input(&self.0, input, profile)
+    }
+    fn set_zone_load(&self, panel: &str, zone: u8, kw: f64, pf: f64) -> Result<(), String> {
+        training::set_zone_load(&self.0, panel, zone, kw, pf)
+    }
+    fn state(&self) -> gridscada_web::api::sim::SimState {
+        training::state(&self.0)
     }
 }
 

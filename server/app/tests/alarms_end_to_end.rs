@@ -295,7 +295,7 @@ fn zone_fault_alarms_are_raised_acknowledged_shelved_and_cleared_and_every_actio
         ("login", "supervisor", 1),
         ("login", "operator", 1),
         ("mode", "supervisor", 2),
-        ("simulation", "admin", 4),
+        ("training", "admin", 4),
         ("ack", "operator", 3), // Ack Top, the re-ack after unshelving, the comm alarm
         ("shelve", "supervisor", 1),
         ("unshelve", "supervisor", 1),
@@ -343,13 +343,7 @@ fn zone_fault_alarms_are_raised_acknowledged_shelved_and_cleared_and_every_actio
     for e in &log {
         let kind = e["kind"].as_str().unwrap_or("");
         if [
-            "ack",
-            "shelve",
-            "unshelve",
-            "write",
-            "mode",
-            "reset",
-            "simulation",
+            "ack", "shelve", "unshelve", "write", "mode", "reset", "training",
         ]
         .contains(&kind)
         {

@@ -33,7 +33,10 @@ const TOOLS: &[(&str, &str)] = &[
 ];
 
 /// Screens only an Administrator's group gets by default.
-const ADMIN_ONLY: &[&str] = &["users", "editor"];
+const ADMIN_ONLY: &[&str] = &["users", "editor", SIMULATION];
+
+/// The Simulation (training) panel: only in a server that runs simulators.
+pub const SIMULATION: &str = "simulation";
 
 /// What kind of screen an entry is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -63,6 +66,9 @@ pub struct ScreenEntry {
 #[derive(Default)]
 pub struct ScreenLibrary {
     screens: RwLock<BTreeMap<String, Arc<Screen>>>,
+    /// Whether this server runs simulators (`demo`, replay), and so has the
+    /// Simulation screen; set where the router is built.
+    simulation: std::sync::atomic::AtomicBool,
 }
 
 impl ScreenLibrary {
@@ -86,6 +92,14 @@ impl ScreenLibrary {
     }
     pub fn all(&self) -> Vec<Arc<Screen>> {
         self.screens.read().values().cloned().collect()
+    }
+    /// Offers the Simulation screen (a server with simulators) or not.
+    pub fn set_simulation(&self, on: bool) {
+        self.simulation
+            .store(on, std::sync::atomic::Ordering::Relaxed);
+    }
+    pub fn has_simulation(&self) -> bool {
+        self.simulation.load(std::sync::atomic::Ordering::Relaxed)
     }
 }
 
@@ -130,6 +144,9 @@ pub fn catalog(plant: &Plant, library: &ScreenLibrary) -> Vec<ScreenEntry> {
         });
     }
     out.extend(TOOLS.iter().map(|(id, label)| builtin(id, label)));
+    if library.has_simulation() {
+        out.push(builtin(SIMULATION, "Simulation"));
+    }
     out
 }
 

@@ -119,10 +119,12 @@ const fn sim(
     handler: fn() -> MethodRouter<WebState>,
     doc: fn() -> Doc,
 ) -> Route {
+    // A trainer: an operator or above whose group may open the Simulation
+    // screen (administrators' groups by default).
     Route {
         method,
         path,
-        perm: Perm::Role(Role::Administrator),
+        perm: Perm::RoleScreen(Role::Operator, crate::access::SIMULATION),
         sim_only: true,
         handler,
         doc,
@@ -483,15 +485,46 @@ pub fn table() -> Vec<Route> {
             || post(api::sim::online),
             doc::<api::sim::__path_online>,
         ),
+        sim(
+            Method::GET,
+            "/api/sim/state",
+            || get(api::sim::state),
+            doc::<api::sim::__path_state>,
+        ),
+        sim(
+            Method::PUT,
+            "/api/sim/devices/{device}/link",
+            || put(api::sim::link),
+            doc::<api::sim::__path_link>,
+        ),
+        sim(
+            Method::PUT,
+            "/api/sim/zones/{panel}/{zone}/load",
+            || put(api::sim::zone_load),
+            doc::<api::sim::__path_zone_load>,
+        ),
+        sim(
+            Method::PUT,
+            "/api/sim/inputs/{input}",
+            || put(api::sim::input),
+            doc::<api::sim::__path_input>,
+        ),
     ]
 }
 
 /// Builds the router from the table, each route behind its permission check.
 pub fn build(state: WebState) -> Router {
     let with_sim = state.sim.is_some();
+    state.screens.set_simulation(with_sim);
     let mut router: Router<WebState> = Router::new();
+    let mut refused_sim_paths = std::collections::HashSet::new();
     for route in table() {
         if route.sim_only && !with_sim {
+            // No simulator (`serve`): the path answers 404 with the reason,
+            // to anyone, before any login check.
+            if refused_sim_paths.insert(route.path) {
+                router = router.route(route.path, axum::routing::any(api::sim::not_simulated));
+            }
             continue;
         }
         let perm = route.perm;

@@ -346,6 +346,13 @@ async fn sim_routes_are_absent_without_a_simulator() {
             )
             .await;
         assert_eq!(r.status, StatusCode::NOT_FOUND, "{} {path}", route.method);
+        // The refusal says why, in words for the trainer.
+        assert!(
+            r.text().contains("only in `gridscada demo`"),
+            "{} {path}: {}",
+            route.method,
+            r.text()
+        );
         // And anonymous callers learn nothing more than "not found" either.
         let r = h
             .call(route.method.clone(), &path, None, body_for(&route.method))
@@ -353,6 +360,88 @@ async fn sim_routes_are_absent_without_a_simulator() {
         assert_eq!(r.status, StatusCode::NOT_FOUND, "{} {path}", route.method);
     }
     assert!(h.sim.calls.lock().is_empty());
+    // Nor is there a Simulation screen to show or to grant to a group.
+    let catalog = h
+        .call(Method::GET, "/api/screens", Some(&admin), None)
+        .await;
+    assert_eq!(catalog.status, StatusCode::OK, "{}", catalog.text());
+    assert!(
+        !catalog.text().contains("\"simulation\""),
+        "{}",
+        catalog.text()
+    );
+    let r = h
+        .call(
+            Method::PUT,
+            "/api/groups/trainers/screens",
+            Some(&admin),
+            Some(json!({"screens": ["simulation"]})),
+        )
+        .await;
+    assert_eq!(r.status, StatusCode::BAD_REQUEST, "{}", r.text());
+}
+
+/// With a simulator (`demo`), the Simulation screen is an administrator's by
+/// default, and an administrator may give it to a trainer group of operators.
+#[tokio::test]
+async fn a_trainer_group_gets_the_simulation_panel() {
+    let h = Harness::new(Options::default()).await;
+    let admin = h.login("administrator", PASSWORD).await;
+    let catalog = h
+        .call(Method::GET, "/api/screens", Some(&admin), None)
+        .await;
+    assert!(
+        catalog.text().contains("\"simulation\""),
+        "{}",
+        catalog.text()
+    );
+    let fault = json!({"panel": "ss1", "zone": 2, "kind": "permanent"});
+    let op = h.login("operator", PASSWORD).await;
+    let r = h
+        .call(
+            Method::POST,
+            "/api/sim/faults",
+            Some(&op),
+            Some(fault.clone()),
+        )
+        .await;
+    assert_eq!(r.status, StatusCode::FORBIDDEN, "{}", r.text());
+    h.add_user("trainer1", Role::Operator, "trainers").await;
+    let r = h
+        .call(
+            Method::PUT,
+            "/api/groups/trainers/screens",
+            Some(&admin),
+            Some(json!({"screens": ["alarms", "simulation"]})),
+        )
+        .await;
+    assert!(r.status.is_success(), "{}", r.text());
+    let trainer = h.login("trainer1", PASSWORD).await;
+    let r = h
+        .call(Method::POST, "/api/sim/faults", Some(&trainer), Some(fault))
+        .await;
+    assert_eq!(r.status, StatusCode::CREATED, "{}", r.text());
+    assert_eq!(h.sim.calls.lock().as_slice(), ["fault ss1 2 Permanent"]);
+    // Recorded as training, with the trainer's name.
+    let events = h
+        .call(Method::GET, "/api/events?type=training", Some(&admin), None)
+        .await;
+    assert!(
+        events.text().contains("trainer1") && events.text().contains("Training:"),
+        "{}",
+        events.text()
+    );
+    // A permanent fault does not clear by itself.
+    let r = h
+        .call(
+            Method::POST,
+            "/api/sim/faults",
+            Some(&trainer),
+            Some(json!({"panel": "ss1", "zone": 2, "kind": "permanent", "clears_after_s": 5})),
+        )
+        .await;
+    assert_eq!(r.status, StatusCode::BAD_REQUEST, "{}", r.text());
+    assert!(r.text().contains("clears_after_s"), "{}", r.text());
 }
 
 /// Every path in the table is routed (no typo sends it to the HMI fallback)
