@@ -22,6 +22,7 @@ import users from './screens/users.js';
 import tagBrowser from './screens/tags.js';
 import devices from './screens/devices.js';
 import editor from './screens/editor.js';
+import simulation from './screens/simulation.js';
 import { customScreen } from './screens/custom.js';
 
 /** The built-in screens by id. Which exist, their order and labels come
@@ -38,6 +39,7 @@ const BUILTIN = {
   trends,
   editor,
   users,
+  simulation,
 };
 
 /** The screens of this plant the user may open: [id, label, module]. */

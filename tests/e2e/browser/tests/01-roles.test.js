@@ -5,7 +5,7 @@ import { launch, login, toolbar, credentials, adminApi, BASE } from '../lib.js';
 import { ensureGuest } from '../fixtures.js';
 
 const EXPECTED = {
-  administrator: ['main', 'ss1', 'css1', 'microgrid', 'units', 'tags', 'devices', 'alarms', 'events', 'trends', 'editor', 'users'],
+  administrator: ['main', 'ss1', 'css1', 'microgrid', 'units', 'tags', 'devices', 'alarms', 'events', 'trends', 'editor', 'users', 'simulation'],
   supervisor: ['main', 'ss1', 'css1', 'microgrid', 'units', 'tags', 'devices', 'alarms', 'events', 'trends'],
   operator: ['main', 'ss1', 'css1', 'microgrid', 'units', 'tags', 'devices', 'alarms', 'events', 'trends'],
   guest: ['main', 'microgrid', 'alarms', 'trends'],
