@@ -153,11 +153,11 @@ export default {
       if (fZone.options.length === 0) fillZones();
       fillSelect(dName, s.devices.map((d) => d.name));
 
-      const faultRows = s.panels.flatMap((p) => p.zones.map((z) => h('tr', { dataset: { panel: p.id, zone: String(z.zone) }, class: z.fault ? 'row-bad' : '' },
+      const faultRows = s.panels.flatMap((p) => p.zones.map((z) => h('tr', { dataset: { panel: p.id, zone: String(z.zone), faulted: String(!!z.fault) } },
         h('th', { scope: 'row', text: p.id }),
         h('td', { text: p.elcb_closed ? 'closed' : 'TRIPPED' }),
         h('td', { text: zoneLabel(z.zone) }),
-        h('td', { class: 'sim-fault', text: faultText(z) }),
+        h('td', { class: 'sim-fault' }, z.fault ? h('span', { class: 'badge badge-bad', text: faultText(z) }) : 'none'),
         h('td', { class: 'num', text: `${fmtNumber(z.load_kw, 1)} kW, PF ${fmtNumber(z.pf, 2)}` }),
         h('td', {}, z.fault ? h('button', { type: 'button', class: 'btn btn-small', id: `sim-repair-${p.id}-${z.zone}`, text: 'Repair', onclick: () => repair(p.id, z.zone) }) : '—'))));
       replace(faultBox, h('table', { class: 'data', id: 'sim-faults-table' },
@@ -166,11 +166,11 @@ export default {
 
       replace(devBox, h('table', { class: 'data', id: 'sim-devices-table' },
         h('thead', {}, h('tr', {}, ['Device', 'State', 'Added latency', 'Replies', 'Action'].map((t) => h('th', { scope: 'col', text: t })))),
-        h('tbody', {}, s.devices.map((d) => h('tr', { dataset: { device: d.name }, class: d.offline || d.slow_reply_ms || d.replies !== 'normal' ? 'row-bad' : '' },
+        h('tbody', {}, s.devices.map((d) => h('tr', { dataset: { device: d.name } },
           h('th', { scope: 'row', text: d.name }),
-          h('td', { text: d.offline ? 'OFFLINE' : 'online' }),
+          h('td', {}, d.offline ? h('span', { class: 'badge badge-bad', text: 'OFFLINE' }) : 'online'),
           h('td', { class: 'num', text: d.slow_reply_ms ? `${d.slow_reply_ms} ms` : '—' }),
-          h('td', { text: d.replies }),
+          h('td', {}, d.replies === 'normal' ? 'normal' : h('span', { class: 'badge badge-bad', text: d.replies })),
           h('td', {}, h('button', { type: 'button', class: 'btn btn-small', id: `sim-offline-${d.name}`,
             text: d.offline ? 'Bring online' : 'Take offline', onclick: () => setOffline(d.name, !d.offline) })))))));
 
