@@ -49,9 +49,19 @@ async fn the_catalog_is_the_plants_own() {
         .await;
     assert_eq!(cat.status, StatusCode::OK, "{}", cat.text());
     // The test plant has no panel and no microgrid: no screens for them.
+    // It runs a simulator, so it has the Simulation screen.
     assert_eq!(
         ids(&cat.json()),
-        ["tags", "devices", "alarms", "events", "trends", "editor", "users"]
+        [
+            "tags",
+            "devices",
+            "alarms",
+            "events",
+            "trends",
+            "editor",
+            "users",
+            "simulation"
+        ]
     );
     let guest = h.login("guest", PASSWORD).await;
     let cat = h
