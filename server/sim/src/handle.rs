@@ -204,11 +204,13 @@ impl SimHandle {
     ) -> Result<(), Error> {
         profile.check().map_err(Error::BadValue)?;
         self.shared.with_plant(|p| {
+            let now = p.now();
             let mg = p
                 .microgrid
                 .as_mut()
                 .ok_or_else(|| Error::NotFound("the plant has no microgrid".into()))?;
             set(mg, profile);
+            mg.sample_environment(now);
             Ok(())
         })
     }

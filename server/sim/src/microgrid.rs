@@ -223,7 +223,9 @@ impl Microgrid {
         }
     }
 
-    fn sample_environment(&mut self, t: Timestamp) {
+    /// Reads the input profiles at `t` (also at once after a profile
+    /// changes, so the meters show the new input without waiting a step).
+    pub(crate) fn sample_environment(&mut self, t: Timestamp) {
         self.irradiance_w_m2 = self.irradiance.value(t, builtin_irradiance).max(0.0);
         self.wind_speed_m_s = self.wind_speed.value(t, builtin_wind_speed).max(0.0);
         self.demand_kw = self.demand.value(t, builtin_demand).max(0.0);

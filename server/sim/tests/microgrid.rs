@@ -159,3 +159,34 @@ async fn unit_trip_and_microgrid_balance() {
     assert!(h.set_demand(Profile::Constant(f64::INFINITY)).is_err());
     assert!(h.trip_unit("nope").is_err());
 }
+
+/// A trainer scales the built-in curves: the registers follow the scaled
+/// value, and a bad factor is refused.
+#[tokio::test]
+async fn scaled_profiles_reach_the_registers() {
+    let rig = rig(1.0).await;
+    let h = rig.sim.handle();
+    h.set_demand(Profile::Builtin).unwrap();
+    rig.wait(Duration::from_millis(300)).await;
+    let builtin = h.snapshot().microgrid.unwrap().demand_kw;
+    h.set_demand(Profile::Scaled(0.5)).unwrap();
+    // At once, without waiting for the plant's next step.
+    let snap = h.snapshot().microgrid.unwrap();
+    assert!(
+        (snap.demand_kw / builtin - 0.5).abs() < 0.01,
+        "{} vs {builtin}",
+        snap.demand_kw
+    );
+    assert_eq!(snap.demand_profile, Profile::Scaled(0.5));
+    let read = rig.read_f32("MG.Load.P_kW").await;
+    assert!(
+        (read / snap.demand_kw - 1.0).abs() < 0.05,
+        "{read} vs {}",
+        snap.demand_kw
+    );
+    h.set_wind_speed(Profile::Scaled(0.0)).unwrap();
+    rig.wait(Duration::from_secs(1)).await;
+    assert_eq!(rig.read_f32("MG.WT1.WindSpeed").await, 0.0);
+    assert!(h.set_irradiance(Profile::Scaled(-1.0)).is_err());
+    assert!(h.set_irradiance(Profile::Scaled(f64::NAN)).is_err());
+}

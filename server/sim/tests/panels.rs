@@ -267,3 +267,41 @@ async fn a_bigger_plant_from_configuration() {
     assert!(rig.read_bool("CSS1.ELCB.Closed").await);
     assert!(h.inject_zone_fault("ss9", 7, FaultKind::Permanent).is_err());
 }
+
+/// A trainer's transient fault with a clearing time: over Modbus, a reset
+/// before that time recloses onto it and trips again; after it, a reset holds.
+#[tokio::test]
+async fn timed_transient_fault_retrips_until_its_clearing_time() {
+    let rig = rig(10.0).await;
+    let h = rig.sim.handle();
+    assert!(h
+        .inject_timed_fault("ss1", 2, Duration::from_millis(500))
+        .is_err());
+    assert!(h
+        .inject_timed_fault("ss1", 2, Duration::from_secs(7200))
+        .is_err());
+    assert!(h
+        .inject_timed_fault("ss1", 9, Duration::from_secs(5))
+        .is_err());
+    h.inject_timed_fault("ss1", 2, Duration::from_secs(20))
+        .unwrap();
+    rig.wait(SETTLE).await;
+    assert!(!rig.read_bool("SS1.ELCB.Closed").await);
+    let snap = h.snapshot();
+    let z2 = &snap.panel("ss1").unwrap().zones[1];
+    assert_eq!(z2.fault, Some(FaultKind::Transient));
+    assert!(z2.fault_clears_at.is_some());
+    // Before its time: the reclose trips again.
+    rig.pulse("SS1.ELCB.Reset").await;
+    rig.wait(SETTLE).await;
+    assert!(!rig.read_bool("SS1.ELCB.Closed").await);
+    assert_eq!(h.snapshot().panel("ss1").unwrap().elcb_trips, 2);
+    // After it: gone, and the reclose holds with every zone on.
+    rig.wait(Duration::from_secs(20)).await;
+    assert_eq!(h.snapshot().panel("ss1").unwrap().zones[1].fault, None);
+    rig.pulse("SS1.ELCB.Reset").await;
+    rig.wait(SETTLE).await;
+    assert!(rig.read_bool("SS1.ELCB.Closed").await);
+    assert!(rig.read_bool("SS1.Zone2.Energised").await);
+    assert_eq!(h.snapshot().panel("ss1").unwrap().elcb_trips, 2);
+}
