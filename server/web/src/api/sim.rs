@@ -83,6 +83,7 @@ pub enum ReplyFault {
 pub struct LinkFaults {
     /// Added reply latency, ms (0 or absent: none; at most 60000).
     #[serde(default)]
+    #[schema(maximum = 60000)]
     pub slow_reply_ms: Option<u32>,
     #[serde(default)]
     #[schema(inline)]
@@ -242,6 +243,7 @@ pub struct FaultBody {
     /// (1 to 3600), so a reclose after that holds. Without it a transient
     /// fault is gone once it has tripped the ELCB.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(minimum = 1, maximum = 3600)]
     pub clears_after_s: Option<u32>,
 }
 
@@ -416,8 +418,10 @@ pub async fn link(
 #[serde(deny_unknown_fields)]
 pub struct ZoneLoadBody {
     /// Active power, kW (0 to 10000).
+    #[schema(minimum = 0, maximum = 10000)]
     pub kw: f64,
     /// Power factor, above 0 and at most 1.
+    #[schema(exclusive_minimum = 0, maximum = 1)]
     pub pf: f64,
 }
 
