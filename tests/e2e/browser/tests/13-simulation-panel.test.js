@@ -71,3 +71,35 @@ test('a trainer injects a zone fault from the Simulation panel; the sequence iso
     await restorePanel(api, PANEL).catch(() => {});
   }
 });
+
+test('a transient fault set to clear before the reclose: the panel restores every zone, nothing isolated', async () => {
+  const api = await adminApi();
+  await restorePanel(api, PANEL);
+  await ensureTrainer(api);
+  const b = await launch('13-simulation-transient');
+  const page = b.page;
+  const breaker = (name) => page.locator(`tr[data-breaker-row="${name}"] .bk-text`);
+  try {
+    await login(page, TRAINER.user, TRAINER.password);
+    await page.goto(`${BASE}/#/simulation`);
+    await page.locator('#sim-faults-table').waitFor();
+    await page.locator('#sim-fault-panel').selectOption(PANEL);
+    await page.locator('#sim-fault-zone').selectOption(String(ZONE));
+    await page.locator('#sim-fault-kind').selectOption('transient');
+    // Shorter than the panel's reclose delay: the first reclose holds.
+    await page.locator('#sim-fault-clears').fill('1');
+    await page.locator('#sim-inject').click();
+    await page.goto(`${BASE}/#/${PANEL}`);
+    await page.locator(`#${PANEL}-last`, { hasText: /every zone restored.*, 1 trips/ }).waitFor({ timeout: 60_000 });
+    await b.screenshot('restored');
+    assert.equal(await page.locator(`#${PANEL}-faulty`).textContent(), 'none');
+    for (const z of [1, 2, 3, 4]) assert.equal(await breaker(`zone${z}`).textContent(), 'CLOSED', `zone ${z} closed`);
+    assert.equal(await breaker('elcb').textContent(), 'CLOSED');
+    const log = requireOk(await api.call('GET', '/api/events?type=training&limit=50'), 'events').events;
+    assert.ok(log.some((e) => e.user === TRAINER.user && /transient fault \(clears after 1 s\)/.test(e.message)), JSON.stringify(log));
+    assert.deepEqual(b.problems, []);
+  } finally {
+    await b.close();
+    await restorePanel(api, PANEL).catch(() => {});
+  }
+});
