@@ -290,6 +290,10 @@ fn serve_without_its_devices_is_live_and_ready_but_degraded() {
     assert!(body.contains("\"not_good\":[\""), "{body}");
     let (status, body) = http_get(&addr, "/readyz");
     assert_eq!((status, body.as_str()), (200, "ready\n"));
+    // `serve` runs a real plant: no Simulation panel, and its API says why.
+    let (status, body) = http_get(&addr, "/api/sim/state");
+    assert_eq!(status, 404, "{body}");
+    assert!(body.contains("only in `gridscada demo`"), "{body}");
 }
 
 /// A copy of the demo plant whose data folder is inside `dir`.
