@@ -288,6 +288,32 @@ fn control_line(handle: &SimHandle, line: &str) -> Result<(), String> {
                 .inject_zone_fault(panel, zone(z)?, kind)
                 .map_err(|e| e.to_string())
         }
+        ["transient", panel, z, secs] => {
+            let secs: u64 = secs
+                .parse()
+                .map_err(|_| format!("'{secs}' is not a number of seconds"))?;
+            handle
+                .inject_timed_fault(panel, zone(z)?, Duration::from_secs(secs))
+                .map_err(|e| e.to_string())
+        }
+        ["slow", device, ms] => {
+            let ms: u64 = ms
+                .parse()
+                .map_err(|_| format!("'{ms}' is not a number of milliseconds"))?;
+            let delay = (ms > 0).then(|| Duration::from_millis(ms));
+            handle
+                .set_slow_replies(device, delay)
+                .map_err(|e| e.to_string())
+        }
+        ["corrupt", device, on] => handle
+            .set_corrupt_frames(device, on_off(on)?)
+            .map_err(|e| e.to_string()),
+        ["exception", device, on] => handle
+            .set_exception(
+                device,
+                on_off(on)?.then_some(ExceptionCode::ServerDeviceFailure),
+            )
+            .map_err(|e| e.to_string()),
         ["repair", panel, z] => handle
             .repair_zone(panel, zone(z)?)
             .map_err(|e| e.to_string()),
@@ -299,8 +325,16 @@ fn control_line(handle: &SimHandle, line: &str) -> Result<(), String> {
             .map_err(|e| e.to_string()),
         [] => Ok(()),
         _ => Err(format!(
-            "unknown command '{line}'; expected fault PANEL ZONE permanent|transient, repair PANEL ZONE, offline DEVICE or online DEVICE"
+            "unknown command '{line}'; expected fault PANEL ZONE permanent|transient, transient PANEL ZONE SECONDS, repair PANEL ZONE, offline DEVICE, online DEVICE, slow DEVICE MS, corrupt DEVICE on|off or exception DEVICE on|off"
         )),
+    }
+}
+
+fn on_off(w: &str) -> Result<bool, String> {
+    match w {
+        "on" => Ok(true),
+        "off" => Ok(false),
+        other => Err(format!("'{other}': expected on or off")),
     }
 }
 
@@ -320,9 +354,11 @@ pub async fn run_standalone(plant: &Plant) -> Result<(), Error> {
     }
     // Fault injection from standard input, one command a line (a test or
     // an engineer at the terminal drives the plant like the demo's
-    // simulator API): `fault PANEL ZONE permanent|transient`, `repair
-    // PANEL ZONE`, `offline DEVICE`, `online DEVICE`. Each answers `ok` or
-    // `error: ...` on standard output.
+    // simulator API): `fault PANEL ZONE permanent|transient`, `transient
+    // PANEL ZONE SECONDS` (clears after that time), `repair PANEL ZONE`,
+    // `offline DEVICE`, `online DEVICE`, `slow DEVICE MS` (0: no delay),
+    // `corrupt DEVICE on|off`, `exception DEVICE on|off`. Each answers `ok`
+    // or `error: ...` on standard output.
     let handle = sim.handle();
     std::thread::spawn(move || {
         use std::io::BufRead;
@@ -337,4 +373,53 @@ pub async fn run_standalone(plant: &Plant) -> Result<(), Error> {
     tracing::info!("simulator: stopping");
     sim.shutdown().await;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[tokio::test]
+    async fn control_lines_drive_the_training_faults() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tags");
+        let plant = gridscada_config::load_path(&dir).unwrap_or_else(|d| panic!("{d:?}"));
+        let sim = start(&plant, Arc::new(SystemClock), BindMode::Ephemeral)
+            .await
+            .unwrap();
+        let h = sim.handle();
+        let device = |name: &str| {
+            h.snapshot()
+                .devices
+                .into_iter()
+                .find(|d| d.name == name)
+                .unwrap()
+        };
+        control_line(&h, "slow MG.PV1 1500").unwrap();
+        control_line(&h, "corrupt MG.PV1 on").unwrap();
+        control_line(&h, "exception MG.WT1 on").unwrap();
+        let pv = device("MG.PV1");
+        assert_eq!((pv.slow_reply_ms, pv.corrupt_frames), (Some(1500), true));
+        assert_eq!(device("MG.WT1").exception, Some(4));
+        control_line(&h, "slow MG.PV1 0").unwrap();
+        control_line(&h, "corrupt MG.PV1 off").unwrap();
+        control_line(&h, "exception MG.WT1 off").unwrap();
+        let pv = device("MG.PV1");
+        assert_eq!((pv.slow_reply_ms, pv.corrupt_frames), (None, false));
+        assert_eq!(device("MG.WT1").exception, None);
+        control_line(&h, "transient ss1 2 30").unwrap();
+        let snap = h.snapshot();
+        let z2 = &snap.panel("ss1").unwrap().zones[1];
+        assert_eq!(z2.fault, Some(FaultKind::Transient));
+        assert!(z2.fault_clears_at.is_some());
+        for bad in [
+            "slow MG.PV1 soon",
+            "corrupt MG.PV1 maybe",
+            "transient ss1 2 0",
+            "slow nobody 10",
+            "dance",
+        ] {
+            assert!(control_line(&h, bad).is_err(), "{bad}");
+        }
+        sim.shutdown().await;
+    }
 }
