@@ -30,4 +30,4 @@ pub use model::{
     AlarmView, ServiceInfo, ShelveInfo, TransitionCause,
 };
 pub use set::{plant_defs, AlarmSet, InputId, Outputs, RestoreReport, MAX_SHELVE};
-pub use suppression::{default_rules, AlarmMatch, SuppressionRule};
+pub use suppression::{default_rules, plant_rules, AlarmMatch, SuppressionRule};
