@@ -23,7 +23,9 @@ pub mod suppression;
 pub use engine::{AlarmChannels, AlarmEngine, EngineOptions, EngineStats};
 pub use events::{Event, EventType, UnknownEventType};
 pub use machine::{Alarm, AlarmDef, Condition};
-pub use metrics::{compute as compute_metrics, Activation, AlarmMetrics, MetricsOptions};
+pub use metrics::{
+    compute as compute_metrics, Activation, AlarmMetrics, MetricTargets, MetricsOptions,
+};
 pub use model::{comm_key, discrete_key, limit_key};
 pub use model::{
     AlarmError, AlarmFilter, AlarmId, AlarmKind, AlarmState, AlarmStateRecord, AlarmTransition,

@@ -315,7 +315,7 @@ pub fn table() -> Vec<Route> {
         r(
             Method::GET,
             "/api/alarms/metrics",
-            Perm::Screen("alarms"),
+            Perm::Screen("alarmkpi"),
             || get(api::alarms::metrics),
             doc::<api::alarms::__path_metrics>,
         ),

@@ -11,6 +11,7 @@ use gridscada_store::AlarmHistoryFilter;
 use gridscada_tagdb::Timestamp;
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
+use std::collections::BTreeMap;
 use std::sync::Arc;
 use utoipa::{IntoParams, ToSchema};
 
@@ -388,6 +389,10 @@ pub struct MetricsQuery {
     pub from: Option<String>,
     #[param(schema_with = shapes::time, required = false)]
     pub to: Option<String>,
+    /// Operator positions sharing the alarm load (1-100, default 1): the
+    /// rates per operator are the plant's divided by this.
+    #[param(minimum = 1, maximum = 100)]
+    pub operators: Option<u32>,
 }
 
 /// The widest range the alarm metrics cover in one request.
@@ -416,25 +421,69 @@ pub async fn metrics(
             "the metrics range may span at most 366 days",
         ));
     }
+    let operators = q.operators.unwrap_or(1);
+    if !(1..=100).contains(&operators) {
+        return Err(ApiError::bad_request("operators must be 1 to 100"));
+    }
     let rows = s.store.alarm_activations(from, to).await?;
+    let mut by_selection: BTreeMap<String, Vec<gridscada_alarms::Activation>> = BTreeMap::new();
     let activations: Vec<gridscada_alarms::Activation> = rows
         .into_iter()
-        .map(|r| gridscada_alarms::Activation {
-            time: r.transition.ts,
-            key: r.transition.alarm_key,
-            priority: r.transition.priority.max(0) as u32,
+        .map(|r| {
+            let a = gridscada_alarms::Activation {
+                time: r.transition.ts,
+                key: r.transition.alarm_key,
+                priority: r.transition.priority.max(0) as u32,
+            };
+            by_selection
+                .entry(r.transition.selection)
+                .or_default()
+                .push(a.clone());
+            a
         })
         .collect();
-    let m = gridscada_alarms::compute_metrics(
-        &activations,
-        &e.persisted_states(),
-        from,
-        to,
-        &Default::default(),
-    );
-    Ok(Json(serde_json::to_value(m).map_err(|e| {
-        ApiError::internal("serializing metrics", e)
-    })?))
+    let states = e.persisted_states();
+    let options = gridscada_alarms::MetricsOptions {
+        operators,
+        ..Default::default()
+    };
+    let m = gridscada_alarms::compute_metrics(&activations, &states, from, to, &options);
+    // The load of each selection (the area one console watches), as if one
+    // operator position had it alone.
+    let positions: Vec<Value> = by_selection
+        .iter()
+        .map(|(selection, acts)| {
+            let p = gridscada_alarms::compute_metrics(acts, &[], from, to, &Default::default());
+            json!({
+                "selection": selection,
+                "total_activations": p.total_activations,
+                "average_per_interval": p.average_per_interval_per_operator,
+                "max_per_interval": p.max_per_interval_per_operator,
+                "floods": p.floods.len(),
+                "percent_time_in_flood": p.percent_time_in_flood,
+            })
+        })
+        .collect();
+    let shelved: Vec<Value> = states
+        .iter()
+        .filter(|a| a.shelved_by.is_some())
+        .map(|a| {
+            json!({
+                "key": a.key,
+                "message": a.message,
+                "by": a.shelved_by,
+                "since": a.shelved_at,
+                "until": a.shelved_until,
+                "reason": a.shelve_reason,
+            })
+        })
+        .collect();
+    let mut out =
+        serde_json::to_value(m).map_err(|e| ApiError::internal("serializing metrics", e))?;
+    out["positions"] = json!(positions);
+    out["shelved"] = json!(shelved);
+    out["targets"] = json!(gridscada_alarms::MetricTargets::default());
+    Ok(Json(out))
 }
 
 /// The alarm summary for live push, if it changed since `since`.
