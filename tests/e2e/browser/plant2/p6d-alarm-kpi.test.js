@@ -26,6 +26,13 @@ test('a supervisor reads the alarm KPIs against the ISA-18.2 targets', async () 
     requireOk(await api.call('POST', `/api/alarms/${alarm.id}/shelve`, { minutes: 30, reason: 'KPI test' }), 'shelve');
     const m = requireOk(await api.call('GET', '/api/alarms/metrics'), 'metrics');
     assert.ok(m.total_activations >= 1, `activations counted: ${m.total_activations}`);
+    // Each activation is in the load of its selection's position; the shelved alarm is listed.
+    assert.equal(m.positions.reduce((a, p) => a + p.total_activations, 0), m.total_activations);
+    assert.ok(m.shelved.some((a) => a.key === alarm.key && a.reason === 'KPI test'), JSON.stringify(m.shelved));
+    assert.equal(m.targets.max_per_interval_per_operator, 10);
+    assert.equal((await api.call('GET', '/api/alarms/metrics?operators=0')).status, 400);
+    const two = requireOk(await api.call('GET', '/api/alarms/metrics?operators=2'), 'metrics for two');
+    assert.ok(Math.abs(two.max_per_interval_per_operator * 2 - m.max_per_interval_per_operator) < 1e-9, 'two positions halve the peak');
 
     const op = credentials().operator;
     await login(page, op.user, op.password);
