@@ -16,6 +16,7 @@ import { panelScreen } from './screens/panel.js';
 import microgrid from './screens/microgrid.js';
 import units from './screens/units.js';
 import alarms from './screens/alarms.js';
+import alarmkpi from './screens/alarmkpi.js';
 import events from './screens/events.js';
 import trends from './screens/trends.js';
 import users from './screens/users.js';
@@ -35,6 +36,7 @@ const BUILTIN = {
   tags: tagBrowser,
   devices,
   alarms,
+  alarmkpi,
   events,
   trends,
   editor,

@@ -6,7 +6,7 @@
 // suppressed", "Acknowledged"...) and the state it left the alarm in; the
 // state change only when there was one, never "Suppressed → Suppressed".
 
-import { get, post, del, qs } from '../api.js';
+import { get, post, del, qs, apiUrl } from '../api.js';
 import { h, replace, select, field } from '../dom.js';
 import { fmtTime, fmtValue, roleAtLeast } from '../format.js';
 import { live } from '../live.js';
@@ -182,15 +182,19 @@ export default {
       const text = h('input', { type: 'search', id: 'hist-text', size: 16 });
       const limit = select({ id: 'hist-limit' }, ['100', '500', '2000'], '500');
       const out = h('div', { class: 'table-wrap', tabindex: '0' });
+      // Every transition the filter selects (no row cap), as CSV.
+      const csvLink = h('a', { class: 'btn', id: 'hist-csv', href: '#', download: 'alarm-history.csv', text: 'Download CSV' });
       const form = h('form', { class: 'filters' }, field('From', from), field('To', to), field('Selection', selection), field('Priority', prio),
-        field('Text', text), field('Rows', limit), h('div', { class: 'btn-row' }, h('button', { type: 'submit', class: 'btn btn-primary', id: 'hist-search', text: 'Search' })));
+        field('Text', text), field('Rows', limit), h('div', { class: 'btn-row' }, h('button', { type: 'submit', class: 'btn btn-primary', id: 'hist-search', text: 'Search' }), csvLink));
       body.append(h('div', { class: 'card' }, form, out));
       const load = async () => {
         replace(out, h('p', { class: 'loading', text: 'Loading…' }));
         try {
-          const r = await get(`/api/alarms/history${qs({
+          const filter = {
             from: from.value ? new Date(from.value).getTime() : '', to: to.value ? new Date(to.value).getTime() : '',
-            selection: selection.value.trim(), min_priority: prio.value, text: text.value.trim(), limit: limit.value })}`);
+            selection: selection.value.trim(), min_priority: prio.value, text: text.value.trim() };
+          csvLink.href = apiUrl(`/api/alarms/history.csv${qs(filter)}`);
+          const r = await get(`/api/alarms/history${qs({ ...filter, limit: limit.value })}`);
           const rows = r.transitions || [];
           replace(out, h('p', { class: 'hint', role: 'status', text: `${rows.length} transitions${rows.length >= Number(limit.value) ? ' (limit reached: narrow the filter)' : ''}` }),
             h('table', { class: 'data', id: 'alarms-history' },

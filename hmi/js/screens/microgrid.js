@@ -3,7 +3,7 @@
 // state; the demand; and the latest dispatch with its cost and solver.
 // Daily maxima come from today's trend (bucket maxima) and then from live values.
 
-import { get, qs } from '../api.js';
+import { get, qs, apiUrl } from '../api.js';
 import { h, replace } from '../dom.js';
 import { fmtNumber, fmtTime, qualityOf } from '../format.js';
 import { Binder, valueEl } from '../ui.js';
@@ -194,7 +194,10 @@ export default {
         h('table', { class: 'data', id: 'dispatch-setpoints' },
           h('thead', {}, h('tr', {}, h('th', { scope: 'col', text: 'Unit' }), h('th', { scope: 'col', class: 'num', text: 'Setpoint' }))),
           h('tbody', {}, sp.map(([u, kw]) => h('tr', {}, h('td', { text: u }), h('td', { class: 'num', text: typeof kw === 'number' ? `${fmtNumber(kw)} kW` : String(kw) }))))),
-        d.horizon ? drawPlan(d.horizon) : null);
+        d.horizon ? drawPlan(d.horizon) : null,
+        // The day's dispatches with their setpoints, as CSV.
+        h('p', {}, h('a', { class: 'btn', id: 'dispatch-csv', download: 'dispatch-history.csv', text: 'Download 24 h of dispatches (CSV)',
+          href: apiUrl(`/api/dispatch/history.csv${qs({ from: Date.now() - 86_400_000, to: Date.now() + 60_000 })}`) })));
     }
 
     // The look-ahead plan: forecasts, planned state of charge and diesel per

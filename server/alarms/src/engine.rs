@@ -32,7 +32,7 @@ use crate::model::{
     AlarmError, AlarmFilter, AlarmId, AlarmStateRecord, AlarmTransition, AlarmView,
 };
 use crate::set::{AlarmSet, InputId, Outputs, RestoreReport};
-use crate::suppression::{default_rules, SuppressionRule};
+use crate::suppression::{plant_rules, SuppressionRule};
 
 /// Where the engine sends what it produces.
 #[derive(Debug, Clone)]
@@ -50,7 +50,8 @@ pub struct AlarmChannels {
 /// Engine settings.
 #[derive(Debug, Clone)]
 pub struct EngineOptions {
-    /// Suppression rules; `None` derives the default rules from the panels.
+    /// Suppression rules; `None`: the plant's ([`plant_rules`]: the panels'
+    /// defaults and the configured `[[suppression]]` rules).
     pub rules: Option<Vec<SuppressionRule>>,
     /// Longest the engine sleeps between timer checks (plant time).
     pub max_tick: Duration,
@@ -119,7 +120,7 @@ impl AlarmEngine {
         restore: &[AlarmStateRecord],
         options: EngineOptions,
     ) -> Result<Arc<AlarmEngine>, AlarmError> {
-        let rules = options.rules.unwrap_or_else(|| default_rules(plant));
+        let rules = options.rules.unwrap_or_else(|| plant_rules(plant));
         let set = AlarmSet::from_plant(plant, rules)?;
         Ok(Self::with_set(
             set,

@@ -23,11 +23,13 @@ pub mod suppression;
 pub use engine::{AlarmChannels, AlarmEngine, EngineOptions, EngineStats};
 pub use events::{Event, EventType, UnknownEventType};
 pub use machine::{Alarm, AlarmDef, Condition};
-pub use metrics::{compute as compute_metrics, Activation, AlarmMetrics, MetricsOptions};
+pub use metrics::{
+    compute as compute_metrics, Activation, AlarmMetrics, MetricTargets, MetricsOptions,
+};
 pub use model::{comm_key, discrete_key, limit_key};
 pub use model::{
     AlarmError, AlarmFilter, AlarmId, AlarmKind, AlarmState, AlarmStateRecord, AlarmTransition,
     AlarmView, ServiceInfo, ShelveInfo, TransitionCause,
 };
 pub use set::{plant_defs, AlarmSet, InputId, Outputs, RestoreReport, MAX_SHELVE};
-pub use suppression::{default_rules, AlarmMatch, SuppressionRule};
+pub use suppression::{default_rules, plant_rules, AlarmMatch, SuppressionRule};

@@ -143,6 +143,47 @@ pub struct AlarmMetrics {
     pub priority_distribution: Vec<PriorityCount>,
 }
 
+/// The ISA-18.2 (and EEMUA 191) performance targets the KPI screen holds
+/// the measured figures against.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MetricTargets {
+    /// Average annunciated alarms per operator per 10 minutes: about 1 is
+    /// "very likely acceptable"...
+    pub average_per_interval_per_operator: f64,
+    /// ...and 2 the most that is manageable.
+    pub average_per_interval_per_operator_max: f64,
+    /// Peak alarms per operator in one 10-minute interval: over 10 is a flood.
+    pub max_per_interval_per_operator: f64,
+    /// Share of the time in flood, percent: under 1.
+    pub percent_time_in_flood: f64,
+    /// The 10 most frequent alarms' share of all activations, percent: at
+    /// most 5 (about 1 is the aim).
+    pub top10_percent: f64,
+    /// Chattering alarms: none.
+    pub chattering: u32,
+    /// Stale alarms (active over 24 h): fewer than 5 on any day.
+    pub stale: u32,
+    /// Shelved alarms at once: ISA-18.2 sets no figure, only that each one
+    /// is authorised, has an end and is reviewed; more than this many (a
+    /// site guideline) means shelving is used instead of fixing.
+    pub shelved: u32,
+}
+
+impl Default for MetricTargets {
+    fn default() -> Self {
+        MetricTargets {
+            average_per_interval_per_operator: 1.0,
+            average_per_interval_per_operator_max: 2.0,
+            max_per_interval_per_operator: 10.0,
+            percent_time_in_flood: 1.0,
+            top10_percent: 5.0,
+            chattering: 0,
+            stale: 5,
+            shelved: 5,
+        }
+    }
+}
+
 fn percent(part: u32, whole: u32) -> f64 {
     if whole == 0 {
         0.0

@@ -9,9 +9,11 @@
 //! (the discrete alarm of `P.ELCB.Closed` with `when = false`) stands, the
 //! alarms of `P.Zone*` tags and the low/low-low alarms of the panel's power
 //! analyzer (`P.PA.V_*`, `P.PA.I_*`, `P.PA.Hz`) are suppressed: with the ELCB
-//! open, dead zones and zero voltage are expected, not news.
+//! open, dead zones and zero voltage are expected, not news. A panel with
+//! `default_suppression = false` has no default rule; `[[suppression]]`
+//! rules of the configuration are added to the defaults ([`plant_rules`]).
 
-use gridscada_config::{PanelConfig, Plant};
+use gridscada_config::{PanelConfig, Plant, SuppressionConfig};
 use serde::{Deserialize, Serialize};
 
 use crate::model::AlarmKind;
@@ -61,13 +63,48 @@ fn default_release_delay() -> f64 {
 }
 
 /// The default rules of the plant: one per panel whose ELCB status tag has a
-/// discrete alarm on `false` (the trip). Panels without that alarm get no rule.
+/// discrete alarm on `false` (the trip), unless the panel turned its default
+/// off. Panels without that alarm get no rule.
 pub fn default_rules(plant: &Plant) -> Vec<SuppressionRule> {
     plant
         .panels
         .iter()
+        .filter(|p| *p.default_suppression.get_ref())
         .filter_map(|p| panel_rule(plant, p))
         .collect()
+}
+
+/// Every rule of the plant: the panels' defaults, then the configured
+/// `[[suppression]]` rules (validated when the configuration was loaded).
+pub fn plant_rules(plant: &Plant) -> Vec<SuppressionRule> {
+    let mut rules = default_rules(plant);
+    rules.extend(plant.suppression.iter().map(configured_rule));
+    rules
+}
+
+fn configured_rule(c: &SuppressionConfig) -> SuppressionRule {
+    SuppressionRule {
+        name: c.name.get_ref().clone(),
+        trigger: c.trigger.get_ref().clone(),
+        targets: c
+            .suppress
+            .get_ref()
+            .iter()
+            .map(|t| AlarmMatch {
+                tag_prefix: t.tag_prefix.get_ref().clone(),
+                kinds: t
+                    .kinds
+                    .iter()
+                    .filter_map(|k| {
+                        AlarmKind::ALL
+                            .into_iter()
+                            .find(|a| a.as_str() == k.get_ref())
+                    })
+                    .collect(),
+            })
+            .collect(),
+        release_delay_s: *c.release_delay_s.get_ref(),
+    }
 }
 
 fn panel_rule(plant: &Plant, panel: &PanelConfig) -> Option<SuppressionRule> {

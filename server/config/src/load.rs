@@ -46,6 +46,9 @@ pub struct Plant {
     /// `[[notify]]`: alarm notification routes (none: no alarm leaves the
     /// server).
     pub notify: Vec<NotifyConfig>,
+    /// `[[suppression]]`: configured suppression rules (besides the panels'
+    /// built-in ones).
+    pub suppression: Vec<SuppressionConfig>,
 }
 
 /// Where HTTPS takes its certificate and key, and its other settings.
@@ -230,6 +233,7 @@ pub fn load_with(
         opcua: main_cfg.opcua,
         redundancy: main_cfg.redundancy,
         notify: main_cfg.notify,
+        suppression: main_cfg.suppression,
     })
 }
 
@@ -330,6 +334,7 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
     let mut opcua = None;
     let mut redundancy = None;
     let mut notify = vec![];
+    let mut suppression = vec![];
     let before = diags.len();
     for (key, value) in root.iter() {
         match key.get_ref().as_ref() {
@@ -342,10 +347,11 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
             "opcua" => opcua = de(file, value, "[opcua]", diags),
             "redundancy" => redundancy = de(file, value, "[redundancy]", diags),
             "notify" => notify = de_each(file, value, "notify", diags),
+            "suppression" => suppression = de_each(file, value, "suppression", diags),
             other => diags.push(file.error_at(
                 key.span(),
                 format!(
-                    "unknown key '{other}' in the main file; expected one of tag_files, server, storage, panel, microgrid, mqtt, opcua, redundancy, notify"
+                    "unknown key '{other}' in the main file; expected one of tag_files, server, storage, panel, microgrid, mqtt, opcua, redundancy, notify, suppression"
                 ),
             )),
         }
@@ -373,6 +379,7 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
         opcua,
         redundancy,
         notify,
+        suppression,
     })
 }
 

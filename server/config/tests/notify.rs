@@ -173,3 +173,66 @@ fn mistakes_are_located() {
     ));
     assert!(errs.is_empty(), "{errs:#?}");
 }
+
+const MQTT: &str = r#"
+[mqtt]
+broker = "mqtt://127.0.0.1:1883"
+group = "G"
+
+[[notify]]
+name = "desk"
+channel = "mqtt"
+hmi_url = "https://scada.example.com"
+[notify.mqtt]
+topic = "site1/alarms"
+[[notify.contact]]
+name = "Desk"
+address = "desk-1"
+"#;
+
+#[test]
+fn an_mqtt_route_loads_and_its_mistakes_are_located() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = load_path(&plant_in(dir.path(), MQTT)).unwrap();
+    assert_eq!(*p.notify[0].channel.get_ref(), NotifyChannel::Mqtt);
+    assert_eq!(
+        p.notify[0].mqtt.as_ref().unwrap().topic.get_ref(),
+        "site1/alarms"
+    );
+    let cases: &[(&str, &str, &str)] = &[
+        (
+            "topic = \"site1/alarms\"",
+            "topic = \"site1/#\"",
+            ":12:9: error: notify 'desk': mqtt topic 'site1/#' must not hold the wildcards + or #",
+        ),
+        (
+            "topic = \"site1/alarms\"",
+            "topic = \"spBv1.0/G\"",
+            "the Sparkplug B namespace",
+        ),
+        (
+            "[notify.mqtt]\ntopic = \"site1/alarms\"\n",
+            "",
+            ":9:11: error: notify 'desk': channel \"mqtt\" needs a [notify.mqtt] table",
+        ),
+        (
+            "[mqtt]\nbroker = \"mqtt://127.0.0.1:1883\"\ngroup = \"G\"\n",
+            "",
+            "publishes on the broker of [mqtt], which is not configured",
+        ),
+        (
+            "channel = \"mqtt\"",
+            "channel = \"email\"",
+            "[notify.mqtt] is for channel \"mqtt\"",
+        ),
+    ];
+    for (from, to, want) in cases {
+        let broken = MQTT.replacen(from, to, 1);
+        assert_ne!(broken, MQTT, "case {from} did not apply");
+        let errs = errors(&broken);
+        assert!(
+            errs.iter().any(|e| e.contains(want)),
+            "{from} -> {to}: want '{want}', got {errs:#?}"
+        );
+    }
+}

@@ -1,13 +1,16 @@
 //! The ways a message leaves the server: email over SMTP (STARTTLS, TLS or,
-//! for a local relay, plain), and a webhook (a JSON POST signed with
-//! HMAC-SHA256). Each send is one attempt; retrying is the outbox's.
+//! for a local relay, plain), a webhook (a JSON POST signed with
+//! HMAC-SHA256), and MQTT (`mqtt.rs`). Each send is one attempt; retrying is
+//! the outbox's.
 
 use std::path::Path;
 use std::sync::Arc;
 use std::time::Duration;
 
 use bytes::Bytes;
-use gridscada_config::{NotifyChannel, NotifyConfig, SmtpConfig, SmtpSecurity, WebhookConfig};
+use gridscada_config::{
+    MqttConfig, NotifyChannel, NotifyConfig, SmtpConfig, SmtpSecurity, WebhookConfig,
+};
 use hmac::{Hmac, Mac};
 use http_body_util::{BodyExt, Full};
 use lettre::message::Mailbox;
@@ -20,6 +23,7 @@ use serde::Serialize;
 use sha2::Sha256;
 
 use crate::message::Message;
+use crate::mqtt::Mqtt;
 
 /// The header carrying the webhook body's signature: `sha256=<hex>`.
 pub const SIGNATURE_HEADER: &str = "x-gridscada-signature";
@@ -31,17 +35,25 @@ const ATTEMPT_TIMEOUT: Duration = Duration::from_secs(30);
 pub enum Channel {
     Email(Email),
     Webhook(Webhook),
+    Mqtt(Mqtt),
 }
 
 impl Channel {
     /// Builds the channel of a checked route, reading its secret through
-    /// `env` and its CA file relative to `base`.
+    /// `env` and its CA file relative to `base`; an MQTT route publishes on
+    /// the broker of `plant_mqtt`.
     pub fn build(
         n: &NotifyConfig,
         base: &Path,
         env: &dyn Fn(&str) -> Option<String>,
+        plant_mqtt: Option<&MqttConfig>,
     ) -> Result<Channel, String> {
         let route = n.name.get_ref();
+        if let (NotifyChannel::Mqtt, Some(m)) = (n.channel.get_ref(), &n.mqtt) {
+            return Mqtt::build(route, m, plant_mqtt, base)
+                .map(Channel::Mqtt)
+                .map_err(|e| format!("notify '{route}': {e}"));
+        }
         match (n.channel.get_ref(), &n.smtp, &n.webhook) {
             (NotifyChannel::Email, Some(s), _) => Email::build(s, base, env)
                 .map(Channel::Email)
@@ -66,6 +78,7 @@ impl Channel {
             match self {
                 Channel::Email(e) => e.send(address, m).await,
                 Channel::Webhook(w) => w.send(id, contact, address, m).await,
+                Channel::Mqtt(q) => q.send(id, contact, address, m).await,
             }
         };
         tokio::time::timeout(ATTEMPT_TIMEOUT, attempt)
@@ -155,15 +168,16 @@ pub struct Webhook {
     tls: Option<tokio_rustls::TlsConnector>,
 }
 
-/// What a webhook receives: the message with who it is for.
+/// What a webhook (or an MQTT subscriber) receives: the message with who it
+/// is for.
 #[derive(Serialize)]
-struct Payload<'a> {
+pub(crate) struct Payload<'a> {
     /// The outbox id: the same id comes again if a delivery is retried.
-    id: i64,
-    contact: &'a str,
-    address: &'a str,
+    pub id: i64,
+    pub contact: &'a str,
+    pub address: &'a str,
     #[serde(flatten)]
-    message: &'a Message,
+    pub message: &'a Message,
 }
 
 /// `sha256=<hex>` of the body under `secret`.

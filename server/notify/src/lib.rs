@@ -1,5 +1,5 @@
 //! Alarm notification: alarms leave the server by email (SMTP with
-//! STARTTLS/TLS) or a signed webhook, to the contact on call, escalating to
+//! STARTTLS/TLS), a signed webhook or MQTT (a topic per priority band), to the contact on call, escalating to
 //! the next one while unacknowledged, with one summary per flood instead of
 //! a mail per alarm.
 //!
@@ -7,7 +7,7 @@
 //! selection and tag (`routing.rs`), the on-call rota and escalation
 //! (`routing.rs`, `notifier.rs`), flood limiting and back-off (`flood.rs`),
 //! what a message says and its link into the HMI (`message.rs`), the
-//! channels (`channels.rs`), and the planner and delivery tasks with their
+//! channels (`channels.rs`, MQTT `mqtt.rs`), and the planner and delivery tasks with their
 //! events, system alarm and figures (`notifier.rs`).
 //!
 //! **Must not touch:** SQL (the outbox is the store's `notifications`
@@ -18,6 +18,7 @@
 pub mod channels;
 pub mod flood;
 pub mod message;
+pub mod mqtt;
 mod notifier;
 pub mod routing;
 

@@ -117,7 +117,7 @@ impl Notifier {
                 })?;
             routes.push(RouteRt {
                 route: Route::from_config(n),
-                channel: Channel::build(n, base, env)?,
+                channel: Channel::build(n, base, env, plant.mqtt.as_ref())?,
                 link,
                 flood: FloodWindow::new(
                     *n.flood_limit.get_ref(),

@@ -97,6 +97,15 @@ pub struct AlarmHistoryFilter {
     pub oldest_first: bool,
 }
 
+/// The conditions of [`AlarmHistoryFilter`], binds `$1` to `$9` (the list
+/// and the CSV export filter alike).
+pub(crate) const HISTORY_WHERE: &str =
+    "WHERE ($1 IS NULL OR ts >= $1) AND ($2 IS NULL OR ts < $2) \
+       AND ($3 IS NULL OR alarm_key = $3) AND ($4 IS NULL OR tag = $4) \
+       AND ($5 IS NULL OR kind = $5) AND ($6 IS NULL OR selection = $6) \
+       AND ($7 IS NULL OR priority >= $7) AND ($8 = FALSE OR activation = TRUE) \
+       AND ($9 IS NULL OR lower(message) LIKE $9 ESCAPE '\\')";
+
 /// Activations of one alarm in a time range.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
 pub struct ActivationCount {
@@ -104,7 +113,7 @@ pub struct ActivationCount {
     pub count: u64,
 }
 
-type TransitionRow = (
+pub(crate) type TransitionRow = (
     i64,
     i64,
     String,
@@ -418,12 +427,7 @@ impl Store {
         let sql = format!(
             "SELECT id, ts, alarm_key, tag, kind, from_state, to_state, cause, activation, value, \
                limit_value, user_name, message, priority, selection FROM alarm_history \
-             WHERE ($1 IS NULL OR ts >= $1) AND ($2 IS NULL OR ts < $2) \
-               AND ($3 IS NULL OR alarm_key = $3) AND ($4 IS NULL OR tag = $4) \
-               AND ($5 IS NULL OR kind = $5) AND ($6 IS NULL OR selection = $6) \
-               AND ($7 IS NULL OR priority >= $7) AND ($8 = FALSE OR activation = TRUE) \
-               AND ($9 IS NULL OR lower(message) LIKE $9 ESCAPE '\\') \
-             ORDER BY ts {order}, id {order} LIMIT $10 OFFSET $11"
+             {HISTORY_WHERE} ORDER BY ts {order}, id {order} LIMIT $10 OFFSET $11"
         );
         let rows: Vec<TransitionRow> = on_backend!(self, reader, |p| {
             sqlx::query_as(&sql)

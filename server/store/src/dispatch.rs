@@ -43,7 +43,7 @@ pub struct DispatchRecord {
     pub reason: Option<String>,
 }
 
-type Row = (
+pub(crate) type Row = (
     i64,
     i64,
     String,
@@ -73,7 +73,8 @@ fn record(r: Row) -> Result<DispatchRecord> {
     })
 }
 
-const COLS: &str = "id, ts, status, mode, objective, solve_ms, inputs_json, setpoints_json, reason";
+pub(crate) const COLS: &str =
+    "id, ts, status, mode, objective, solve_ms, inputs_json, setpoints_json, reason";
 
 impl Store {
     /// Records a dispatch; returns its id once committed.

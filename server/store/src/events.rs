@@ -50,6 +50,13 @@ pub struct EventFilter {
     pub offset: u32,
 }
 
+/// The conditions of [`EventFilter`], binds `$1` to `$6` (the list and the
+/// CSV export filter alike).
+pub(crate) const EVENTS_WHERE: &str = "WHERE ($1 IS NULL OR ts >= $1) AND ($2 IS NULL OR ts < $2) \
+       AND ($3 IS NULL OR kind = $3) AND ($4 IS NULL OR user_name = $4) \
+       AND ($5 IS NULL OR source = $5) \
+       AND ($6 IS NULL OR lower(message) LIKE $6 ESCAPE '\\')";
+
 /// The most rows one list query returns.
 pub(crate) const MAX_LIST: u32 = 10_000;
 
@@ -161,15 +168,13 @@ impl Store {
     pub async fn events(&self, filter: &EventFilter) -> Result<Vec<Event>> {
         let text = filter.text.as_deref().map(like_pattern);
         let limit = filter.limit.min(MAX_LIST) as i64;
-        const SQL: &str = "SELECT id, ts, user_name, source, kind, message FROM events \
-             WHERE ($1 IS NULL OR ts >= $1) AND ($2 IS NULL OR ts < $2) \
-               AND ($3 IS NULL OR kind = $3) AND ($4 IS NULL OR user_name = $4) \
-               AND ($5 IS NULL OR source = $5) \
-               AND ($6 IS NULL OR lower(message) LIKE $6 ESCAPE '\\') \
-             ORDER BY ts DESC, id DESC LIMIT $7 OFFSET $8";
+        let sql = format!(
+            "SELECT id, ts, user_name, source, kind, message FROM events {EVENTS_WHERE} \
+             ORDER BY ts DESC, id DESC LIMIT $7 OFFSET $8"
+        );
         let rows: Vec<(i64, i64, Option<String>, String, String, String)> =
             on_backend!(self, reader, |p| {
-                sqlx::query_as(SQL)
+                sqlx::query_as(&sql)
                     .bind(filter.from.map(Timestamp::as_millis))
                     .bind(filter.to.map(Timestamp::as_millis))
                     .bind(filter.kind.as_deref())

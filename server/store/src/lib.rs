@@ -48,6 +48,7 @@ mod csv;
 mod dispatch;
 mod error;
 mod events;
+mod exports;
 mod historian;
 mod lease;
 mod notifications;

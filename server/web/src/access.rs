@@ -26,6 +26,7 @@ const TOOLS: &[(&str, &str)] = &[
     ("tags", "Tags"),
     ("devices", "Devices"),
     ("alarms", "Alarms"),
+    ("alarmkpi", "Alarm KPIs"),
     ("events", "Events"),
     ("trends", "Trends"),
     ("editor", "Screen editor"),
@@ -37,6 +38,10 @@ const ADMIN_ONLY: &[&str] = &["users", "editor", SIMULATION];
 
 /// The Simulation (training) panel: only in a server that runs simulators.
 pub const SIMULATION: &str = "simulation";
+
+/// Screens a Supervisor's group gets by default, an Operator's not: alarm
+/// rationalisation (the ISA-18.2 KPIs) is the supervisors' work.
+const SUPERVISOR_UP: &[&str] = &["alarmkpi"];
 
 /// What kind of screen an entry is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -167,7 +172,10 @@ pub fn default_screens(plant: &Plant, library: &ScreenLibrary, role: Role) -> Ve
         .into_iter()
         .filter(|e| match role {
             Role::Administrator => true,
-            Role::Supervisor | Role::Operator => !ADMIN_ONLY.contains(&e.id.as_str()),
+            Role::Supervisor => !ADMIN_ONLY.contains(&e.id.as_str()),
+            Role::Operator => ![ADMIN_ONLY, SUPERVISOR_UP]
+                .concat()
+                .contains(&e.id.as_str()),
             Role::Guest | Role::Display => {
                 matches!(e.kind, ScreenKind::Builtin)
                     && ["main", "microgrid", "alarms", "trends"].contains(&e.id.as_str())

@@ -316,8 +316,15 @@ pub fn table() -> Vec<Route> {
         ),
         r(
             Method::GET,
-            "/api/alarms/metrics",
+            "/api/alarms/history.csv",
             Perm::Screen("alarms"),
+            || get(api::alarms::history_csv),
+            doc::<api::alarms::__path_history_csv>,
+        ),
+        r(
+            Method::GET,
+            "/api/alarms/metrics",
+            Perm::Screen("alarmkpi"),
             || get(api::alarms::metrics),
             doc::<api::alarms::__path_metrics>,
         ),
@@ -328,6 +335,13 @@ pub fn table() -> Vec<Route> {
             Perm::Screen("events"),
             || get(api::events::list),
             doc::<api::events::__path_list>,
+        ),
+        r(
+            Method::GET,
+            "/api/events.csv",
+            Perm::Screen("events"),
+            || get(api::events::csv),
+            doc::<api::events::__path_csv>,
         ),
         r(
             Method::GET,
@@ -444,6 +458,13 @@ pub fn table() -> Vec<Route> {
             Perm::Screen("microgrid"),
             || get(api::dispatch::history),
             doc::<api::dispatch::__path_history>,
+        ),
+        r(
+            Method::GET,
+            "/api/dispatch/history.csv",
+            Perm::Screen("microgrid"),
+            || get(api::dispatch::history_csv),
+            doc::<api::dispatch::__path_history_csv>,
         ),
         r(
             Method::GET,

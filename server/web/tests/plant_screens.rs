@@ -56,6 +56,7 @@ async fn the_catalog_is_the_plants_own() {
             "tags",
             "devices",
             "alarms",
+            "alarmkpi",
             "events",
             "trends",
             "editor",

@@ -98,3 +98,41 @@ impl Default for HistoryConfig {
 fn default_max_interval() -> Spanned<f64> {
     Spanned::new(0..0, 900.0)
 }
+
+/// `[[suppression]]`: suppression by design. While the alarm `trigger`
+/// stands, the alarms matching one of `suppress` are suppressed (kept, but
+/// out of the operator's list), and released `release_delay_s` after the
+/// trigger clears. Each panel has a built-in rule (its ELCB trip suppresses
+/// its zones and its analyzer's low alarms) unless the panel sets
+/// `default_suppression = false`.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SuppressionConfig {
+    /// Unique name, shown in events.
+    pub name: Spanned<String>,
+    /// The key of the causing alarm: `TAG:discrete` (`TAG:discrete2`...),
+    /// `TAG:hihi`, `TAG:hi`, `TAG:lo`, `TAG:lolo`, or `DEVICE:comm`.
+    pub trigger: Spanned<String>,
+    /// The alarms to suppress.
+    pub suppress: Spanned<Vec<SuppressTarget>>,
+    /// Seconds the suppression is held after the trigger clears.
+    #[serde(default = "ten")]
+    pub release_delay_s: Spanned<f64>,
+}
+
+/// The alarms of the tags whose name starts with `tag_prefix`, of the listed
+/// kinds (`hihi`, `hi`, `lo`, `lolo`, `discrete`; all when empty).
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SuppressTarget {
+    pub tag_prefix: Spanned<String>,
+    #[serde(default)]
+    pub kinds: Vec<Spanned<String>>,
+}
+
+/// The alarm kinds a suppression target may name.
+pub const SUPPRESSIBLE_KINDS: [&str; 5] = ["hihi", "hi", "lo", "lolo", "discrete"];
+
+fn ten() -> Spanned<f64> {
+    Spanned::new(0..0, 10.0)
+}

@@ -58,6 +58,9 @@ pub struct MainFile {
     /// `[[notify]]`: alarm notification routes.
     #[serde(default)]
     pub notify: Vec<NotifyConfig>,
+    /// `[[suppression]]`: configured suppression rules.
+    #[serde(default)]
+    pub suppression: Vec<SuppressionConfig>,
 }
 
 /// A tag file: devices and the tags read from them.

@@ -47,6 +47,8 @@ pub struct NotifyConfig {
     pub utc_offset: Option<Spanned<String>>,
     pub smtp: Option<SmtpConfig>,
     pub webhook: Option<WebhookConfig>,
+    /// `[notify.mqtt]`: publishing on the broker of the plant's `[mqtt]`.
+    pub mqtt: Option<NotifyMqttConfig>,
     /// The escalation chain, in order.
     #[serde(default, rename = "contact")]
     pub contacts: Vec<ContactConfig>,
@@ -57,6 +59,8 @@ pub struct NotifyConfig {
 pub enum NotifyChannel {
     Email,
     Webhook,
+    /// Published on the `[mqtt]` broker, a topic per priority band.
+    Mqtt,
 }
 
 impl NotifyChannel {
@@ -64,6 +68,7 @@ impl NotifyChannel {
         match self {
             NotifyChannel::Email => "email",
             NotifyChannel::Webhook => "webhook",
+            NotifyChannel::Mqtt => "mqtt",
         }
     }
 }
@@ -121,6 +126,22 @@ pub struct WebhookConfig {
     /// A PEM file of CA certificates to trust besides the public roots;
     /// relative to the main file.
     pub ca_file: Option<Spanned<String>>,
+}
+
+/// An MQTT route: each message is published (QoS 1) as JSON on
+/// `{topic}/{band}`, the band of the alarm's priority (`urgent`, `high`,
+/// `medium`, `low`), or `{topic}/summary` for a flood summary, so that a
+/// subscriber takes the priorities it wants. The broker, credentials and TLS
+/// are the plant's `[mqtt]` (the Sparkplug B connection's settings).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NotifyMqttConfig {
+    /// The topic prefix, e.g. `site1/alarms`.
+    pub topic: Spanned<String>,
+    /// Whether the broker keeps the last message of each topic for new
+    /// subscribers.
+    #[serde(default)]
+    pub retain: bool,
 }
 
 #[derive(Debug, Clone, Deserialize)]

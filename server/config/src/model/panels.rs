@@ -43,6 +43,15 @@ pub struct PanelConfig {
     /// Mode at start-up.
     #[serde(default = "default_auto")]
     pub start_mode: PanelMode,
+    /// The built-in suppression rule (the ELCB trip suppresses the zones'
+    /// alarms and the analyzer's low alarms); `false` to turn it off, e.g.
+    /// to write a `[[suppression]]` rule of the plant's own instead.
+    #[serde(default = "default_true")]
+    pub default_suppression: Spanned<bool>,
+}
+
+fn default_true() -> Spanned<bool> {
+    Spanned::new(0..0, true)
 }
 
 fn default_reclose_delay() -> Spanned<f64> {

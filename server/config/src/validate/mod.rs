@@ -140,6 +140,9 @@ pub(crate) fn check(
     if let Some(mg) = &main.microgrid {
         check_microgrid(&mut cx, mg, &lookup);
     }
+    alarms::check_suppression(&mut cx, &main.suppression, tags, &lookup, &|d| {
+        device_by_name.contains_key(d)
+    });
     if let Some(m) = &main.mqtt {
         mqtt::check_mqtt(&mut cx, m, &device_by_name, &tag_by_name);
     }

@@ -143,6 +143,37 @@ fn check_route(cx: &mut Ctx<'_>, main: &MainFile, n: &NotifyConfig, owner: &str)
                 );
             }
         }
+        NotifyChannel::Mqtt => {
+            match &n.mqtt {
+                Some(m) => check_mqtt_topic(cx, &m.topic, owner),
+                None => cx.err(
+                    0,
+                    n.channel.span(),
+                    format!("{owner}: channel \"mqtt\" needs a [notify.mqtt] table with its topic"),
+                ),
+            }
+            if main.mqtt.is_none() {
+                cx.err(
+                    0,
+                    n.channel.span(),
+                    format!("{owner}: channel \"mqtt\" publishes on the broker of [mqtt], which is not configured"),
+                );
+            }
+            if n.smtp.is_some() || n.webhook.is_some() {
+                cx.err(
+                    0,
+                    n.channel.span(),
+                    format!("{owner}: [notify.smtp] and [notify.webhook] are for the other channels; this route publishes on MQTT"),
+                );
+            }
+        }
+    }
+    if n.mqtt.is_some() && *n.channel.get_ref() != NotifyChannel::Mqtt {
+        cx.err(
+            0,
+            n.channel.span(),
+            format!("{owner}: [notify.mqtt] is for channel \"mqtt\""),
+        );
     }
     if n.contacts.is_empty() {
         cx.err(
@@ -165,7 +196,7 @@ fn check_route(cx: &mut Ctx<'_>, main: &MainFile, n: &NotifyConfig, owner: &str)
         let a = c.address.get_ref();
         let bad_address = match n.channel.get_ref() {
             NotifyChannel::Email => !is_address(a),
-            NotifyChannel::Webhook => a.trim().is_empty(),
+            NotifyChannel::Webhook | NotifyChannel::Mqtt => a.trim().is_empty(),
         };
         if bad_address {
             cx.err(
@@ -280,5 +311,27 @@ fn is_address(a: &str) -> bool {
                 && !a.contains(|c: char| c.is_whitespace() || c == '<' || c == '>')
         }
         None => false,
+    }
+}
+
+/// An MQTT topic prefix: levels without wildcards, not the Sparkplug B
+/// namespace (whose topics the host and edge nodes own).
+fn check_mqtt_topic(cx: &mut Ctx<'_>, topic: &Spanned<String>, owner: &str) {
+    let t = topic.get_ref();
+    let why = if t.is_empty() {
+        Some("is empty")
+    } else if t.contains(['+', '#']) {
+        Some("must not hold the wildcards + or #")
+    } else if t.starts_with('/') || t.ends_with('/') || t.contains("//") {
+        Some("must not start or end with / or have an empty level")
+    } else if t.starts_with('$') || t.starts_with("spBv1.0") {
+        Some("must not be in the broker's $ topics or the Sparkplug B namespace spBv1.0")
+    } else if t.len() > 200 || t.contains('\0') {
+        Some("is longer than 200 bytes or holds a NUL")
+    } else {
+        None
+    };
+    if let Some(why) = why {
+        cx.err(0, topic.span(), format!("{owner}: mqtt topic '{t}' {why}"));
     }
 }

@@ -11,6 +11,7 @@ use gridscada_store::AlarmHistoryFilter;
 use gridscada_tagdb::Timestamp;
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
+use std::collections::BTreeMap;
 use std::sync::Arc;
 use utoipa::{IntoParams, ToSchema};
 
@@ -361,7 +362,35 @@ pub async fn history(
     State(s): State<WebState>,
     Query(q): Query<HistoryQuery>,
 ) -> ApiResult<Json<Transitions>> {
-    let filter = AlarmHistoryFilter {
+    let filter = history_filter(q)?;
+    let rows = s.store.alarm_history(&filter).await?;
+    Ok(Json(Transitions {
+        count: rows.len(),
+        transitions: rows,
+    }))
+}
+
+/// The alarm history as CSV, with the list's filters (no row cap, `limit`
+/// and `offset` ignored), newest first, streamed.
+#[utoipa::path(get, path = "/api/alarms/history.csv", tag = "alarms", summary = "Alarm transitions as CSV",
+    params(HistoryQuery),
+    responses((status = 200, description = "CSV", body = String, content_type = "text/csv"), (status = 400)))]
+pub async fn history_csv(
+    State(s): State<WebState>,
+    Query(q): Query<HistoryQuery>,
+) -> ApiResult<axum::response::Response> {
+    let filter = history_filter(q)?;
+    let store = s.store.clone();
+    Ok(crate::api::csv_download(
+        "alarm-history.csv",
+        "alarm history CSV export",
+        move |mut tx| async move { store.export_alarm_history_csv(&filter, &mut tx).await },
+    ))
+}
+
+/// The store's filter for the list and the CSV alike.
+fn history_filter(q: HistoryQuery) -> ApiResult<AlarmHistoryFilter> {
+    Ok(AlarmHistoryFilter {
         from: opt_time("from", &q.from)?,
         to: opt_time("to", &q.to)?,
         alarm_key: q.key.filter(|v| !v.is_empty()),
@@ -372,12 +401,7 @@ pub async fn history(
         limit: q.limit.unwrap_or(500).clamp(1, 10_000),
         offset: q.offset.unwrap_or(0),
         ..Default::default()
-    };
-    let rows = s.store.alarm_history(&filter).await?;
-    Ok(Json(Transitions {
-        count: rows.len(),
-        transitions: rows,
-    }))
+    })
 }
 
 #[derive(Deserialize, Default, IntoParams)]
@@ -388,6 +412,10 @@ pub struct MetricsQuery {
     pub from: Option<String>,
     #[param(schema_with = shapes::time, required = false)]
     pub to: Option<String>,
+    /// Operator positions sharing the alarm load (1-100, default 1): the
+    /// rates per operator are the plant's divided by this.
+    #[param(minimum = 1, maximum = 100)]
+    pub operators: Option<u32>,
 }
 
 /// The widest range the alarm metrics cover in one request.
@@ -416,25 +444,69 @@ pub async fn metrics(
             "the metrics range may span at most 366 days",
         ));
     }
+    let operators = q.operators.unwrap_or(1);
+    if !(1..=100).contains(&operators) {
+        return Err(ApiError::bad_request("operators must be 1 to 100"));
+    }
     let rows = s.store.alarm_activations(from, to).await?;
+    let mut by_selection: BTreeMap<String, Vec<gridscada_alarms::Activation>> = BTreeMap::new();
     let activations: Vec<gridscada_alarms::Activation> = rows
         .into_iter()
-        .map(|r| gridscada_alarms::Activation {
-            time: r.transition.ts,
-            key: r.transition.alarm_key,
-            priority: r.transition.priority.max(0) as u32,
+        .map(|r| {
+            let a = gridscada_alarms::Activation {
+                time: r.transition.ts,
+                key: r.transition.alarm_key,
+                priority: r.transition.priority.max(0) as u32,
+            };
+            by_selection
+                .entry(r.transition.selection)
+                .or_default()
+                .push(a.clone());
+            a
         })
         .collect();
-    let m = gridscada_alarms::compute_metrics(
-        &activations,
-        &e.persisted_states(),
-        from,
-        to,
-        &Default::default(),
-    );
-    Ok(Json(serde_json::to_value(m).map_err(|e| {
-        ApiError::internal("serializing metrics", e)
-    })?))
+    let states = e.persisted_states();
+    let options = gridscada_alarms::MetricsOptions {
+        operators,
+        ..Default::default()
+    };
+    let m = gridscada_alarms::compute_metrics(&activations, &states, from, to, &options);
+    // The load of each selection (the area one console watches), as if one
+    // operator position had it alone.
+    let positions: Vec<Value> = by_selection
+        .iter()
+        .map(|(selection, acts)| {
+            let p = gridscada_alarms::compute_metrics(acts, &[], from, to, &Default::default());
+            json!({
+                "selection": selection,
+                "total_activations": p.total_activations,
+                "average_per_interval": p.average_per_interval_per_operator,
+                "max_per_interval": p.max_per_interval_per_operator,
+                "floods": p.floods.len(),
+                "percent_time_in_flood": p.percent_time_in_flood,
+            })
+        })
+        .collect();
+    let shelved: Vec<Value> = states
+        .iter()
+        .filter(|a| a.shelved_by.is_some())
+        .map(|a| {
+            json!({
+                "key": a.key,
+                "message": a.message,
+                "by": a.shelved_by,
+                "since": a.shelved_at,
+                "until": a.shelved_until,
+                "reason": a.shelve_reason,
+            })
+        })
+        .collect();
+    let mut out =
+        serde_json::to_value(m).map_err(|e| ApiError::internal("serializing metrics", e))?;
+    out["positions"] = json!(positions);
+    out["shelved"] = json!(shelved);
+    out["targets"] = json!(gridscada_alarms::MetricTargets::default());
+    Ok(Json(out))
 }
 
 /// The alarm summary for live push, if it changed since `since`.

@@ -51,6 +51,37 @@ pub async fn history(
     State(s): State<WebState>,
     Query(q): Query<HistoryQuery>,
 ) -> ApiResult<Json<DispatchHistory>> {
+    let (from, to) = history_range(&s, &q)?;
+    let rows = s
+        .store
+        .dispatch_history(from, to, q.limit.unwrap_or(500).clamp(1, 10_000))
+        .await?;
+    Ok(Json(DispatchHistory {
+        count: rows.len(),
+        dispatches: rows,
+    }))
+}
+
+/// The dispatch history as CSV (the setpoints as JSON text), with the
+/// list's range (no row cap, `limit` ignored), newest first, streamed.
+#[utoipa::path(get, path = "/api/dispatch/history.csv", tag = "dispatch", summary = "Dispatch history as CSV",
+    params(HistoryQuery),
+    responses((status = 200, description = "CSV", body = String, content_type = "text/csv"), (status = 400)))]
+pub async fn history_csv(
+    State(s): State<WebState>,
+    Query(q): Query<HistoryQuery>,
+) -> ApiResult<axum::response::Response> {
+    let (from, to) = history_range(&s, &q)?;
+    let store = s.store.clone();
+    Ok(crate::api::csv_download(
+        "dispatch-history.csv",
+        "dispatch CSV export",
+        move |mut tx| async move { store.export_dispatches_csv(from, to, &mut tx).await },
+    ))
+}
+
+/// `from..to` of a history request: the last hour by default.
+fn history_range(s: &WebState, q: &HistoryQuery) -> ApiResult<(Timestamp, Timestamp)> {
     let to = match q.to.as_deref().filter(|v| !v.is_empty()) {
         Some(v) => parse_time("to", v)?,
         None => s.clock.now(),
@@ -62,14 +93,7 @@ pub async fn history(
     if from > to {
         return Err(ApiError::bad_request("from must not be after to"));
     }
-    let rows = s
-        .store
-        .dispatch_history(from, to, q.limit.unwrap_or(500).clamp(1, 10_000))
-        .await?;
-    Ok(Json(DispatchHistory {
-        count: rows.len(),
-        dispatches: rows,
-    }))
+    Ok((from, to))
 }
 
 /// The microgrid's units as configured (names, kinds, ratings), for the

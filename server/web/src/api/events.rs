@@ -1,6 +1,7 @@
 //! The event log: every operator and system action.
 
 use axum::extract::{Query, State};
+use axum::response::Response;
 use axum::Json;
 use gridscada_store::EventFilter;
 use gridscada_tagdb::Timestamp;
@@ -57,6 +58,31 @@ pub async fn list(
     State(s): State<WebState>,
     Query(q): Query<EventQuery>,
 ) -> ApiResult<Json<EventList>> {
+    let filter = event_filter(&s, q)?;
+    let events = s.store.events(&filter).await?;
+    Ok(Json(EventList {
+        count: events.len(),
+        events,
+    }))
+}
+
+/// The event log as CSV, with the list's filters (no row cap, `limit` and
+/// `offset` ignored), newest first, streamed.
+#[utoipa::path(get, path = "/api/events.csv", tag = "events", summary = "The event log as CSV",
+    params(EventQuery),
+    responses((status = 200, description = "CSV", body = String, content_type = "text/csv"), (status = 400)))]
+pub async fn csv(State(s): State<WebState>, Query(q): Query<EventQuery>) -> ApiResult<Response> {
+    let filter = event_filter(&s, q)?;
+    let store = s.store.clone();
+    Ok(crate::api::csv_download(
+        "events.csv",
+        "event CSV export",
+        move |mut tx| async move { store.export_events_csv(&filter, &mut tx).await },
+    ))
+}
+
+/// The store's filter for the list and the CSV alike.
+fn event_filter(s: &WebState, q: EventQuery) -> ApiResult<EventFilter> {
     let mut filter = EventFilter {
         limit: q.limit.unwrap_or(500).clamp(1, 10_000),
         offset: q.offset.unwrap_or(0),
@@ -90,11 +116,7 @@ pub async fn list(
                 .map(|v| parse_time("to", v))
                 .transpose()?;
     }
-    let events = s.store.events(&filter).await?;
-    Ok(Json(EventList {
-        count: events.len(),
-        events,
-    }))
+    Ok(filter)
 }
 
 #[cfg(test)]

@@ -109,6 +109,42 @@ pub(crate) fn refused_unaudited(why: String) -> crate::error::ApiError {
 ///
 /// Also takes an RFC 3339 date and time (`2026-11-24T21:00:00Z`,
 /// `2026-11-24T22:00:00+01:00`).
+/// A CSV download whose body `write` streams (the store's exports write
+/// into the pipe as rows come off the database; the client's pace holds
+/// them back through the pipe's 64 KiB), so a long export never sits in
+/// memory. `what` names the export in the log if it fails part-way.
+pub fn csv_download<F, Fut>(
+    filename: &str,
+    what: &'static str,
+    write: F,
+) -> axum::response::Response
+where
+    F: FnOnce(tokio::io::DuplexStream) -> Fut + Send + 'static,
+    Fut: std::future::Future<Output = gridscada_store::Result<u64>> + Send + 'static,
+{
+    use axum::http::header;
+    use axum::response::IntoResponse;
+    let (tx, rx) = tokio::io::duplex(64 * 1024);
+    tokio::spawn(async move {
+        if let Err(e) = write(tx).await {
+            // The response has started; the client sees a truncated file.
+            tracing::error!(error = %e, "{what} failed part-way");
+        }
+    });
+    let body = axum::body::Body::from_stream(tokio_util::io::ReaderStream::new(rx));
+    (
+        [
+            (header::CONTENT_TYPE, "text/csv; charset=utf-8".to_string()),
+            (
+                header::CONTENT_DISPOSITION,
+                format!("attachment; filename=\"{filename}\""),
+            ),
+        ],
+        body,
+    )
+        .into_response()
+}
+
 pub fn parse_time(
     field: &str,
     s: &str,

@@ -1,9 +1,7 @@
 //! Trends: downsampled series for charts, raw CSV for export.
 
-use axum::body::Body;
 use axum::extract::{Query, State};
-use axum::http::header;
-use axum::response::{IntoResponse, Response};
+use axum::response::Response;
 use axum::{Extension, Json};
 use gridscada_tagdb::Timestamp;
 use serde::{Deserialize, Serialize};
@@ -124,25 +122,13 @@ pub async fn csv(
     if from > to {
         return Err(ApiError::bad_request("from must not be after to"));
     }
-    let (mut tx, rx) = tokio::io::duplex(64 * 1024);
     let store = s.store.clone();
-    tokio::spawn(async move {
-        let refs: Vec<&str> = tags.iter().map(String::as_str).collect();
-        if let Err(e) = store.export_csv(&refs, from, to, &mut tx).await {
-            // The response has started; the client sees a truncated file.
-            tracing::error!(error = %e, "CSV export failed part-way");
-        }
-    });
-    let body = Body::from_stream(tokio_util::io::ReaderStream::new(rx));
-    Ok((
-        [
-            (header::CONTENT_TYPE, "text/csv; charset=utf-8"),
-            (
-                header::CONTENT_DISPOSITION,
-                "attachment; filename=\"trend.csv\"",
-            ),
-        ],
-        body,
-    )
-        .into_response())
+    Ok(crate::api::csv_download(
+        "trend.csv",
+        "CSV export",
+        move |mut tx| async move {
+            let refs: Vec<&str> = tags.iter().map(String::as_str).collect();
+            store.export_csv(&refs, from, to, &mut tx).await
+        },
+    ))
 }

@@ -241,7 +241,7 @@ pub struct Alarm {
     pub last_change: Timestamp,
 }
 
-/// `gridscada_alarms::AlarmMetrics` (more fields: the ISA-18.2 figures).
+/// `gridscada_alarms::AlarmMetrics` (more fields: the ISA-18.2 figures; `positions`, the load of each selection as if one operator position had it alone; `shelved`, the alarms shelved now; `targets`, the ISA-18.2 targets).
 #[derive(ToSchema)]
 pub struct AlarmMetrics {
     pub from: Timestamp,
