@@ -134,19 +134,21 @@ impl Store {
                 check_text("event user", u, 256)?;
             }
         }
+        self.writable("recording events")?;
         Ok(on_backend!(self, writer, |p| {
             let mut tx = p.begin().await.map_err(db("recording events"))?;
             let mut ids = Vec::with_capacity(events.len());
             for e in events {
                 let id: i64 = sqlx::query_scalar(
-                    "INSERT INTO events (ts, user_name, source, kind, message) \
-                     VALUES ($1, $2, $3, $4, $5) RETURNING id",
+                    "INSERT INTO events (ts, user_name, source, kind, message, site) \
+                     VALUES ($1, $2, $3, $4, $5, $6) RETURNING id",
                 )
                 .bind(e.ts.as_millis())
                 .bind(e.user.as_deref())
                 .bind(&e.source)
                 .bind(&e.kind)
                 .bind(&e.message)
+                .bind(&*self.site)
                 .fetch_one(&mut *tx)
                 .await
                 .map_err(db("recording events"))?;
@@ -165,7 +167,7 @@ impl Store {
              WHERE ($1 IS NULL OR ts >= $1) AND ($2 IS NULL OR ts < $2) \
                AND ($3 IS NULL OR kind = $3) AND ($4 IS NULL OR user_name = $4) \
                AND ($5 IS NULL OR source = $5) \
-               AND ($6 IS NULL OR lower(message) LIKE $6 ESCAPE '\\') \
+               AND ($6 IS NULL OR lower(message) LIKE $6 ESCAPE '\\') AND site = $9 \
              ORDER BY ts DESC, id DESC LIMIT $7 OFFSET $8";
         let rows: Vec<(i64, i64, Option<String>, String, String, String)> =
             on_backend!(self, reader, |p| {
@@ -178,6 +180,7 @@ impl Store {
                     .bind(text.as_deref())
                     .bind(limit)
                     .bind(filter.offset as i64)
+                    .bind(&*self.site)
                     .fetch_all(p)
                     .await
                     .map_err(db("listing events"))?

@@ -224,6 +224,14 @@ pub fn table() -> Vec<Route> {
             || get(api::pair::view),
             doc::<api::pair::__path_view>,
         ),
+        // The sites on this server's database, for `site=` on the history.
+        r(
+            Method::GET,
+            "/api/sites",
+            Perm::LoggedIn,
+            || get(api::pair::sites),
+            doc::<api::pair::__path_sites>,
+        ),
         // Devices.
         r(
             Method::GET,

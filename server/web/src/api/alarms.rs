@@ -336,6 +336,9 @@ pub struct HistoryQuery {
     pub text: Option<String>,
     pub limit: Option<u32>,
     pub offset: Option<u32>,
+    /// Another site on the same database whose history to read
+    /// (read-only); this server's own site if absent (`GET /api/sites`).
+    pub site: Option<String>,
 }
 
 fn opt_time(field: &str, v: &Option<String>) -> ApiResult<Option<Timestamp>> {
@@ -356,7 +359,8 @@ pub struct Transitions {
 
 #[utoipa::path(get, path = "/api/alarms/history", tag = "alarms", summary = "Alarm transitions",
     params(HistoryQuery),
-    responses((status = 200, description = "OK", body = inline(Transitions)), (status = 400)))]
+    responses((status = 200, description = "OK", body = inline(Transitions)), (status = 400),
+        (status = 404, description = "No such site")))]
 pub async fn history(
     State(s): State<WebState>,
     Query(q): Query<HistoryQuery>,
@@ -373,7 +377,10 @@ pub async fn history(
         offset: q.offset.unwrap_or(0),
         ..Default::default()
     };
-    let rows = s.store.alarm_history(&filter).await?;
+    let rows = crate::api::history_of(&s, q.site.as_deref())
+        .await?
+        .alarm_history(&filter)
+        .await?;
     Ok(Json(Transitions {
         count: rows.len(),
         transitions: rows,

@@ -33,6 +33,9 @@ pub struct HistoryQuery {
     #[param(schema_with = shapes::time, required = false)]
     pub to: Option<String>,
     pub limit: Option<u32>,
+    /// Another site on the same database whose history to read
+    /// (read-only); this server's own site if absent (`GET /api/sites`).
+    pub site: Option<String>,
 }
 
 /// Recorded dispatches.
@@ -46,7 +49,8 @@ pub struct DispatchHistory {
 
 #[utoipa::path(get, path = "/api/dispatch/history", tag = "dispatch", summary = "Dispatch history",
     params(HistoryQuery),
-    responses((status = 200, description = "OK", body = inline(DispatchHistory)), (status = 400)))]
+    responses((status = 200, description = "OK", body = inline(DispatchHistory)), (status = 400),
+        (status = 404, description = "No such site")))]
 pub async fn history(
     State(s): State<WebState>,
     Query(q): Query<HistoryQuery>,
@@ -62,8 +66,8 @@ pub async fn history(
     if from > to {
         return Err(ApiError::bad_request("from must not be after to"));
     }
-    let rows = s
-        .store
+    let rows = crate::api::history_of(&s, q.site.as_deref())
+        .await?
         .dispatch_history(from, to, q.limit.unwrap_or(500).clamp(1, 10_000))
         .await?;
     Ok(Json(DispatchHistory {

@@ -31,6 +31,9 @@ pub struct EventQuery {
     pub text: Option<String>,
     pub limit: Option<u32>,
     pub offset: Option<u32>,
+    /// Another site on the same database whose history to read
+    /// (read-only); this server's own site if absent (`GET /api/sites`).
+    pub site: Option<String>,
 }
 
 /// Start of the local day containing `now`, for a zone `offset_min` east of UTC.
@@ -52,7 +55,8 @@ pub struct EventList {
 
 #[utoipa::path(get, path = "/api/events", tag = "events", summary = "The event log",
     params(EventQuery),
-    responses((status = 200, description = "OK", body = inline(EventList)), (status = 400)))]
+    responses((status = 200, description = "OK", body = inline(EventList)), (status = 400),
+        (status = 404, description = "No such site")))]
 pub async fn list(
     State(s): State<WebState>,
     Query(q): Query<EventQuery>,
@@ -90,7 +94,10 @@ pub async fn list(
                 .map(|v| parse_time("to", v))
                 .transpose()?;
     }
-    let events = s.store.events(&filter).await?;
+    let events = crate::api::history_of(&s, q.site.as_deref())
+        .await?
+        .events(&filter)
+        .await?;
     Ok(Json(EventList {
         count: events.len(),
         events,
