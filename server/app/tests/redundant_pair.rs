@@ -125,63 +125,6 @@ fn via(url: &str, port: u16) -> (String, String) {
     )
 }
 
-/// One Modbus write as the writer logged it.
-#[derive(Debug, Clone)]
-struct FieldWrite {
-    t: f64,
-    server: String,
-    epoch: u64,
-    tag: String,
-    value: String,
-}
-
-/// RFC 3339 UTC (`2026-11-26T02:29:29.123456Z`) to seconds since 1970.
-fn rfc3339(s: &str) -> Option<f64> {
-    let (date, time) = s.trim_end_matches('Z').split_once('T')?;
-    let mut d = date.split('-').map(|x| x.parse::<i64>());
-    let (y, m, day) = (d.next()?.ok()?, d.next()?.ok()?, d.next()?.ok()?);
-    // Days from civil (Howard Hinnant's algorithm).
-    let y = if m <= 2 { y - 1 } else { y };
-    let era = y.div_euclid(400);
-    let yoe = y - era * 400;
-    let doy = (153 * (m + if m > 2 { -3 } else { 9 }) + 2) / 5 + day - 1;
-    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-    let days = era * 146097 + doe - 719468;
-    let mut t = time.split(':');
-    let (h, mi, sec) = (
-        t.next()?.parse::<f64>().ok()?,
-        t.next()?.parse::<f64>().ok()?,
-        t.next()?.parse::<f64>().ok()?,
-    );
-    Some(days as f64 * 86400.0 + h * 3600.0 + mi * 60.0 + sec)
-}
-
-/// Every field write in the servers' logs, in time order.
-fn field_writes(logs: &[&Path]) -> Vec<FieldWrite> {
-    let mut out = Vec::new();
-    for log in logs {
-        let text = std::fs::read_to_string(log).unwrap_or_default();
-        for line in text.lines() {
-            let Ok(v) = serde_json::from_str::<Value>(line) else {
-                continue;
-            };
-            if v["target"] != "gridscada::field_write" {
-                continue;
-            }
-            let f = &v["fields"];
-            out.push(FieldWrite {
-                t: rfc3339(v["timestamp"].as_str().unwrap_or("")).expect("timestamp"),
-                server: f["server"].as_str().unwrap_or("").to_string(),
-                epoch: f["epoch"].as_u64().expect("epoch"),
-                tag: f["tag"].as_str().unwrap_or("").to_string(),
-                value: f["value"].to_string().trim_matches('"').to_string(),
-            });
-        }
-    }
-    out.sort_by(|a, b| a.t.total_cmp(&b.t));
-    out
-}
-
 /// The log lines of `log` whose message contains `what`, as times.
 fn logged_at(log: &Path, what: &str) -> Vec<f64> {
     std::fs::read_to_string(log)
@@ -195,28 +138,6 @@ fn logged_at(log: &Path, what: &str) -> Vec<f64> {
         })
         .filter_map(|v| rfc3339(v["timestamp"].as_str()?))
         .collect()
-}
-
-/// Waits until exactly one of the pair is active; its index and how long
-/// that took.
-fn wait_active(servers: &[&Server], limit: Duration) -> (usize, Duration) {
-    let start = Instant::now();
-    loop {
-        let active: Vec<usize> = servers
-            .iter()
-            .enumerate()
-            .filter(|(_, s)| s.child.is_some() && s.active() == Some(true))
-            .map(|(i, _)| i)
-            .collect();
-        if active.len() == 1 {
-            return (active[0], start.elapsed());
-        }
-        assert!(
-            start.elapsed() < limit,
-            "no single active server after {limit:?}: {active:?}"
-        );
-        std::thread::sleep(Duration::from_millis(25));
-    }
 }
 
 /// Waits until `panel` on the server at `c` has finished with its fault:
@@ -523,20 +444,7 @@ fn the_pair_keeps_isolating_faults_through_kills_freezes_and_a_cut_database() {
     // by a later epoch in its round.
     let writes = field_writes(&[&servers[0].log, &servers[1].log]);
     assert!(!writes.is_empty(), "no field writes were logged");
-    let mut owner: HashMap<u64, &str> = HashMap::new();
-    for w in &writes {
-        let o = owner.entry(w.epoch).or_insert(&w.server);
-        assert_eq!(*o, w.server, "epoch {} used by two servers: {w:?}", w.epoch);
-    }
-    let mut newest = 0;
-    for w in &writes {
-        assert!(
-            w.epoch >= newest,
-            "a write of epoch {} after one of epoch {newest}: {w:?}",
-            w.epoch
-        );
-        newest = w.epoch;
-    }
+    let epochs = assert_fenced(&writes);
     for (round, epoch, panel, zone) in &known_faulty {
         let (killed_at, recovering_at) = round_windows[*round];
         let tag = format!("{}.Zone{zone}.Cmd", prefixes[panel]);
@@ -563,7 +471,7 @@ fn the_pair_keeps_isolating_faults_through_kills_freezes_and_a_cut_database() {
         sorted[sorted.len() / 2],
         sorted[sorted.len() - 1],
         writes.len(),
-        owner.len(),
+        epochs,
         known_faulty.len()
     );
 }

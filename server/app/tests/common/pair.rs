@@ -3,14 +3,15 @@
 //! test's own, the demo plant's files moved to free ports, the standalone
 //! simulator, a `gridscada serve` process, the operator's login.
 
+use std::collections::HashMap;
 use std::io::{BufRead, BufReader, Write};
 use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, Command, Stdio};
 use std::sync::mpsc;
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use serde_json::json;
+use serde_json::{json, Value};
 
 use super::{gridscada, Client};
 
@@ -311,4 +312,104 @@ pub fn add_operator(config: &Path) {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+}
+
+/// One Modbus write as the writer logged it.
+#[derive(Debug, Clone)]
+pub struct FieldWrite {
+    pub t: f64,
+    pub server: String,
+    pub epoch: u64,
+    pub tag: String,
+    pub value: String,
+}
+
+/// RFC 3339 UTC (`2026-11-26T02:29:29.123456Z`) to seconds since 1970.
+pub fn rfc3339(s: &str) -> Option<f64> {
+    let (date, time) = s.trim_end_matches('Z').split_once('T')?;
+    let mut d = date.split('-').map(|x| x.parse::<i64>());
+    let (y, m, day) = (d.next()?.ok()?, d.next()?.ok()?, d.next()?.ok()?);
+    // Days from civil (Howard Hinnant's algorithm).
+    let y = if m <= 2 { y - 1 } else { y };
+    let era = y.div_euclid(400);
+    let yoe = y - era * 400;
+    let doy = (153 * (m + if m > 2 { -3 } else { 9 }) + 2) / 5 + day - 1;
+    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+    let days = era * 146097 + doe - 719468;
+    let mut t = time.split(':');
+    let (h, mi, sec) = (
+        t.next()?.parse::<f64>().ok()?,
+        t.next()?.parse::<f64>().ok()?,
+        t.next()?.parse::<f64>().ok()?,
+    );
+    Some(days as f64 * 86400.0 + h * 3600.0 + mi * 60.0 + sec)
+}
+
+/// Every field write in the servers' logs, in time order.
+pub fn field_writes(logs: &[&Path]) -> Vec<FieldWrite> {
+    let mut out = Vec::new();
+    for log in logs {
+        let text = std::fs::read_to_string(log).unwrap_or_default();
+        for line in text.lines() {
+            let Ok(v) = serde_json::from_str::<Value>(line) else {
+                continue;
+            };
+            if v["target"] != "gridscada::field_write" {
+                continue;
+            }
+            let f = &v["fields"];
+            out.push(FieldWrite {
+                t: rfc3339(v["timestamp"].as_str().unwrap_or("")).expect("timestamp"),
+                server: f["server"].as_str().unwrap_or("").to_string(),
+                epoch: f["epoch"].as_u64().expect("epoch"),
+                tag: f["tag"].as_str().unwrap_or("").to_string(),
+                value: f["value"].to_string().trim_matches('"').to_string(),
+            });
+        }
+    }
+    out.sort_by(|a, b| a.t.total_cmp(&b.t));
+    out
+}
+
+/// Waits until exactly one of the pair is active; its index and how long
+/// that took.
+pub fn wait_active(servers: &[&Server], limit: Duration) -> (usize, Duration) {
+    let start = Instant::now();
+    loop {
+        let active: Vec<usize> = servers
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.child.is_some() && s.active() == Some(true))
+            .map(|(i, _)| i)
+            .collect();
+        if active.len() == 1 {
+            return (active[0], start.elapsed());
+        }
+        assert!(
+            start.elapsed() < limit,
+            "no single active server after {limit:?}: {active:?}"
+        );
+        std::thread::sleep(Duration::from_millis(25));
+    }
+}
+
+/// The fencing as the write record shows it: each epoch belongs to one
+/// server, and no write of an older epoch follows one of a newer epoch (so
+/// two servers never commanded the plant at once). How many epochs wrote.
+pub fn assert_fenced(writes: &[FieldWrite]) -> usize {
+    let mut owner: HashMap<u64, &str> = HashMap::new();
+    for w in writes {
+        let o = owner.entry(w.epoch).or_insert(&w.server);
+        assert_eq!(*o, w.server, "epoch {} used by two servers: {w:?}", w.epoch);
+    }
+    let mut newest = 0;
+    for w in writes {
+        assert!(
+            w.epoch >= newest,
+            "a write of epoch {} after one of epoch {newest}: {w:?}",
+            w.epoch
+        );
+        newest = w.epoch;
+    }
+    owner.len()
 }
