@@ -7,8 +7,9 @@
 # the active server a, kills it (kill -9), and checks the page moves to b,
 # shows b active and is still logged in.
 #
-# Both servers listen on 127.0.0.1 (other ports): the browser sends the
-# session cookie to both, as it does when one host name reaches the pair.
+# Server a listens on 127.0.0.1, server b on 127.0.0.2: two hosts, as two
+# machines are, so the session cookie of one is not sent to the other and
+# the login has to be carried by the HMI's failover ticket.
 #
 # Environment: GRIDSCADA_BIN (default target/debug/gridscada, built if
 # missing), GRIDSCADA_TEST_PG_URL (eval "$(scripts/pg-test-cluster.sh)").
@@ -52,7 +53,7 @@ trap cleanup EXIT
 psql -X -q -v ON_ERROR_STOP=1 "$pg" -c "CREATE DATABASE $db" >/dev/null
 url="${pg%/*}/$db"
 pa=$(free_port)
-pb=$(free_port)
+pb=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.2", 0)); print(s.getsockname()[1]); s.close()')
 port_base=$((26000 + ($$ % 400) * 20))
 
 # plant NAME: the demo plant's files in $tmp/NAME as server NAME of the
@@ -70,8 +71,8 @@ for f in pathlib.Path(src).glob("*.toml"):
     if f.name == "gridscada.toml":
         text = text.replace("sqlite://gridscada.db", url)
         text += f'\n[redundancy]\nname = "{name}"\n'
-        for s, port in (("a", pa), ("b", pb)):
-            text += f'[[redundancy.server]]\nname = "{s}"\nurl = "http://127.0.0.1:{port}"\n'
+        for s, host in (("a", f"127.0.0.1:{pa}"), ("b", f"127.0.0.2:{pb}")):
+            text += f'[[redundancy.server]]\nname = "{s}"\nurl = "http://{host}"\n'
     (dst / f.name).write_text(text)
 PY
 }
@@ -84,23 +85,25 @@ password="pair-browser-password-$$"
 printf '%s\n' "$password" | "$bin" user add op --role operator --config "$tmp/a/gridscada.toml" >/dev/null
 printf 'operator op %s\n' "$password" >"$tmp/credentials.txt"
 
-# serve NAME PORT: starts the server; sets $pid.
+# serve NAME HOST:PORT: starts the server; sets $pid.
 serve() {
-  "$bin" serve --config "$tmp/$1/gridscada.toml" --http "127.0.0.1:$2" >"$artifacts/pair-$1.log" 2>&1 &
+  "$bin" serve --config "$tmp/$1/gridscada.toml" --http "$2" >"$artifacts/pair-$1.log" 2>&1 &
   pid=$!
   pids+=("$pid")
 }
-# active PORT: whether the server there holds the lease.
-active() { curl -fsS "http://127.0.0.1:$1/metrics" 2>/dev/null | grep -q '^gridscada_pair_active 1'; }
+# active HOST:PORT: whether the server there holds the lease.
+# (The page is read whole first: grep -q closing the pipe early would fail
+# curl, and with it the pipeline.)
+active() { grep -q '^gridscada_pair_active 1' <<<"$(curl -fsS "http://$1/metrics" 2>/dev/null)"; }
 
-serve a "$pa"
+serve a "127.0.0.1:$pa"
 pid_a=$pid
-for _ in $(seq 1 150); do active "$pa" && break; sleep 0.2; done
-active "$pa" || { echo "pair_browser.sh: server a did not become active"; tail -20 "$artifacts/pair-a.log"; exit 1; }
-serve b "$pb"
-for _ in $(seq 1 150); do curl -fsS "http://127.0.0.1:$pb/healthz" >/dev/null 2>&1 && break; sleep 0.2; done
-curl -fsS "http://127.0.0.1:$pb/healthz" >/dev/null || { echo "pair_browser.sh: server b did not start"; tail -20 "$artifacts/pair-b.log"; exit 1; }
+for _ in $(seq 1 150); do active "127.0.0.1:$pa" && break; sleep 0.2; done
+active "127.0.0.1:$pa" || { echo "pair_browser.sh: server a did not become active"; tail -20 "$artifacts/pair-a.log"; exit 1; }
+serve b "127.0.0.2:$pb"
+for _ in $(seq 1 150); do curl -fsS "http://127.0.0.2:$pb/healthz" >/dev/null 2>&1 && break; sleep 0.2; done
+curl -fsS "http://127.0.0.2:$pb/healthz" >/dev/null || { echo "pair_browser.sh: server b did not start"; tail -20 "$artifacts/pair-b.log"; exit 1; }
 
-GRIDSCADA_URL="http://127.0.0.1:$pa" GRIDSCADA_PAIR_OTHER="http://127.0.0.1:$pb" GRIDSCADA_PID="$pid_a" \
+GRIDSCADA_URL="http://127.0.0.1:$pa" GRIDSCADA_PAIR_OTHER="http://127.0.0.2:$pb" GRIDSCADA_PID="$pid_a" \
 GRIDSCADA_CREDENTIALS="$tmp/credentials.txt" GRIDSCADA_ARTIFACTS="$artifacts" \
   timeout --kill-after=20 180 node --test --test-concurrency=1 --test-reporter=spec pair/failover.test.js

@@ -185,6 +185,21 @@ pub fn table() -> Vec<Route> {
             || delete(api::session::logout),
             doc::<api::session::__path_logout>,
         ),
+        // A redundant pair's failover: the login carried to the other server.
+        r(
+            Method::POST,
+            "/api/session/handover",
+            Perm::LoggedIn,
+            || post(api::session::handover),
+            doc::<api::session::__path_handover>,
+        ),
+        r(
+            Method::POST,
+            "/api/session/handover/claim",
+            Perm::Public,
+            || post(api::session::claim),
+            doc::<api::session::__path_claim>,
+        ),
         // Tags.
         r(
             Method::GET,

@@ -2,7 +2,8 @@
 // a new login. Logged in on the active server a, the operator's page stays
 // open while a is killed (kill -9); the page moves to server b (its address
 // from the pair's configuration, through /api/pair), shows b active, and is
-// still logged in (sessions are in the shared database).
+// still logged in: b is another host (127.0.0.2), which a's session cookie
+// is not sent to, so the HMI carries its failover ticket there.
 //
 // Run by tests/e2e/pair_browser.sh, which starts the pair: GRIDSCADA_URL is
 // server a, GRIDSCADA_PAIR_OTHER server b, GRIDSCADA_PID server a's process.
@@ -36,7 +37,12 @@ test('the HMI follows a failover to the other server without a new login', async
     // Still logged in: the operator's name, no login form.
     await page.locator('#current-user', { hasText: op.user }).waitFor({ timeout: 10_000 });
     assert.equal(await page.locator('#login-user').count(), 0, 'the login form is shown');
+    assert.ok(!page.url().includes('handover='), `the ticket is left in the address: ${page.url()}`);
     await page.locator('#toolbar a').first().waitFor();
+    // The login came with the ticket (the cookie of a's host is not b's).
+    const logins = await page.evaluate(async () => (await (await fetch('/api/events?type=login&limit=50')).json()).events);
+    assert.ok(logins.some((e) => e.user === op.user && e.message.includes('failover ticket')),
+      JSON.stringify(logins));
     await b.screenshot('b-active');
     console.log(`page on server b ${moved} ms after the kill; b shown active after ${shown} ms`);
     // The dead server's refused connections (live push, while the page
