@@ -5,7 +5,9 @@
 # (GRIDSCADA_TEST_PG_URL: a database of its own is created there and dropped
 # at the end), the demo's devices from `gridscada sim`. The test logs in on
 # the active server a, kills it (kill -9), and checks the page moves to b,
-# shows b active and is still logged in.
+# shows b active and is still logged in. Then (pair/sites.test.js) a
+# server of another site on the same database, "south", is read from b's
+# event and alarm history screens through their Site choice.
 #
 # Server a listens on 127.0.0.1, server b on 127.0.0.2: two hosts, as two
 # machines are, so the session cookie of one is not sent to the other and
@@ -78,6 +80,21 @@ PY
 }
 plant a
 plant b
+# The other site: a server alone, its devices (not simulated) elsewhere.
+python3 - "$tmp/a" "$tmp/south" "$port_base" <<'PY'
+import pathlib, sys
+src, dst, base = sys.argv[1:]
+dst = pathlib.Path(dst)
+dst.mkdir(parents=True)
+for f in pathlib.Path(src).glob("*.toml"):
+    text = f.read_text()
+    for p in range(int(base), int(base) + 100):
+        text = text.replace(f'127.0.0.1:{p}"', f'127.0.0.1:{p + 5000}"')
+    if f.name == "gridscada.toml":
+        text = text[: text.index("\n[redundancy]")] + "\n"
+        text = text.replace("\n[server]\n", '\n[server]\nsite = "south"\n', 1)
+    (dst / f.name).write_text(text)
+PY
 
 "$bin" sim --config "$tmp/a/gridscada.toml" </dev/null >"$artifacts/pair-sim.log" 2>&1 &
 pids+=($!)
@@ -104,6 +121,14 @@ serve b "127.0.0.2:$pb"
 for _ in $(seq 1 150); do curl -fsS "http://127.0.0.2:$pb/healthz" >/dev/null 2>&1 && break; sleep 0.2; done
 curl -fsS "http://127.0.0.2:$pb/healthz" >/dev/null || { echo "pair_browser.sh: server b did not start"; tail -20 "$artifacts/pair-b.log"; exit 1; }
 
+ps=$(free_port)
+serve south "127.0.0.1:$ps"
+for _ in $(seq 1 150); do curl -fsS "http://127.0.0.1:$ps/healthz" >/dev/null 2>&1 && break; sleep 0.2; done
+# A login at the south site: an event of its own.
+curl -fsS -o /dev/null -H 'Content-Type: application/json' \
+  -d "{\"username\":\"op\",\"password\":\"$password\"}" "http://127.0.0.1:$ps/api/session" \
+  || { echo "pair_browser.sh: cannot log in at the south site"; tail -20 "$artifacts/pair-south.log"; exit 1; }
+
 GRIDSCADA_URL="http://127.0.0.1:$pa" GRIDSCADA_PAIR_OTHER="http://127.0.0.2:$pb" GRIDSCADA_PID="$pid_a" \
 GRIDSCADA_CREDENTIALS="$tmp/credentials.txt" GRIDSCADA_ARTIFACTS="$artifacts" \
-  timeout --kill-after=20 180 node --test --test-concurrency=1 --test-reporter=spec pair/failover.test.js
+  timeout --kill-after=20 180 node --test --test-concurrency=1 --test-reporter=spec pair/failover.test.js pair/sites.test.js

@@ -4,6 +4,7 @@
 import { get, qs } from '../api.js';
 import { h, replace, field } from '../dom.js';
 import { fmtTime, pad } from '../format.js';
+import { siteChoice } from '../sites.js';
 
 const KNOWN_TYPES = ['login', 'logout', 'login_failed', 'command', 'command_refused', 'mode', 'reset', 'write', 'write_failed',
   'ack', 'shelve', 'unshelve', 'sequence', 'dispatch', 'simulation', 'user', 'system'];
@@ -19,10 +20,11 @@ export default {
     const types = h('datalist', { id: 'events-types' }, KNOWN_TYPES.map((t) => h('option', { value: t })));
     const user = h('input', { id: 'events-user', size: 12 });
     const text = h('input', { type: 'search', id: 'events-text', size: 16 });
+    const site = siteChoice('events-site');
     const out = h('div', { class: 'table-wrap', tabindex: '0' });
     let todayMode = true;
     const form = h('form', { class: 'filters' },
-      field('From date', from), field('To date', to), field('Type', type), types, field('User', user), field('Text', text),
+      field('From date', from), field('To date', to), field('Type', type), types, field('User', user), field('Text', text), site.el,
       h('div', { class: 'btn-row' },
         h('button', { type: 'submit', class: 'btn btn-primary', id: 'events-search', text: 'Search' }),
         h('button', { type: 'button', class: 'btn', id: 'events-today', text: 'Today', onclick: () => { todayMode = true; const d = dateValue(new Date()); from.value = d; to.value = d; load(); } })));
@@ -30,7 +32,7 @@ export default {
     form.addEventListener('submit', (e) => { e.preventDefault(); todayMode = false; load(); });
 
     async function load() {
-      const params = { type: type.value.trim(), user: user.value.trim(), text: text.value.trim(), limit: 1000 };
+      const params = { type: type.value.trim(), user: user.value.trim(), text: text.value.trim(), limit: 1000, site: site.value() };
       if (todayMode) {
         params.today = true;
         params.tz_offset_min = -new Date().getTimezoneOffset();
