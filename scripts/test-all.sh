@@ -137,7 +137,7 @@ for t in tests/e2e/*.sh; do
     started=$(date +%s)
     # Replay runs whole simulated days (about 15 minutes on 2 cores); the
     # other stages take a few minutes each.
-    case "$t" in *replay.sh) secs=2400 ;; *sparkplug_sites.sh) secs=600 ;; *sparkplug_*.sh) secs=300 ;; *notify.sh) secs=600 ;; *) secs=1200 ;; esac
+    case "$t" in *replay.sh) secs=2400 ;; *sparkplug_sites.sh) secs=600 ;; *sparkplug_*.sh) secs=300 ;; *notify.sh) secs=600 ;; *pair_browser.sh) secs=300 ;; *) secs=1200 ;; esac
     if limit "$secs" bash "$t"; then
         echo "end-to-end: $t passed in $(( $(date +%s) - started )) s"
     else

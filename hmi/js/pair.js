@@ -7,12 +7,22 @@
 // takeover, it goes to the active server's configured address (or, with no
 // answer, to the next server of the pair). An HMI opened on a standby stays
 // there, read-only, with a link to the active server.
+//
+// The session cookie belongs to this server's host, and the other server
+// may be another host: so the HMI keeps a failover ticket of this server
+// (renewed every minute, `/api/session/handover`) and hands it to the
+// other one in the address it goes to; `claimHandover` there turns it into
+// a session, so the operator stays logged in.
 
-import { api, ApiError } from './api.js';
+import { api, ApiError, post } from './api.js';
 
 const EVERY_MS = 2000;
 /** No answer this long: the server is taken for dead (more than a takeover). */
 const DEAD_MS = 8000;
+/** How often the failover ticket is renewed (it lasts three minutes). */
+const TICKET_EVERY_MS = 60_000;
+/** The address parameter that carries a ticket to the other server. */
+const HANDOVER = 'handover';
 
 /** Starts following the pair; returns the stop function. */
 export function watchPair(light) {
@@ -20,6 +30,17 @@ export function watchPair(light) {
   let wasActive = false;    // this server was the active one
   let silentSince = null;
   let stopped = false;
+  let ticket = null;        // this login's failover ticket
+  let ticketAt = 0;
+
+  const renewTicket = async () => {
+    if (Date.now() - ticketAt < TICKET_EVERY_MS) return;
+    try {
+      const t = await post('/api/session/handover', ticket ? { previous: ticket } : {});
+      ticket = t.ticket;
+      ticketAt = Date.now();
+    } catch { /* the next check tries again */ }
+  };
 
   const go = (url, why) => {
     if (!url || stopped) return;
@@ -27,7 +48,8 @@ export function watchPair(light) {
     if (target.origin === location.origin) return;
     stopped = true;
     light.textContent = `Failover: going to ${why}…`;
-    location.href = `${target.origin}${location.pathname}${location.hash}`;
+    const carry = ticket ? `?${HANDOVER}=${encodeURIComponent(ticket)}` : '';
+    location.href = `${target.origin}${location.pathname}${carry}${location.hash}`;
   };
 
   const draw = (v) => {
@@ -59,6 +81,7 @@ export function watchPair(light) {
       silentSince = null;
       last = v;
       draw(v);
+      await renewTicket();
       if (v.role === 'active') wasActive = true;
       else if (wasActive && v.active_url) go(v.active_url, `the active server ${v.active}`);
     } catch (e) {
@@ -81,4 +104,20 @@ export function watchPair(light) {
     light.hidden = true;
   }
   return stop;
+}
+
+/**
+ * On an HMI opened by a failover from the other server: logs in here with
+ * the ticket it carried, and drops it from the address (it is good once).
+ */
+export async function claimHandover() {
+  const params = new URLSearchParams(location.search);
+  const ticket = params.get(HANDOVER);
+  if (!ticket) return;
+  params.delete(HANDOVER);
+  const rest = params.toString();
+  history.replaceState(null, '', `${location.pathname}${rest ? `?${rest}` : ''}${location.hash}`);
+  try {
+    await post('/api/session/handover/claim', { ticket });
+  } catch { /* expired or used: the login page asks */ }
 }

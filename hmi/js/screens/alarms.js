@@ -10,6 +10,7 @@ import { get, post, del, qs, apiUrl } from '../api.js';
 import { h, replace, select, field } from '../dom.js';
 import { fmtTime, fmtValue, roleAtLeast } from '../format.js';
 import { live } from '../live.js';
+import { siteChoice } from '../sites.js';
 import { attempt, formDialog, toast } from '../ui.js';
 import { ALARM_HEADERS, KIND_LABELS, STATE_LABELS, causeLabel, drawAlarmRows, stateChange, filterAlarms, priorityChip, sortAlarms, summarize, summaryTable } from '../components/alarmtable.js';
 import { PRIORITY_LEVELS } from '../components/alarmfooter.js';
@@ -181,18 +182,19 @@ export default {
       const prio = select({ id: 'hist-priority' }, PRIORITY_LEVELS, '');
       const text = h('input', { type: 'search', id: 'hist-text', size: 16 });
       const limit = select({ id: 'hist-limit' }, ['100', '500', '2000'], '500');
+      const site = siteChoice('hist-site');
       const out = h('div', { class: 'table-wrap', tabindex: '0' });
       // Every transition the filter selects (no row cap), as CSV.
       const csvLink = h('a', { class: 'btn', id: 'hist-csv', href: '#', download: 'alarm-history.csv', text: 'Download CSV' });
       const form = h('form', { class: 'filters' }, field('From', from), field('To', to), field('Selection', selection), field('Priority', prio),
-        field('Text', text), field('Rows', limit), h('div', { class: 'btn-row' }, h('button', { type: 'submit', class: 'btn btn-primary', id: 'hist-search', text: 'Search' }), csvLink));
+        field('Text', text), field('Rows', limit), site.el, h('div', { class: 'btn-row' }, h('button', { type: 'submit', class: 'btn btn-primary', id: 'hist-search', text: 'Search' }), csvLink));
       body.append(h('div', { class: 'card' }, form, out));
       const load = async () => {
         replace(out, h('p', { class: 'loading', text: 'Loading…' }));
         try {
           const filter = {
             from: from.value ? new Date(from.value).getTime() : '', to: to.value ? new Date(to.value).getTime() : '',
-            selection: selection.value.trim(), min_priority: prio.value, text: text.value.trim() };
+            selection: selection.value.trim(), min_priority: prio.value, text: text.value.trim(), site: site.value() };
           csvLink.href = apiUrl(`/api/alarms/history.csv${qs(filter)}`);
           const r = await get(`/api/alarms/history${qs({ ...filter, limit: limit.value })}`);
           const rows = r.transitions || [];

@@ -4,6 +4,7 @@
 import { get, qs, apiUrl } from '../api.js';
 import { h, replace, field } from '../dom.js';
 import { fmtTime, pad } from '../format.js';
+import { siteChoice } from '../sites.js';
 
 const KNOWN_TYPES = ['login', 'logout', 'login_failed', 'command', 'command_refused', 'mode', 'reset', 'write', 'write_failed',
   'ack', 'shelve', 'unshelve', 'sequence', 'dispatch', 'simulation', 'training', 'user', 'system'];
@@ -19,12 +20,13 @@ export default {
     const types = h('datalist', { id: 'events-types' }, KNOWN_TYPES.map((t) => h('option', { value: t })));
     const user = h('input', { id: 'events-user', size: 12 });
     const text = h('input', { type: 'search', id: 'events-text', size: 16 });
+    const site = siteChoice('events-site');
     const out = h('div', { class: 'table-wrap', tabindex: '0' });
     // Every event the filter selects (no row cap), as CSV.
     const csvLink = h('a', { class: 'btn', id: 'events-csv', href: '#', download: 'events.csv', text: 'Download CSV' });
     let todayMode = true;
     const form = h('form', { class: 'filters' },
-      field('From date', from), field('To date', to), field('Type', type), types, field('User', user), field('Text', text),
+      field('From date', from), field('To date', to), field('Type', type), types, field('User', user), field('Text', text), site.el,
       h('div', { class: 'btn-row' },
         h('button', { type: 'submit', class: 'btn btn-primary', id: 'events-search', text: 'Search' }),
         h('button', { type: 'button', class: 'btn', id: 'events-today', text: 'Today', onclick: () => { todayMode = true; const d = dateValue(new Date()); from.value = d; to.value = d; load(); } }),
@@ -33,7 +35,7 @@ export default {
     form.addEventListener('submit', (e) => { e.preventDefault(); todayMode = false; load(); });
 
     async function load() {
-      const params = { type: type.value.trim(), user: user.value.trim(), text: text.value.trim() };
+      const params = { type: type.value.trim(), user: user.value.trim(), text: text.value.trim(), site: site.value() };
       if (todayMode) {
         params.today = true;
         params.tz_offset_min = -new Date().getTimezoneOffset();

@@ -9,6 +9,7 @@ import { h, replace, select, field } from '../dom.js';
 import { fmtNumber, fmtTime, pad } from '../format.js';
 import { live } from '../live.js';
 import { toast } from '../ui.js';
+import { siteChoice } from '../sites.js';
 import { TrendChart, PEN_COLORS, axesOf } from '../components/chart.js';
 import { tagList } from './common.js';
 
@@ -66,6 +67,7 @@ export default {
     const now = new Date(Date.now() - 15 * 60_000);
     const startDate = h('input', { type: 'date', id: 'trend-start-date', value: dateValue(now) });
     const startTime = h('input', { type: 'time', id: 'trend-start-time', step: 1, value: timeValue(now) });
+    const site = siteChoice('trend-site', () => load());
     const duration = select({ id: 'trend-duration' }, DURATIONS.map(([s, l]) => [String(s), l]), String(15 * 60));
     const liveBox = h('input', { type: 'checkbox', id: 'trend-live', checked: true });
     const yAxis = select({ id: 'trend-y-axis' }, [], '');
@@ -100,7 +102,7 @@ export default {
           h('label', { class: 'field field-inline' }, liveBox, 'Live'),
           field('Y axis', yAxis),
           h('label', { class: 'field field-inline' }, yAuto, 'Y automatic'),
-          field('Y min', yMin), field('Y max', yMax),
+          field('Y min', yMin), field('Y max', yMax), site.el,
           h('div', { class: 'btn-row' }, h('button', { type: 'button', class: 'btn btn-primary', id: 'trend-apply', onclick: () => load(), text: 'Apply' }), reloadBtn, tableBtn, csvLink))),
       h('div', { class: 'trend-layout' },
         h('div', { class: 'card' }, nav, h('div', { class: 'trend-canvas-wrap' }, canvas), status, axesList, tableBox),
@@ -242,13 +244,13 @@ export default {
     async function load() {
       const { from, to } = range();
       if (!Number.isFinite(from)) { status.textContent = 'Set a valid start date and time.'; return; }
-      csvLink.href = pens.length ? apiUrl(`/api/trends.csv${qs({ tags: pens.map((p) => p.tag).join(','), from, to })}`) : '#';
+      csvLink.href = pens.length ? apiUrl(`/api/trends.csv${qs({ tags: pens.map((p) => p.tag).join(','), from, to, site: site.value() })}`) : '#';
       if (!pens.length) { data = { from, to, series: [] }; chart.setData([], from, to); drawAxes(); drawTable(); return; }
       const points = Math.max(50, Math.min(2000, Math.round(canvas.clientWidth || 800)));
       const seq = ++loadSeq;
       status.textContent = 'Loading…';
       try {
-        const r = await get(`/api/trends${qs({ tags: pens.map((p) => p.tag).join(','), from, to, points })}`);
+        const r = await get(`/api/trends${qs({ tags: pens.map((p) => p.tag).join(','), from, to, points, site: site.value() })}`);
         if (disposed || seq !== loadSeq) return;
         const series = pens.map((p) => {
           const s = (r.series || []).find((x) => x.tag === p.tag);
@@ -267,13 +269,14 @@ export default {
       }
     }
 
-    // Live mode: between reloads, the newest live values extend the pens.
+    // Live mode: between reloads, the newest live values extend the pens
+    // (this server's values: not onto another site's trend).
     function resubscribe() {
       if (offWant) offWant();
       offWant = live.want({ tags: pens.map((p) => p.tag) });
     }
     function onLiveTags(names) {
-      if (!liveBox.checked || !data) return;
+      if (!liveBox.checked || !data || site.other()) return;
       let changed = false;
       for (const s of data.series) {
         if (!names.includes(s.tag)) continue;

@@ -22,18 +22,16 @@
 mod common;
 
 use std::collections::{BTreeMap, HashMap};
-use std::io::{BufRead, BufReader, Write};
 use std::net::{Shutdown, TcpListener, TcpStream};
-use std::path::{Path, PathBuf};
-use std::process::{Child, ChildStdin, Command, Stdio};
+use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{mpsc, Arc, Mutex};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use common::{gridscada, wait_for, Client};
+use common::pair::*;
+use common::{wait_for, Client};
 use serde_json::{json, Value};
 
-const PASSWORD: &str = "a-long-enough-password";
 /// The configured takeover bound (the default).
 const TAKEOVER_BOUND: Duration = Duration::from_secs(5);
 
@@ -53,63 +51,6 @@ impl Rng {
         self.0 ^= self.0 << 17;
         self.0 % n
     }
-}
-
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-/// A database of its own on the test cluster, dropped at the end.
-struct Database {
-    base: String,
-    name: String,
-    url: String,
-}
-
-impl Database {
-    fn create(base: &str) -> Database {
-        let name = format!(
-            "gs_pair_{}_{}",
-            std::process::id(),
-            SystemTime::now()
-                .duration_since(UNIX_EPOCH)
-                .unwrap()
-                .subsec_nanos()
-        );
-        psql(base, &format!("CREATE DATABASE {name}"));
-        let (root, _) = base.rsplit_once('/').expect("URL with a database");
-        Database {
-            base: base.to_string(),
-            url: format!("{root}/{name}"),
-            name,
-        }
-    }
-}
-
-impl Drop for Database {
-    fn drop(&mut self) {
-        psql(
-            &self.base,
-            &format!("DROP DATABASE IF EXISTS {} WITH (FORCE)", self.name),
-        );
-    }
-}
-
-fn psql(url: &str, sql: &str) {
-    let out = Command::new("psql")
-        .arg(url)
-        .args(["-q", "-v", "ON_ERROR_STOP=1", "-c", sql])
-        .output()
-        .expect("psql");
-    assert!(
-        out.status.success(),
-        "{sql}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
 }
 
 /// A loopback TCP relay to PostgreSQL that the test can cut.
@@ -184,244 +125,6 @@ fn via(url: &str, port: u16) -> (String, String) {
     )
 }
 
-/// The demo plant's files in `dir`, its devices moved to ports from
-/// `port_base` (so parallel tests do not collide), on `storage`, as server
-/// `name` of the pair `servers`.
-fn write_plant(
-    dir: &Path,
-    storage: &str,
-    name: &str,
-    servers: &[(&str, u16)],
-    port_base: u16,
-) -> PathBuf {
-    std::fs::create_dir_all(dir).unwrap();
-    let tags = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tags");
-    for entry in std::fs::read_dir(&tags).unwrap() {
-        let path = entry.unwrap().path();
-        if path.extension().is_some_and(|e| e == "toml") {
-            let mut text = std::fs::read_to_string(&path).unwrap();
-            for p in 15000..15100u16 {
-                text = text.replace(
-                    &format!("127.0.0.1:{p}\""),
-                    &format!("127.0.0.1:{}\"", port_base + (p - 15000)),
-                );
-            }
-            if path.file_name().unwrap() == "gridscada.toml" {
-                text = text.replace("sqlite://gridscada.db", storage);
-                text.push_str(&format!("\n[redundancy]\nname = \"{name}\"\n"));
-                for (s, port) in servers {
-                    text.push_str(&format!(
-                        "[[redundancy.server]]\nname = \"{s}\"\nurl = \"http://127.0.0.1:{port}\"\n"
-                    ));
-                }
-            }
-            std::fs::write(dir.join(path.file_name().unwrap()), text).unwrap();
-        }
-    }
-    dir.join("gridscada.toml")
-}
-
-/// `gridscada sim` on the plant's configured addresses, with its fault
-/// injection on standard input.
-struct Sim {
-    child: Child,
-    stdin: ChildStdin,
-    answers: mpsc::Receiver<String>,
-}
-
-impl Sim {
-    fn start(config: &Path, log: &Path) -> Sim {
-        let log = std::fs::File::create(log).unwrap();
-        let mut child = gridscada()
-            .arg("sim")
-            .arg("--config")
-            .arg(config)
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::from(log))
-            .spawn()
-            .unwrap();
-        let stdin = child.stdin.take().unwrap();
-        let stdout = child.stdout.take().unwrap();
-        let (tx, answers) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stdout).lines() {
-                let Ok(line) = line else { return };
-                let _ = tx.send(line);
-            }
-        });
-        Sim {
-            child,
-            stdin,
-            answers,
-        }
-    }
-
-    fn cmd(&mut self, line: &str) {
-        writeln!(self.stdin, "{line}").unwrap();
-        let answer = self
-            .answers
-            .recv_timeout(Duration::from_secs(10))
-            .unwrap_or_else(|_| panic!("the simulator did not answer '{line}'"));
-        assert_eq!(answer, "ok", "{line}");
-    }
-}
-
-impl Drop for Sim {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-/// One server of the pair.
-struct Server {
-    name: &'static str,
-    config: PathBuf,
-    port: u16,
-    log: PathBuf,
-    child: Option<Child>,
-}
-
-impl Server {
-    fn addr(&self) -> String {
-        format!("127.0.0.1:{}", self.port)
-    }
-
-    fn start(&mut self) {
-        let log = std::fs::OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(&self.log)
-            .unwrap();
-        let mut child = gridscada()
-            .args(["--log-json", "serve", "--config"])
-            .arg(&self.config)
-            .args(["--http", &self.addr()])
-            .env("RUST_LOG", "info")
-            .stdout(Stdio::piped())
-            .stderr(Stdio::from(log))
-            .spawn()
-            .unwrap();
-        let stdout = child.stdout.take().unwrap();
-        let (tx, rx) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-                if line.contains("HMI and API") {
-                    let _ = tx.send(());
-                }
-            }
-        });
-        rx.recv_timeout(Duration::from_secs(60))
-            .unwrap_or_else(|_| {
-                panic!(
-                    "server {} did not start: {}",
-                    self.name,
-                    common::tail(&self.log)
-                )
-            });
-        self.child = Some(child);
-    }
-
-    fn pid(&self) -> u32 {
-        self.child.as_ref().expect("running").id()
-    }
-
-    fn kill9(&mut self) {
-        if let Some(mut c) = self.child.take() {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
-
-    fn signal(&self, sig: &str) {
-        let ok = Command::new("kill")
-            .args([sig, &self.pid().to_string()])
-            .status()
-            .unwrap()
-            .success();
-        assert!(ok, "kill {sig}");
-    }
-
-    /// `gridscada_pair_active` from its `/metrics` (None: no answer).
-    fn active(&self) -> Option<bool> {
-        let mut c = Client::new(&self.addr());
-        let (status, body) = c.try_request("GET", "/metrics", None).ok()?;
-        if status != 200 {
-            return None;
-        }
-        let text = body.as_str()?.to_string();
-        let line = text
-            .lines()
-            .find(|l| l.starts_with("gridscada_pair_active "))?;
-        let value: f64 = line.rsplit(' ').next()?.parse().ok()?;
-        Some(value == 1.0)
-    }
-}
-
-impl Drop for Server {
-    fn drop(&mut self) {
-        self.kill9();
-    }
-}
-
-/// One Modbus write as the writer logged it.
-#[derive(Debug, Clone)]
-struct FieldWrite {
-    t: f64,
-    server: String,
-    epoch: u64,
-    tag: String,
-    value: String,
-}
-
-/// RFC 3339 UTC (`2026-11-26T02:29:29.123456Z`) to seconds since 1970.
-fn rfc3339(s: &str) -> Option<f64> {
-    let (date, time) = s.trim_end_matches('Z').split_once('T')?;
-    let mut d = date.split('-').map(|x| x.parse::<i64>());
-    let (y, m, day) = (d.next()?.ok()?, d.next()?.ok()?, d.next()?.ok()?);
-    // Days from civil (Howard Hinnant's algorithm).
-    let y = if m <= 2 { y - 1 } else { y };
-    let era = y.div_euclid(400);
-    let yoe = y - era * 400;
-    let doy = (153 * (m + if m > 2 { -3 } else { 9 }) + 2) / 5 + day - 1;
-    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-    let days = era * 146097 + doe - 719468;
-    let mut t = time.split(':');
-    let (h, mi, sec) = (
-        t.next()?.parse::<f64>().ok()?,
-        t.next()?.parse::<f64>().ok()?,
-        t.next()?.parse::<f64>().ok()?,
-    );
-    Some(days as f64 * 86400.0 + h * 3600.0 + mi * 60.0 + sec)
-}
-
-/// Every field write in the servers' logs, in time order.
-fn field_writes(logs: &[&Path]) -> Vec<FieldWrite> {
-    let mut out = Vec::new();
-    for log in logs {
-        let text = std::fs::read_to_string(log).unwrap_or_default();
-        for line in text.lines() {
-            let Ok(v) = serde_json::from_str::<Value>(line) else {
-                continue;
-            };
-            if v["target"] != "gridscada::field_write" {
-                continue;
-            }
-            let f = &v["fields"];
-            out.push(FieldWrite {
-                t: rfc3339(v["timestamp"].as_str().unwrap_or("")).expect("timestamp"),
-                server: f["server"].as_str().unwrap_or("").to_string(),
-                epoch: f["epoch"].as_u64().expect("epoch"),
-                tag: f["tag"].as_str().unwrap_or("").to_string(),
-                value: f["value"].to_string().trim_matches('"').to_string(),
-            });
-        }
-    }
-    out.sort_by(|a, b| a.t.total_cmp(&b.t));
-    out
-}
-
 /// The log lines of `log` whose message contains `what`, as times.
 fn logged_at(log: &Path, what: &str) -> Vec<f64> {
     std::fs::read_to_string(log)
@@ -435,38 +138,6 @@ fn logged_at(log: &Path, what: &str) -> Vec<f64> {
         })
         .filter_map(|v| rfc3339(v["timestamp"].as_str()?))
         .collect()
-}
-
-fn login(addr: &str) -> Client {
-    let mut c = Client::new(addr);
-    let (status, body) = c.post(
-        "/api/session",
-        json!({"username": "op", "password": PASSWORD}),
-    );
-    assert_eq!(status, 200, "{body}");
-    c
-}
-
-/// Waits until exactly one of the pair is active; its index and how long
-/// that took.
-fn wait_active(servers: &[&Server], limit: Duration) -> (usize, Duration) {
-    let start = Instant::now();
-    loop {
-        let active: Vec<usize> = servers
-            .iter()
-            .enumerate()
-            .filter(|(_, s)| s.child.is_some() && s.active() == Some(true))
-            .map(|(i, _)| i)
-            .collect();
-        if active.len() == 1 {
-            return (active[0], start.elapsed());
-        }
-        assert!(
-            start.elapsed() < limit,
-            "no single active server after {limit:?}: {active:?}"
-        );
-        std::thread::sleep(Duration::from_millis(25));
-    }
 }
 
 /// Waits until `panel` on the server at `c` has finished with its fault:
@@ -548,25 +219,7 @@ fn the_pair_keeps_isolating_faults_through_kills_freezes_and_a_cut_database() {
 
     let mut sim = Sim::start(&cb, &dir.path().join("sim.log"));
     // The operator, in the shared database.
-    let mut add = gridscada()
-        .args(["user", "add", "op", "--role", "operator", "--config"])
-        .arg(&cb)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    add.stdin
-        .take()
-        .unwrap()
-        .write_all(format!("{PASSWORD}\n").as_bytes())
-        .unwrap();
-    let out = add.wait_with_output().unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    add_operator(&cb);
 
     let mut servers = [
         Server {
@@ -791,20 +444,7 @@ fn the_pair_keeps_isolating_faults_through_kills_freezes_and_a_cut_database() {
     // by a later epoch in its round.
     let writes = field_writes(&[&servers[0].log, &servers[1].log]);
     assert!(!writes.is_empty(), "no field writes were logged");
-    let mut owner: HashMap<u64, &str> = HashMap::new();
-    for w in &writes {
-        let o = owner.entry(w.epoch).or_insert(&w.server);
-        assert_eq!(*o, w.server, "epoch {} used by two servers: {w:?}", w.epoch);
-    }
-    let mut newest = 0;
-    for w in &writes {
-        assert!(
-            w.epoch >= newest,
-            "a write of epoch {} after one of epoch {newest}: {w:?}",
-            w.epoch
-        );
-        newest = w.epoch;
-    }
+    let epochs = assert_fenced(&writes);
     for (round, epoch, panel, zone) in &known_faulty {
         let (killed_at, recovering_at) = round_windows[*round];
         let tag = format!("{}.Zone{zone}.Cmd", prefixes[panel]);
@@ -831,7 +471,7 @@ fn the_pair_keeps_isolating_faults_through_kills_freezes_and_a_cut_database() {
         sorted[sorted.len() / 2],
         sorted[sorted.len() - 1],
         writes.len(),
-        owner.len(),
+        epochs,
         known_faulty.len()
     );
 }

@@ -97,14 +97,14 @@ pub struct AlarmHistoryFilter {
     pub oldest_first: bool,
 }
 
-/// The conditions of [`AlarmHistoryFilter`], binds `$1` to `$9` (the list
+/// The conditions of [`AlarmHistoryFilter`], binds `$1` to `$10`, the last the site (the list
 /// and the CSV export filter alike).
 pub(crate) const HISTORY_WHERE: &str =
     "WHERE ($1 IS NULL OR ts >= $1) AND ($2 IS NULL OR ts < $2) \
        AND ($3 IS NULL OR alarm_key = $3) AND ($4 IS NULL OR tag = $4) \
        AND ($5 IS NULL OR kind = $5) AND ($6 IS NULL OR selection = $6) \
        AND ($7 IS NULL OR priority >= $7) AND ($8 = FALSE OR activation = TRUE) \
-       AND ($9 IS NULL OR lower(message) LIKE $9 ESCAPE '\\')";
+       AND ($9 IS NULL OR lower(message) LIKE $9 ESCAPE '\\') AND site = $10";
 
 /// Activations of one alarm in a time range.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
@@ -188,14 +188,14 @@ fn decode_value(text: &str) -> Option<Value> {
 /// so the two cannot drift apart. Yields the new row's id, or no row when a
 /// record with the same audit id is already stored (a spool replay).
 macro_rules! insert_alarm_transition {
-    ($t:expr, $audit_id:expr) => {{
+    ($site:expr, $t:expr, $audit_id:expr) => {{
         let t = $t;
         sqlx::query_scalar::<_, i64>(
             "INSERT INTO alarm_history (ts, alarm_key, tag, kind, from_state, to_state, \
                cause, activation, value, limit_value, user_name, message, priority, \
-               selection, audit_id) \
-             VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15) \
-             ON CONFLICT (audit_id) DO NOTHING \
+               selection, audit_id, site) \
+             VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, $16) \
+             ON CONFLICT (site, audit_id) DO NOTHING \
              RETURNING id",
         )
         .bind(t.ts.as_millis())
@@ -213,6 +213,7 @@ macro_rules! insert_alarm_transition {
         .bind(t.priority)
         .bind(&t.selection)
         .bind($audit_id)
+        .bind($site)
     }};
 }
 pub(crate) use insert_alarm_transition;
@@ -236,6 +237,7 @@ impl Store {
                 2048,
             )?;
         }
+        self.writable("saving alarm states")?;
         on_backend!(self, writer, |p| {
             let mut tx = p.begin().await.map_err(db("saving alarm states"))?;
             for s in states {
@@ -244,10 +246,10 @@ impl Store {
                        active_since, last_change, message, priority, selection, shelved_by, \
                        shelved_at, shelved_until, shelve_reason, out_of_service, \
                        out_of_service_by, out_of_service_since, out_of_service_reason, \
-                       activation_value, out_of_service_until) \
+                       activation_value, out_of_service_until, site) \
                      VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, \
-                       $16, $17, $18, $19, $20) \
-                     ON CONFLICT (alarm_key) DO UPDATE SET kind = excluded.kind, \
+                       $16, $17, $18, $19, $20, $21) \
+                     ON CONFLICT (site, alarm_key) DO UPDATE SET kind = excluded.kind, \
                        state = excluded.state, active = excluded.active, acked = excluded.acked, \
                        active_since = excluded.active_since, last_change = excluded.last_change, \
                        message = excluded.message, priority = excluded.priority, \
@@ -282,6 +284,7 @@ impl Store {
                 .bind(s.out_of_service_reason.as_deref())
                 .bind(s.activation_value.as_ref().and_then(encode_value))
                 .bind(s.out_of_service_until.map(Timestamp::as_millis))
+                .bind(&*self.site)
                 .execute(&mut *tx)
                 .await
                 .map_err(db("saving alarm states"))?;
@@ -294,8 +297,10 @@ impl Store {
     /// Forgets the persisted state of an alarm (e.g. it returned to normal and
     /// is acknowledged, or it left the configuration). Returns whether it existed.
     pub async fn delete_alarm_state(&self, alarm_key: &str) -> Result<bool> {
+        self.writable("deleting an alarm state")?;
         Ok(on_backend!(self, writer, |p| {
-            sqlx::query("DELETE FROM alarm_states WHERE alarm_key = $1")
+            sqlx::query("DELETE FROM alarm_states WHERE site = $1 AND alarm_key = $2")
+                .bind(&*self.site)
                 .bind(alarm_key)
                 .execute(p)
                 .await
@@ -314,8 +319,9 @@ impl Store {
                    message, priority, selection, shelved_by, shelved_at, shelved_until, \
                    shelve_reason, out_of_service, out_of_service_by, out_of_service_since, \
                    out_of_service_reason, activation_value, out_of_service_until \
-                 FROM alarm_states ORDER BY alarm_key",
+                 FROM alarm_states WHERE site = $1 ORDER BY alarm_key",
             )
+            .bind(&*self.site)
             .fetch_all(p)
             .await
             .map_err(db("loading alarm states"))?;
@@ -400,11 +406,12 @@ impl Store {
                 64,
             )?;
         }
+        self.writable("recording alarm transitions")?;
         Ok(on_backend!(self, writer, |p| {
             let mut tx = p.begin().await.map_err(db("recording alarm transitions"))?;
             let mut ids = Vec::with_capacity(transitions.len());
             for t in transitions {
-                let id: i64 = insert_alarm_transition!(t, None::<i64>)
+                let id: i64 = insert_alarm_transition!(&*self.site, t, None::<i64>)
                     .fetch_one(&mut *tx)
                     .await
                     .map_err(db("recording alarm transitions"))?;
@@ -427,7 +434,7 @@ impl Store {
         let sql = format!(
             "SELECT id, ts, alarm_key, tag, kind, from_state, to_state, cause, activation, value, \
                limit_value, user_name, message, priority, selection FROM alarm_history \
-             {HISTORY_WHERE} ORDER BY ts {order}, id {order} LIMIT $10 OFFSET $11"
+             {HISTORY_WHERE} ORDER BY ts {order}, id {order} LIMIT $11 OFFSET $12"
         );
         let rows: Vec<TransitionRow> = on_backend!(self, reader, |p| {
             sqlx::query_as(&sql)
@@ -440,6 +447,7 @@ impl Store {
                 .bind(f.min_priority)
                 .bind(f.activations_only)
                 .bind(text.as_deref())
+                .bind(&*self.site)
                 .bind(f.limit.min(MAX_LIST) as i64)
                 .bind(f.offset as i64)
                 .fetch_all(p)
@@ -461,10 +469,11 @@ impl Store {
             sqlx::query_as(
                 "SELECT id, ts, alarm_key, tag, kind, from_state, to_state, cause, activation, value, \
                    limit_value, user_name, message, priority, selection FROM alarm_history \
-                 WHERE activation = TRUE AND ts >= $1 AND ts < $2 ORDER BY ts, id",
+                 WHERE activation = TRUE AND ts >= $1 AND ts < $2 AND site = $3 ORDER BY ts, id",
             )
             .bind(from.as_millis())
             .bind(to.as_millis())
+            .bind(&*self.site)
             .fetch_all(p)
             .await
             .map_err(db("listing alarm activations"))?
@@ -481,11 +490,12 @@ impl Store {
         let rows: Vec<(String, i64)> = on_backend!(self, reader, |p| {
             sqlx::query_as(
                 "SELECT alarm_key, count(*) AS n FROM alarm_history \
-                 WHERE activation = TRUE AND ts >= $1 AND ts < $2 \
+                 WHERE activation = TRUE AND ts >= $1 AND ts < $2 AND site = $3 \
                  GROUP BY alarm_key ORDER BY n DESC, alarm_key",
             )
             .bind(from.as_millis())
             .bind(to.as_millis())
+            .bind(&*self.site)
             .fetch_all(p)
             .await
             .map_err(db("counting alarm activations"))?

@@ -95,6 +95,7 @@ impl Store {
         if ok.is_empty() {
             return Ok(rejected);
         }
+        self.writable("recording the audit trail")?;
         on_backend!(self, writer, |p| {
             let mut tx = p.begin().await.map_err(db("recording the audit trail"))?;
             for r in &ok {
@@ -102,9 +103,10 @@ impl Store {
                     AuditBody::Event(e) => {
                         let e = escape_controls(e);
                         sqlx::query(
-                            "INSERT INTO events (ts, user_name, source, kind, message, audit_id) \
-                             VALUES ($1, $2, $3, $4, $5, $6) \
-                             ON CONFLICT (audit_id) DO NOTHING",
+                            "INSERT INTO events (ts, user_name, source, kind, message, audit_id, \
+                               site) \
+                             VALUES ($1, $2, $3, $4, $5, $6, $7) \
+                             ON CONFLICT (site, audit_id) DO NOTHING",
                         )
                         .bind(e.ts.as_millis())
                         .bind(e.user.as_deref())
@@ -112,12 +114,13 @@ impl Store {
                         .bind(&e.kind)
                         .bind(&e.message)
                         .bind(r.seq)
+                        .bind(&*self.site)
                         .execute(&mut *tx)
                         .await
                         .map_err(db("recording events"))?;
                     }
                     AuditBody::Transition(t) => {
-                        crate::alarms::insert_alarm_transition!(t, r.seq)
+                        crate::alarms::insert_alarm_transition!(&*self.site, t, r.seq)
                             .fetch_optional(&mut *tx)
                             .await
                             .map_err(db("recording alarm transitions"))?;
@@ -134,9 +137,10 @@ impl Store {
     pub async fn max_audit_id(&self) -> Result<i64> {
         let (e, a): (Option<i64>, Option<i64>) = on_backend!(self, reader, |p| {
             sqlx::query_as(
-                "SELECT (SELECT max(audit_id) FROM events), \
-                        (SELECT max(audit_id) FROM alarm_history)",
+                "SELECT (SELECT max(audit_id) FROM events WHERE site = $1), \
+                        (SELECT max(audit_id) FROM alarm_history WHERE site = $1)",
             )
+            .bind(&*self.site)
             .fetch_one(p)
             .await
             .map_err(db("reading the last audit id"))?
@@ -154,15 +158,17 @@ impl Store {
         before: Timestamp,
         batch: u32,
     ) -> Result<u64> {
+        self.writable("applying audit retention")?;
         let sql = format!(
             "DELETE FROM {t} WHERE id IN \
-               (SELECT id FROM {t} WHERE ts < $1 ORDER BY ts, id LIMIT $2)",
+               (SELECT id FROM {t} WHERE ts < $1 AND site = $3 ORDER BY ts, id LIMIT $2)",
             t = table.name()
         );
         Ok(on_backend!(self, writer, |p| {
             sqlx::query(&sql)
                 .bind(before.as_millis())
                 .bind(batch.max(1) as i64)
+                .bind(&*self.site)
                 .execute(p)
                 .await
                 .map_err(db("applying audit retention"))?

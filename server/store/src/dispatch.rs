@@ -83,10 +83,12 @@ impl Store {
         check_text("dispatch mode", &d.mode, 64)?;
         let inputs = d.inputs.to_string();
         let setpoints = d.setpoints.to_string();
+        self.writable("recording a dispatch")?;
         Ok(on_backend!(self, writer, |p| {
             sqlx::query_scalar(
                 "INSERT INTO dispatches (ts, status, mode, objective, solve_ms, inputs_json, \
-                   setpoints_json, reason) VALUES ($1, $2, $3, $4, $5, $6, $7, $8) RETURNING id",
+                   setpoints_json, reason, site) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9) \
+                 RETURNING id",
             )
             .bind(d.ts.as_millis())
             .bind(&d.status)
@@ -100,6 +102,7 @@ impl Store {
             .bind(inputs)
             .bind(setpoints)
             .bind(d.reason.as_deref())
+            .bind(&*self.site)
             .fetch_one(p)
             .await
             .map_err(db("recording a dispatch"))?
@@ -110,8 +113,9 @@ impl Store {
     pub async fn latest_dispatch(&self) -> Result<Option<DispatchRecord>> {
         let row: Option<Row> = on_backend!(self, reader, |p| {
             sqlx::query_as(&format!(
-                "SELECT {COLS} FROM dispatches ORDER BY ts DESC, id DESC LIMIT 1"
+                "SELECT {COLS} FROM dispatches WHERE site = $1 ORDER BY ts DESC, id DESC LIMIT 1"
             ))
+            .bind(&*self.site)
             .fetch_optional(p)
             .await
             .map_err(db("reading the latest dispatch"))?
@@ -128,12 +132,13 @@ impl Store {
     ) -> Result<Vec<DispatchRecord>> {
         let rows: Vec<Row> = on_backend!(self, reader, |p| {
             sqlx::query_as(&format!(
-                "SELECT {COLS} FROM dispatches WHERE ts >= $1 AND ts < $2 \
+                "SELECT {COLS} FROM dispatches WHERE ts >= $1 AND ts < $2 AND site = $4 \
                  ORDER BY ts DESC, id DESC LIMIT $3"
             ))
             .bind(from.as_millis())
             .bind(to.as_millis())
             .bind(limit.min(MAX_LIST) as i64)
+            .bind(&*self.site)
             .fetch_all(p)
             .await
             .map_err(db("listing dispatches"))?

@@ -50,12 +50,12 @@ pub struct EventFilter {
     pub offset: u32,
 }
 
-/// The conditions of [`EventFilter`], binds `$1` to `$6` (the list and the
+/// The conditions of [`EventFilter`], binds `$1` to `$7`, the last the site (the list and the
 /// CSV export filter alike).
 pub(crate) const EVENTS_WHERE: &str = "WHERE ($1 IS NULL OR ts >= $1) AND ($2 IS NULL OR ts < $2) \
        AND ($3 IS NULL OR kind = $3) AND ($4 IS NULL OR user_name = $4) \
        AND ($5 IS NULL OR source = $5) \
-       AND ($6 IS NULL OR lower(message) LIKE $6 ESCAPE '\\')";
+       AND ($6 IS NULL OR lower(message) LIKE $6 ESCAPE '\\') AND site = $7";
 
 /// The most rows one list query returns.
 pub(crate) const MAX_LIST: u32 = 10_000;
@@ -141,19 +141,21 @@ impl Store {
                 check_text("event user", u, 256)?;
             }
         }
+        self.writable("recording events")?;
         Ok(on_backend!(self, writer, |p| {
             let mut tx = p.begin().await.map_err(db("recording events"))?;
             let mut ids = Vec::with_capacity(events.len());
             for e in events {
                 let id: i64 = sqlx::query_scalar(
-                    "INSERT INTO events (ts, user_name, source, kind, message) \
-                     VALUES ($1, $2, $3, $4, $5) RETURNING id",
+                    "INSERT INTO events (ts, user_name, source, kind, message, site) \
+                     VALUES ($1, $2, $3, $4, $5, $6) RETURNING id",
                 )
                 .bind(e.ts.as_millis())
                 .bind(e.user.as_deref())
                 .bind(&e.source)
                 .bind(&e.kind)
                 .bind(&e.message)
+                .bind(&*self.site)
                 .fetch_one(&mut *tx)
                 .await
                 .map_err(db("recording events"))?;
@@ -170,7 +172,7 @@ impl Store {
         let limit = filter.limit.min(MAX_LIST) as i64;
         let sql = format!(
             "SELECT id, ts, user_name, source, kind, message FROM events {EVENTS_WHERE} \
-             ORDER BY ts DESC, id DESC LIMIT $7 OFFSET $8"
+             ORDER BY ts DESC, id DESC LIMIT $8 OFFSET $9"
         );
         let rows: Vec<(i64, i64, Option<String>, String, String, String)> =
             on_backend!(self, reader, |p| {
@@ -181,6 +183,7 @@ impl Store {
                     .bind(filter.user.as_deref())
                     .bind(filter.source.as_deref())
                     .bind(text.as_deref())
+                    .bind(&*self.site)
                     .bind(limit)
                     .bind(filter.offset as i64)
                     .fetch_all(p)

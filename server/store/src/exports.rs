@@ -46,6 +46,7 @@ impl Store {
                 .bind(filter.user.as_deref())
                 .bind(filter.source.as_deref())
                 .bind(text.as_deref())
+                .bind(&*self.site)
                 .fetch(p);
             while let Some((_, ts, user, source, kind, message)) =
                 rows.try_next().await.map_err(db("exporting events"))?
@@ -91,6 +92,7 @@ impl Store {
                 .bind(f.min_priority)
                 .bind(f.activations_only)
                 .bind(text.as_deref())
+                .bind(&*self.site)
                 .fetch(p);
             while let Some(r) = rows
                 .try_next()
@@ -126,7 +128,7 @@ impl Store {
         out: &mut W,
     ) -> Result<u64> {
         let sql = format!(
-            "SELECT {DISPATCH_COLS} FROM dispatches WHERE ts >= $1 AND ts < $2 \
+            "SELECT {DISPATCH_COLS} FROM dispatches WHERE ts >= $1 AND ts < $2 AND site = $3 \
              ORDER BY ts DESC, id DESC"
         );
         let mut w = CsvWriter::new(
@@ -138,6 +140,7 @@ impl Store {
             let mut rows = sqlx::query_as::<_, DispatchRow>(&sql)
                 .bind(from.as_millis())
                 .bind(to.as_millis())
+                .bind(&*self.site)
                 .fetch(p);
             while let Some(r) = rows.try_next().await.map_err(db("exporting dispatches"))? {
                 w.time(r.1);

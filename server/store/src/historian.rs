@@ -607,6 +607,7 @@ impl Store {
     /// Deletes samples older than `before`: of one tag, or of all tags.
     /// Returns the number of rows deleted.
     pub async fn delete_samples_before(&self, tag: Option<&str>, before: Timestamp) -> Result<u64> {
+        self.writable("deleting historian samples")?;
         let ids: Vec<i64> = match tag {
             Some(t) => self.tag_ids(&[t], false).await?.into_values().collect(),
             None => self.all_tag_ids().await?,
@@ -632,9 +633,11 @@ impl Store {
     /// Applies a retention policy at `now`: raw samples per tag, roll-ups per
     /// level. Returns the number of rows deleted (raw and roll-up).
     pub async fn apply_retention(&self, policy: &RetentionPolicy, now: Timestamp) -> Result<u64> {
+        self.writable("applying historian retention")?;
         const DAY_MS: i64 = 86_400_000;
         let all: Vec<(i64, String)> = on_backend!(self, reader, |p| {
-            sqlx::query_as("SELECT id, name FROM tags")
+            sqlx::query_as("SELECT id, name FROM tags WHERE site = $1")
+                .bind(&*self.site)
                 .fetch_all(p)
                 .await
                 .map_err(db("listing historian tags"))?
@@ -689,7 +692,8 @@ impl Store {
 
     async fn all_tag_ids(&self) -> Result<Vec<i64>> {
         Ok(on_backend!(self, reader, |p| {
-            sqlx::query_scalar("SELECT id FROM tags")
+            sqlx::query_scalar("SELECT id FROM tags WHERE site = $1")
+                .bind(&*self.site)
                 .fetch_all(p)
                 .await
                 .map_err(db("listing historian tags"))?
@@ -699,7 +703,8 @@ impl Store {
     /// Names of every tag the historian has logged.
     pub async fn historian_tags(&self) -> Result<Vec<String>> {
         Ok(on_backend!(self, reader, |p| {
-            sqlx::query_scalar("SELECT name FROM tags ORDER BY name")
+            sqlx::query_scalar("SELECT name FROM tags WHERE site = $1 ORDER BY name")
+                .bind(&*self.site)
                 .fetch_all(p)
                 .await
                 .map_err(db("listing historian tags"))?

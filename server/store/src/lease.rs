@@ -94,12 +94,19 @@ impl Store {
         check_text("panel id", panel, 256)?;
         let json = state.to_string();
         let epoch = i64::try_from(fence.epoch).unwrap_or(i64::MAX);
+        self.writable("saving a panel's state under the lease")?;
+        if fence.site != *self.site {
+            return Err(StoreError::Invalid(format!(
+                "saving panel {panel}: the lease of site '{}' does not fence site '{}'",
+                fence.site, self.site
+            )));
+        }
         let done = on_backend!(self, writer, |p| {
             sqlx::query(
-                "INSERT INTO panel_states (panel_id, state_json, updated_at) \
-                 SELECT $1, $2, $3 WHERE EXISTS (SELECT 1 FROM leadership \
+                "INSERT INTO panel_states (panel_id, state_json, updated_at, site) \
+                 SELECT $1, $2, $3, $4 WHERE EXISTS (SELECT 1 FROM leadership \
                  WHERE site = $4 AND holder = $5 AND epoch = $6) \
-                 ON CONFLICT (panel_id) DO UPDATE SET state_json = excluded.state_json, \
+                 ON CONFLICT (site, panel_id) DO UPDATE SET state_json = excluded.state_json, \
                  updated_at = excluded.updated_at",
             )
             .bind(panel)

@@ -83,7 +83,7 @@ pub use spool::{
     read_spool, AuditConfig, AuditError, AuditHandle, AuditMetrics, AuditTrail, SpoolContents,
     SPOOL_FILE,
 };
-pub use store::{BackendKind, OpenOptions, SqliteSync, Store};
+pub use store::{BackendKind, OpenOptions, SqliteSync, Store, DEFAULT_SITE};
 pub use users::{NewUser, User, UserSummary};
 pub use writer::{Historian, HistorianConfig, HistorianHandle, HistorianMetrics};
 

@@ -128,11 +128,12 @@ impl Store {
     pub async fn enqueue_notification(&self, n: &NewNotification) -> Result<i64> {
         check_text("notification subject", &n.subject, 1000)?;
         check_text("notification message", &n.message, 64 * 1024)?;
+        self.writable("queueing a notification")?;
         let id: i64 = on_backend!(self, writer, |p| {
             sqlx::query_scalar(
                 "INSERT INTO notifications (created_at, route, contact, address, alarm_key, level, \
-                 subject, message, status, attempts, next_attempt, give_up_at) \
-                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, 'pending', 0, $1, $9) RETURNING id",
+                 subject, message, status, attempts, next_attempt, give_up_at, site) \
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, 'pending', 0, $1, $9, $10) RETURNING id",
             )
             .bind(n.created_at.as_millis())
             .bind(&n.route)
@@ -143,6 +144,7 @@ impl Store {
             .bind(&n.subject)
             .bind(&n.message)
             .bind(n.give_up_at.as_millis())
+            .bind(&*self.site)
             .fetch_one(p)
             .await
             .map_err(db("queueing a notification"))?
@@ -155,10 +157,11 @@ impl Store {
         let rows: Vec<Row> = on_backend!(self, reader, |p| {
             sqlx::query_as(&format!(
                 "SELECT {COLS} FROM notifications WHERE status = 'pending' AND next_attempt <= $1 \
-                 ORDER BY next_attempt, id LIMIT $2"
+                 AND site = $3 ORDER BY next_attempt, id LIMIT $2"
             ))
             .bind(now.as_millis())
             .bind(i64::from(limit))
+            .bind(&*self.site)
             .fetch_all(p)
             .await
             .map_err(db("reading due notifications"))?
@@ -170,8 +173,9 @@ impl Store {
     pub async fn next_notification_due(&self) -> Result<Option<Timestamp>> {
         let t: Option<i64> = on_backend!(self, reader, |p| {
             sqlx::query_scalar(
-                "SELECT MIN(next_attempt) FROM notifications WHERE status = 'pending'",
+                "SELECT MIN(next_attempt) FROM notifications WHERE status = 'pending' AND site = $1",
             )
+            .bind(&*self.site)
             .fetch_one(p)
             .await
             .map_err(db("reading due notifications"))?
@@ -182,10 +186,13 @@ impl Store {
     /// How many messages wait for delivery.
     pub async fn pending_notifications(&self) -> Result<u64> {
         let n: i64 = on_backend!(self, reader, |p| {
-            sqlx::query_scalar("SELECT COUNT(*) FROM notifications WHERE status = 'pending'")
-                .fetch_one(p)
-                .await
-                .map_err(db("counting pending notifications"))?
+            sqlx::query_scalar(
+                "SELECT COUNT(*) FROM notifications WHERE status = 'pending' AND site = $1",
+            )
+            .bind(&*self.site)
+            .fetch_one(p)
+            .await
+            .map_err(db("counting pending notifications"))?
         });
         Ok(u64::try_from(n).unwrap_or(0))
     }
@@ -253,11 +260,12 @@ impl Store {
         let rows: Vec<(String, i64, i64)> = on_backend!(self, reader, |p| {
             sqlx::query_as(
                 "SELECT alarm_key, MAX(level), MAX(created_at) FROM notifications \
-                 WHERE route = $1 AND alarm_key IS NOT NULL AND created_at >= $2 \
+                 WHERE route = $1 AND alarm_key IS NOT NULL AND created_at >= $2 AND site = $3 \
                  GROUP BY alarm_key",
             )
             .bind(route)
             .bind(since.as_millis())
+            .bind(&*self.site)
             .fetch_all(p)
             .await
             .map_err(db("reading notified alarms"))?
@@ -276,9 +284,10 @@ impl Store {
     pub async fn notifications(&self, limit: u32) -> Result<Vec<Notification>> {
         let rows: Vec<Row> = on_backend!(self, reader, |p| {
             sqlx::query_as(&format!(
-                "SELECT {COLS} FROM notifications ORDER BY id DESC LIMIT $1"
+                "SELECT {COLS} FROM notifications WHERE site = $2 ORDER BY id DESC LIMIT $1"
             ))
             .bind(i64::from(limit))
+            .bind(&*self.site)
             .fetch_all(p)
             .await
             .map_err(db("listing notifications"))?
@@ -292,10 +301,11 @@ impl Store {
         Ok(on_backend!(self, writer, |p| {
             sqlx::query(
                 "DELETE FROM notifications WHERE id IN (SELECT id FROM notifications \
-                 WHERE status <> 'pending' AND done_at < $1 ORDER BY id LIMIT $2)",
+                 WHERE status <> 'pending' AND done_at < $1 AND site = $3 ORDER BY id LIMIT $2)",
             )
             .bind(before.as_millis())
             .bind(i64::from(limit))
+            .bind(&*self.site)
             .execute(p)
             .await
             .map_err(db("pruning notifications"))?

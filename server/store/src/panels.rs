@@ -21,15 +21,18 @@ impl Store {
     ) -> Result<()> {
         check_text("panel id", panel, 256)?;
         let json = state.to_string();
+        self.writable("saving a panel's state")?;
         on_backend!(self, writer, |p| {
             sqlx::query(
-                "INSERT INTO panel_states (panel_id, state_json, updated_at) VALUES ($1, $2, $3) \
-                 ON CONFLICT (panel_id) DO UPDATE SET state_json = excluded.state_json, \
+                "INSERT INTO panel_states (panel_id, state_json, updated_at, site) \
+                 VALUES ($1, $2, $3, $4) \
+                 ON CONFLICT (site, panel_id) DO UPDATE SET state_json = excluded.state_json, \
                  updated_at = excluded.updated_at",
             )
             .bind(panel)
             .bind(&json)
             .bind(at.as_millis())
+            .bind(&*self.site)
             .execute(p)
             .await
             .map(|_| ())
@@ -41,10 +44,13 @@ impl Store {
     /// Every saved panel state, by panel id.
     pub async fn panel_states(&self) -> Result<Vec<(String, serde_json::Value)>> {
         let rows: Vec<(String, String)> = on_backend!(self, reader, |p| {
-            sqlx::query_as("SELECT panel_id, state_json FROM panel_states ORDER BY panel_id")
-                .fetch_all(p)
-                .await
-                .map_err(db("reading the panels' states"))?
+            sqlx::query_as(
+                "SELECT panel_id, state_json FROM panel_states WHERE site = $1 ORDER BY panel_id",
+            )
+            .bind(&*self.site)
+            .fetch_all(p)
+            .await
+            .map_err(db("reading the panels' states"))?
         });
         rows.into_iter()
             .map(|(id, json)| {

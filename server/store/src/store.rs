@@ -55,7 +55,13 @@ pub struct OpenOptions {
     pub pg_schema: Option<String>,
     /// How long to wait for a connection or a lock before failing a call.
     pub acquire_timeout: Duration,
+    /// The site this server writes as (`[server] site`): every row of a
+    /// plant's history names it, so several sites can share one database.
+    pub site: String,
 }
+
+/// The site of a store opened without one (the configuration's default).
+pub const DEFAULT_SITE: &str = "main";
 
 impl OpenOptions {
     pub fn new(data_dir: impl Into<PathBuf>) -> Self {
@@ -65,6 +71,7 @@ impl OpenOptions {
             max_connections: 4,
             pg_schema: None,
             acquire_timeout: Duration::from_secs(30),
+            site: DEFAULT_SITE.to_string(),
         }
     }
 }
@@ -100,14 +107,21 @@ pub(crate) struct Inner {
 }
 
 /// The database. Cheap to clone (shared pools).
+///
+/// A store reads and writes the rows of one site ([`Store::site`]);
+/// [`Store::site_reader`] gives a read-only view of another site's.
 #[derive(Clone)]
 pub struct Store {
     pub(crate) inner: Arc<Inner>,
+    /// The site whose rows this handle reads (and, unless a view, writes).
+    pub(crate) site: Arc<str>,
+    /// A view of another site: it refuses every write.
+    view: bool,
 }
 
 impl std::fmt::Debug for Store {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "Store({})", self.inner.description)
+        write!(f, "Store({}, site {})", self.inner.description, self.site)
     }
 }
 
@@ -162,6 +176,11 @@ const SQLITE_MIGRATIONS: &[(i64, &str, &str)] = &[
         "notifications, out-of-service ends",
         include_str!("../migrations/sqlite/0010_notifications.sql"),
     ),
+    (
+        11,
+        "several sites on one database",
+        include_str!("../migrations/sqlite/0011_sites.sql"),
+    ),
 ];
 const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
     (
@@ -213,6 +232,11 @@ const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
         10,
         "notifications, out-of-service ends",
         include_str!("../migrations/postgres/0010_notifications.sql"),
+    ),
+    (
+        11,
+        "several sites on one database",
+        include_str!("../migrations/postgres/0011_sites.sql"),
     ),
 ];
 
@@ -375,7 +399,10 @@ impl Store {
             .await
             .map_err(open_err(format!("SQLite database {shown} (readers)")))?;
         tracing::info!(path = %shown, sync = ?options.sqlite_sync, "opened SQLite store");
+        check_site(&options.site)?;
         Ok(Store {
+            site: options.site.as_str().into(),
+            view: false,
             inner: Arc::new(Inner {
                 backend: Backend::Sqlite(SqliteBackend { write, read }),
                 tag_ids: Mutex::new(HashMap::new()),
@@ -426,7 +453,10 @@ impl Store {
                 source: Box::new(e),
             })?;
         tracing::info!(url = %shown, schema = ?options.pg_schema, "opened PostgreSQL store");
+        check_site(&options.site)?;
         Ok(Store {
+            site: options.site.as_str().into(),
+            view: false,
             inner: Arc::new(Inner {
                 backend: Backend::Postgres(pool),
                 tag_ids: Mutex::new(HashMap::new()),
@@ -440,6 +470,54 @@ impl Store {
                 ),
             }),
         })
+    }
+
+    /// The site whose rows this store reads and writes.
+    pub fn site(&self) -> &str {
+        &self.site
+    }
+
+    /// A read-only view of `site`'s rows (events, alarm history, trends,
+    /// dispatches) on the same database and pools, for an operator of this
+    /// site looking at another's history. Every write through it is
+    /// refused. `site` equal to this store's gives this store itself.
+    pub fn site_reader(&self, site: &str) -> Result<Store> {
+        check_site(site)?;
+        if site == &*self.site {
+            return Ok(self.clone());
+        }
+        Ok(Store {
+            inner: self.inner.clone(),
+            site: site.into(),
+            view: true,
+        })
+    }
+
+    /// Refuses a write through a view of another site.
+    pub(crate) fn writable(&self, what: &str) -> Result<()> {
+        if self.view {
+            return Err(StoreError::Invalid(format!(
+                "{what}: site '{}' is read-only from here (another site's history)",
+                self.site
+            )));
+        }
+        Ok(())
+    }
+
+    /// Every site with rows in this database (historian tags, alarm or
+    /// panel states, a lease or a pair's server), sorted. Small tables
+    /// only: the long histories are not scanned.
+    pub async fn sites(&self) -> Result<Vec<String>> {
+        Ok(on_backend!(self, reader, |p| {
+            sqlx::query_scalar(
+                "SELECT site FROM tags UNION SELECT site FROM alarm_states \
+                 UNION SELECT site FROM panel_states UNION SELECT site FROM leadership \
+                 UNION SELECT site FROM pair_servers ORDER BY 1",
+            )
+            .fetch_all(p)
+            .await
+            .map_err(db("listing the sites"))?
+        }))
     }
 
     pub fn backend(&self) -> BackendKind {
@@ -560,7 +638,18 @@ impl Store {
     ) -> Result<HashMap<Arc<str>, i64>> {
         let mut found = HashMap::with_capacity(names.len());
         let mut missing: Vec<&str> = Vec::new();
-        {
+        if create {
+            self.writable("registering historian tags")?;
+        }
+        if self.view {
+            // Another site's ids: looked up each time, not mixed into the
+            // cache of this site's.
+            for &n in names {
+                if !missing.contains(&n) {
+                    missing.push(n)
+                }
+            }
+        } else {
             let cache = self.inner.tag_ids.lock();
             for &n in names {
                 match cache.get_key_value(n) {
@@ -587,17 +676,21 @@ impl Store {
                 let mut out = Vec::with_capacity(missing.len());
                 for n in &missing {
                     sqlx::query(
-                        "INSERT INTO tags (name) VALUES ($1) ON CONFLICT (name) DO NOTHING",
+                        "INSERT INTO tags (site, name) VALUES ($1, $2) \
+                         ON CONFLICT (site, name) DO NOTHING",
                     )
+                    .bind(&*self.site)
                     .bind(*n)
                     .execute(&mut *tx)
                     .await
                     .map_err(db("registering historian tags"))?;
-                    let id: i64 = sqlx::query_scalar("SELECT id FROM tags WHERE name = $1")
-                        .bind(*n)
-                        .fetch_one(&mut *tx)
-                        .await
-                        .map_err(db("registering historian tags"))?;
+                    let id: i64 =
+                        sqlx::query_scalar("SELECT id FROM tags WHERE site = $1 AND name = $2")
+                            .bind(&*self.site)
+                            .bind(*n)
+                            .fetch_one(&mut *tx)
+                            .await
+                            .map_err(db("registering historian tags"))?;
                     out.push((n.to_string(), id));
                 }
                 tx.commit()
@@ -609,11 +702,13 @@ impl Store {
             on_backend!(self, reader, |p| {
                 let mut out = Vec::new();
                 for n in &missing {
-                    let id: Option<i64> = sqlx::query_scalar("SELECT id FROM tags WHERE name = $1")
-                        .bind(*n)
-                        .fetch_optional(p)
-                        .await
-                        .map_err(db("looking up historian tags"))?;
+                    let id: Option<i64> =
+                        sqlx::query_scalar("SELECT id FROM tags WHERE site = $1 AND name = $2")
+                            .bind(&*self.site)
+                            .bind(*n)
+                            .fetch_optional(p)
+                            .await
+                            .map_err(db("looking up historian tags"))?;
                     if let Some(id) = id {
                         out.push((n.to_string(), id));
                     }
@@ -621,6 +716,12 @@ impl Store {
                 out
             })
         };
+        if self.view {
+            for (n, id) in resolved {
+                found.insert(n.into(), id);
+            }
+            return Ok(found);
+        }
         let mut cache = self.inner.tag_ids.lock();
         for (n, id) in resolved {
             let k: Arc<str> = n.into();
@@ -629,6 +730,22 @@ impl Store {
         }
         Ok(found)
     }
+}
+
+/// A site id as the configuration allows it: 1..64 letters, digits, `-`, `_`.
+pub(crate) fn check_site(site: &str) -> Result<()> {
+    if site.is_empty()
+        || site.len() > 64
+        || !site
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_')
+    {
+        return Err(StoreError::Invalid(format!(
+            "site '{}' must be 1..64 letters, digits, '-' or '_'",
+            site.escape_debug()
+        )));
+    }
+    Ok(())
 }
 
 pub(crate) fn validate_tag_name(n: &str) -> Result<()> {

@@ -64,7 +64,17 @@ async fn one_holder_at_a_time_and_the_epoch_only_rises() {
         LeaseState::HeldBy { ref holder, epoch: 2, .. } if holder == "b"
     ));
 
-    // The fenced write: only the holder under its epoch writes.
+    // The fenced write: only the holder under its epoch writes, into its
+    // own site's rows.
+    let north = Store::open(
+        &t.url,
+        &OpenOptions {
+            site: "north".into(),
+            ..t.options.clone()
+        },
+    )
+    .await
+    .unwrap();
     let at = Timestamp::from_millis(5);
     let state = serde_json::json!({"mode": "auto"});
     let fence = |server: &str, epoch| Fence {
@@ -72,18 +82,24 @@ async fn one_holder_at_a_time_and_the_epoch_only_rises() {
         server: server.into(),
         epoch,
     };
-    assert!(!t
-        .store
+    assert!(!north
         .save_panel_state_fenced("SS1", &state, at, &fence("a", 1))
         .await
         .unwrap());
+    assert!(north.panel_states().await.unwrap().is_empty());
+    assert!(north
+        .save_panel_state_fenced("SS1", &state, at, &fence("b", 2))
+        .await
+        .unwrap());
+    assert_eq!(north.panel_states().await.unwrap().len(), 1);
+    // Another site's store neither sees the row nor writes under north's lease.
     assert!(t.store.panel_states().await.unwrap().is_empty());
     assert!(t
         .store
         .save_panel_state_fenced("SS1", &state, at, &fence("b", 2))
         .await
-        .unwrap());
-    assert_eq!(t.store.panel_states().await.unwrap().len(), 1);
+        .is_err());
+    north.close().await;
 
     // An orderly release lets a take over at once, under epoch 3.
     b.release(2).await.unwrap();

@@ -1217,3 +1217,130 @@ async fn bad_urls_are_refused_with_the_url_named() {
     .to_string();
     assert!(!e.contains("secret"), "password leaked: {e}");
 }
+
+/// Two sites on one database: each writes its own rows under the same names
+/// (two copies of one plant), reads only its own by default, reads the
+/// other's through a view, and the view refuses every write.
+async fn two_sites_keep_apart(db: TestDb) {
+    let north = &db.store;
+    assert_eq!(north.site(), DEFAULT_SITE);
+    let south = Store::open(
+        &db.url,
+        &OpenOptions {
+            site: "south".into(),
+            ..db.options.clone()
+        },
+    )
+    .await
+    .unwrap();
+    for (s, v) in [(north, 1.0), (&south, 2.0)] {
+        s.insert_samples(&[sample("SS1.V", 1000, Some(v), QualityCode::Good)])
+            .await
+            .unwrap();
+        s.insert_event(&ev(
+            1000,
+            None,
+            "SS1",
+            "info",
+            &format!("from {}", s.site()),
+        ))
+        .await
+        .unwrap();
+        s.insert_alarm_transitions(&[tr(1000, "SS1.V:hi", "normal", "unack_alarm", true, 2, "s")])
+            .await
+            .unwrap();
+        let mut state = alarm_state("SS1.V:hi");
+        state.message = format!("at {}", s.site());
+        s.upsert_alarm_states(&[state]).await.unwrap();
+        s.save_panel_state("ss1", &serde_json::json!({ "site": s.site() }), ts(1000))
+            .await
+            .unwrap();
+        s.insert_dispatch(&NewDispatch {
+            ts: ts(1000),
+            status: s.site().into(),
+            mode: "auto".into(),
+            objective: None,
+            solve_ms: 1.0,
+            inputs: serde_json::json!({}),
+            setpoints: serde_json::json!({}),
+            reason: None,
+        })
+        .await
+        .unwrap();
+    }
+    let all = EventFilter {
+        limit: 100,
+        ..Default::default()
+    };
+    let history = AlarmHistoryFilter {
+        limit: 100,
+        ..Default::default()
+    };
+    for (s, v) in [(north, 1.0), (&south, 2.0)] {
+        let own = s.site().to_string();
+        let events = s.events(&all).await.unwrap();
+        assert_eq!(events.len(), 1, "{own}: {events:?}");
+        assert_eq!(events[0].message, format!("from {own}"));
+        assert_eq!(s.alarm_history(&history).await.unwrap().len(), 1);
+        let states = s.alarm_states().await.unwrap();
+        assert_eq!(states.len(), 1);
+        assert_eq!(states[0].message, format!("at {own}"));
+        assert_eq!(
+            s.panel_states().await.unwrap(),
+            vec![("ss1".to_string(), serde_json::json!({ "site": own }))]
+        );
+        assert_eq!(s.latest_dispatch().await.unwrap().unwrap().status, own);
+        let raw = s
+            .raw_samples(&["SS1.V"], ts(0), ts(2000), 10)
+            .await
+            .unwrap();
+        assert_eq!(raw.len(), 1);
+        assert_eq!(raw[0].value, Some(v));
+        assert_eq!(s.historian_tags().await.unwrap(), vec!["SS1.V".to_string()]);
+    }
+    // North reads south's history through a view, and cannot write to it.
+    let view = north.site_reader("south").unwrap();
+    assert_eq!(view.events(&all).await.unwrap()[0].message, "from south");
+    assert_eq!(view.alarm_history(&history).await.unwrap().len(), 1);
+    let trend = view.trend(&["SS1.V"], ts(0), ts(2000), 1).await.unwrap();
+    assert_eq!(trend[0].buckets[0].last, Some(2.0), "{trend:?}");
+    assert!(view
+        .insert_event(&ev(2000, None, "x", "info", "no"))
+        .await
+        .is_err());
+    assert!(view
+        .insert_samples(&[sample("SS1.V", 2000, Some(9.0), QualityCode::Good)])
+        .await
+        .is_err());
+    assert!(view.delete_alarm_state("SS1.V:hi").await.is_err());
+    assert!(view
+        .save_panel_state("ss1", &serde_json::json!({}), ts(2000))
+        .await
+        .is_err());
+    assert_eq!(south.events(&all).await.unwrap().len(), 1);
+    // The same site gives the store itself (writable); a bad id is refused.
+    assert!(north
+        .site_reader(DEFAULT_SITE)
+        .unwrap()
+        .insert_event(&ev(3000, None, "x", "info", "ok"))
+        .await
+        .is_ok());
+    assert!(north.site_reader("no such/site").is_err());
+    assert_eq!(
+        north.sites().await.unwrap(),
+        vec![DEFAULT_SITE.to_string(), "south".to_string()]
+    );
+    // A retention run of one site leaves the other's samples alone.
+    north.delete_samples_before(None, ts(5000)).await.unwrap();
+    assert_eq!(
+        south
+            .raw_samples(&["SS1.V"], ts(0), ts(2000), 10)
+            .await
+            .unwrap()
+            .len(),
+        1
+    );
+    south.close().await;
+    db.cleanup().await;
+}
+both_backends!(two_sites, two_sites_keep_apart);

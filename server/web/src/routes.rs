@@ -187,6 +187,21 @@ pub fn table() -> Vec<Route> {
             || delete(api::session::logout),
             doc::<api::session::__path_logout>,
         ),
+        // A redundant pair's failover: the login carried to the other server.
+        r(
+            Method::POST,
+            "/api/session/handover",
+            Perm::LoggedIn,
+            || post(api::session::handover),
+            doc::<api::session::__path_handover>,
+        ),
+        r(
+            Method::POST,
+            "/api/session/handover/claim",
+            Perm::Public,
+            || post(api::session::claim),
+            doc::<api::session::__path_claim>,
+        ),
         // Tags.
         r(
             Method::GET,
@@ -225,6 +240,14 @@ pub fn table() -> Vec<Route> {
             Perm::LoggedIn,
             || get(api::pair::view),
             doc::<api::pair::__path_view>,
+        ),
+        // The sites on this server's database, for `site=` on the history.
+        r(
+            Method::GET,
+            "/api/sites",
+            Perm::LoggedIn,
+            || get(api::pair::sites),
+            doc::<api::pair::__path_sites>,
         ),
         // Devices.
         r(

@@ -377,3 +377,76 @@ async fn activity_is_written_through_not_per_request(opts: Options) {
     h.cleanup().await;
 }
 both_backends!(write_through, activity_is_written_through_not_per_request);
+
+/// A redundant pair's failover ticket: issued to a logged-in user on A,
+/// claimed once on B (another host, which A's cookie does not reach) for an
+/// ordinary session of the same user; a second claim, a made-up ticket and
+/// an anonymous request for a ticket are refused; a renewed ticket ends the
+/// one before it.
+async fn failover_ticket_carries_the_login(opts: Options) {
+    let a = Harness::new(opts).await;
+    let b = a.another_server().await;
+    let peer = "127.0.0.2:40001".parse().unwrap();
+    let anonymous = a
+        .call(Method::POST, "/api/session/handover", None, Some(json!({})))
+        .await;
+    assert_eq!(anonymous.status, StatusCode::UNAUTHORIZED);
+    let op = a.login("operator", PASSWORD).await;
+    let ticket = |previous: Option<String>| {
+        let (a, op) = (&a, op.clone());
+        async move {
+            let r = a
+                .call(
+                    Method::POST,
+                    "/api/session/handover",
+                    Some(&op),
+                    Some(json!({ "previous": previous })),
+                )
+                .await;
+            assert_eq!(r.status, StatusCode::OK, "{}", r.text());
+            r.json()["ticket"].as_str().unwrap().to_string()
+        }
+    };
+    let first = ticket(None).await;
+    let second = ticket(Some(first.clone())).await;
+    let claim = |t: String| {
+        let b = b.clone();
+        async move {
+            send_to(
+                &b,
+                request(
+                    Method::POST,
+                    "/api/session/handover/claim",
+                    None,
+                    Some(json!({ "ticket": t })),
+                ),
+                peer,
+            )
+            .await
+        }
+    };
+    // The renewed ticket ended the first one.
+    assert_eq!(claim(first).await.status, StatusCode::UNAUTHORIZED);
+    assert_eq!(
+        claim("not-a-ticket".into()).await.status,
+        StatusCode::UNAUTHORIZED
+    );
+    let r = claim(second.clone()).await;
+    assert_eq!(r.status, StatusCode::NO_CONTENT, "{}", r.text());
+    let cookie = r.session_cookie().expect("the claim sets a session cookie");
+    assert!(!cookie.contains(&second), "a new token, not the ticket");
+    let r = send_to(
+        &b,
+        request(Method::GET, "/api/session", Some(&cookie), None),
+        peer,
+    )
+    .await;
+    assert_eq!(r.json()["user"], "operator");
+    assert_eq!(r.json()["role"], "operator");
+    // Good once.
+    assert_eq!(claim(second).await.status, StatusCode::UNAUTHORIZED);
+    // A's own session goes on.
+    assert_eq!(whoami(&a, &op).await.as_deref(), Some("operator"));
+    a.cleanup().await;
+}
+both_backends!(failover_ticket, failover_ticket_carries_the_login);

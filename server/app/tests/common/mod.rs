@@ -8,6 +8,8 @@
 
 #![allow(dead_code)] // Each test binary uses a different subset.
 
+pub mod pair;
+
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};

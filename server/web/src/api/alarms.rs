@@ -337,6 +337,9 @@ pub struct HistoryQuery {
     pub text: Option<String>,
     pub limit: Option<u32>,
     pub offset: Option<u32>,
+    /// Another site on the same database whose history to read
+    /// (read-only); this server's own site if absent (`GET /api/sites`).
+    pub site: Option<String>,
 }
 
 fn opt_time(field: &str, v: &Option<String>) -> ApiResult<Option<Timestamp>> {
@@ -357,13 +360,15 @@ pub struct Transitions {
 
 #[utoipa::path(get, path = "/api/alarms/history", tag = "alarms", summary = "Alarm transitions",
     params(HistoryQuery),
-    responses((status = 200, description = "OK", body = inline(Transitions)), (status = 400)))]
+    responses((status = 200, description = "OK", body = inline(Transitions)), (status = 400),
+        (status = 404, description = "No such site")))]
 pub async fn history(
     State(s): State<WebState>,
     Query(q): Query<HistoryQuery>,
 ) -> ApiResult<Json<Transitions>> {
+    let store = crate::api::history_of(&s, q.site.as_deref()).await?;
     let filter = history_filter(q)?;
-    let rows = s.store.alarm_history(&filter).await?;
+    let rows = store.alarm_history(&filter).await?;
     Ok(Json(Transitions {
         count: rows.len(),
         transitions: rows,
@@ -374,13 +379,14 @@ pub async fn history(
 /// and `offset` ignored), newest first, streamed.
 #[utoipa::path(get, path = "/api/alarms/history.csv", tag = "alarms", summary = "Alarm transitions as CSV",
     params(HistoryQuery),
-    responses((status = 200, description = "CSV", body = String, content_type = "text/csv"), (status = 400)))]
+    responses((status = 200, description = "CSV", body = String, content_type = "text/csv"), (status = 400),
+        (status = 404, description = "No such site")))]
 pub async fn history_csv(
     State(s): State<WebState>,
     Query(q): Query<HistoryQuery>,
 ) -> ApiResult<axum::response::Response> {
+    let store = crate::api::history_of(&s, q.site.as_deref()).await?;
     let filter = history_filter(q)?;
-    let store = s.store.clone();
     Ok(crate::api::csv_download(
         "alarm-history.csv",
         "alarm history CSV export",

@@ -33,6 +33,9 @@ pub struct HistoryQuery {
     #[param(schema_with = shapes::time, required = false)]
     pub to: Option<String>,
     pub limit: Option<u32>,
+    /// Another site on the same database whose history to read
+    /// (read-only); this server's own site if absent (`GET /api/sites`).
+    pub site: Option<String>,
 }
 
 /// Recorded dispatches.
@@ -46,14 +49,15 @@ pub struct DispatchHistory {
 
 #[utoipa::path(get, path = "/api/dispatch/history", tag = "dispatch", summary = "Dispatch history",
     params(HistoryQuery),
-    responses((status = 200, description = "OK", body = inline(DispatchHistory)), (status = 400)))]
+    responses((status = 200, description = "OK", body = inline(DispatchHistory)), (status = 400),
+        (status = 404, description = "No such site")))]
 pub async fn history(
     State(s): State<WebState>,
     Query(q): Query<HistoryQuery>,
 ) -> ApiResult<Json<DispatchHistory>> {
     let (from, to) = history_range(&s, &q)?;
-    let rows = s
-        .store
+    let rows = crate::api::history_of(&s, q.site.as_deref())
+        .await?
         .dispatch_history(from, to, q.limit.unwrap_or(500).clamp(1, 10_000))
         .await?;
     Ok(Json(DispatchHistory {
@@ -66,13 +70,14 @@ pub async fn history(
 /// list's range (no row cap, `limit` ignored), newest first, streamed.
 #[utoipa::path(get, path = "/api/dispatch/history.csv", tag = "dispatch", summary = "Dispatch history as CSV",
     params(HistoryQuery),
-    responses((status = 200, description = "CSV", body = String, content_type = "text/csv"), (status = 400)))]
+    responses((status = 200, description = "CSV", body = String, content_type = "text/csv"), (status = 400),
+        (status = 404, description = "No such site")))]
 pub async fn history_csv(
     State(s): State<WebState>,
     Query(q): Query<HistoryQuery>,
 ) -> ApiResult<axum::response::Response> {
     let (from, to) = history_range(&s, &q)?;
-    let store = s.store.clone();
+    let store = crate::api::history_of(&s, q.site.as_deref()).await?;
     Ok(crate::api::csv_download(
         "dispatch-history.csv",
         "dispatch CSV export",

@@ -32,6 +32,9 @@ pub struct EventQuery {
     pub text: Option<String>,
     pub limit: Option<u32>,
     pub offset: Option<u32>,
+    /// Another site on the same database whose history to read
+    /// (read-only); this server's own site if absent (`GET /api/sites`).
+    pub site: Option<String>,
 }
 
 /// Start of the local day containing `now`, for a zone `offset_min` east of UTC.
@@ -53,13 +56,15 @@ pub struct EventList {
 
 #[utoipa::path(get, path = "/api/events", tag = "events", summary = "The event log",
     params(EventQuery),
-    responses((status = 200, description = "OK", body = inline(EventList)), (status = 400)))]
+    responses((status = 200, description = "OK", body = inline(EventList)), (status = 400),
+        (status = 404, description = "No such site")))]
 pub async fn list(
     State(s): State<WebState>,
     Query(q): Query<EventQuery>,
 ) -> ApiResult<Json<EventList>> {
+    let store = crate::api::history_of(&s, q.site.as_deref()).await?;
     let filter = event_filter(&s, q)?;
-    let events = s.store.events(&filter).await?;
+    let events = store.events(&filter).await?;
     Ok(Json(EventList {
         count: events.len(),
         events,
@@ -70,10 +75,11 @@ pub async fn list(
 /// `offset` ignored), newest first, streamed.
 #[utoipa::path(get, path = "/api/events.csv", tag = "events", summary = "The event log as CSV",
     params(EventQuery),
-    responses((status = 200, description = "CSV", body = String, content_type = "text/csv"), (status = 400)))]
+    responses((status = 200, description = "CSV", body = String, content_type = "text/csv"), (status = 400),
+        (status = 404, description = "No such site")))]
 pub async fn csv(State(s): State<WebState>, Query(q): Query<EventQuery>) -> ApiResult<Response> {
+    let store = crate::api::history_of(&s, q.site.as_deref()).await?;
     let filter = event_filter(&s, q)?;
-    let store = s.store.clone();
     Ok(crate::api::csv_download(
         "events.csv",
         "event CSV export",

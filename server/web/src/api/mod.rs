@@ -15,10 +15,29 @@ pub mod tags;
 pub mod trends;
 pub mod users;
 
-use gridscada_store::NewEvent;
+use gridscada_store::{NewEvent, Store};
 
 use crate::auth::Principal;
+use crate::error::{ApiError, ApiResult};
 use crate::WebState;
+
+/// The store to read history from (`?site=`): this server's own site, or
+/// another site on the same database, read-only. An unknown site is a 404,
+/// so a misspelt id is not mistaken for an empty history.
+pub async fn history_of(state: &WebState, site: Option<&str>) -> ApiResult<Store> {
+    match site.filter(|v| !v.is_empty() && *v != state.store.site()) {
+        None => Ok(state.store.clone()),
+        Some(site) => {
+            let view = state.store.site_reader(site)?;
+            if !state.store.sites().await?.iter().any(|s| s == site) {
+                return Err(ApiError::not_found(format!(
+                    "no site '{site}' in this database"
+                )));
+            }
+            Ok(view)
+        }
+    }
+}
 
 /// Handles to the running components the API reports on and commands.
 #[derive(Clone, Default)]

@@ -85,3 +85,26 @@ pub async fn view(State(s): State<WebState>) -> ApiResult<Json<PairView>> {
         )),
     }
 }
+
+/// The sites with rows in this server's database.
+#[derive(Debug, Clone, PartialEq, Serialize, ToSchema)]
+pub struct SiteList {
+    /// This server's site (`[server] site`).
+    pub site: String,
+    /// Every site known in the database, this one included, sorted: the
+    /// values the history endpoints take as `site=`.
+    pub sites: Vec<String>,
+}
+
+#[utoipa::path(get, path = "/api/sites", tag = "server", summary = "The sites sharing this server's database",
+    responses((status = 200, description = "OK", body = SiteList), (status = 503)))]
+pub async fn sites(State(s): State<WebState>) -> ApiResult<Json<SiteList>> {
+    let own = s.store.site().to_string();
+    let mut sites = s.store.sites().await?;
+    // A site that has written nothing yet is still this server's.
+    if !sites.contains(&own) {
+        sites.push(own.clone());
+    }
+    sites.sort();
+    Ok(Json(SiteList { site: own, sites }))
+}

@@ -208,3 +208,143 @@ pub async fn logout(
     )
         .into_response()
 }
+
+/// An earlier ticket to end with this one.
+#[derive(Deserialize, Default, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TicketRequest {
+    pub previous: Option<String>,
+}
+
+/// A failover ticket (see [`auth::Sessions::create_ticket`]).
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Ticket {
+    pub ticket: String,
+    /// Seconds it may be claimed in.
+    pub expires_s: u64,
+}
+
+/// The HMI of a redundant pair keeps a ticket so that, when it moves to the
+/// other server (another host, which the session cookie is not sent to),
+/// the operator stays logged in.
+#[utoipa::path(post, path = "/api/session/handover", tag = "session",
+    summary = "A ticket that carries this login to another server of the pair",
+    request_body = TicketRequest,
+    responses((status = 200, description = "OK", body = Ticket), (status = 400), (status = 401)))]
+pub async fn handover(
+    State(s): State<WebState>,
+    Extension(p): Extension<Principal>,
+    Extension(client): Extension<crate::ClientInfo>,
+    headers: HeaderMap,
+    body: Result<Json<TicketRequest>, axum::extract::rejection::JsonRejection>,
+) -> ApiResult<Json<Ticket>> {
+    let Json(request) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
+    let Some(user) = p.user.as_deref() else {
+        return Err(ApiError::new(
+            StatusCode::UNAUTHORIZED,
+            "unauthenticated",
+            "log in first",
+        ));
+    };
+    // An earlier ticket is ended only if it is this user's.
+    let mut previous = None;
+    if let Some(prev) = request.previous {
+        if let Some(owner) = s.auth.sessions.user_untouched(&prev).await {
+            if owner.user == user {
+                previous = Some(prev);
+            }
+        }
+    }
+    let recorded = auth::Client {
+        address: Some(client.ip.to_string()),
+        user_agent: headers
+            .get(header::USER_AGENT)
+            .and_then(|v| v.to_str().ok())
+            .map(str::to_string),
+    };
+    let ticket = s
+        .auth
+        .sessions
+        .create_ticket(user, p.role, previous.as_deref(), recorded)
+        .await?;
+    Ok(Json(Ticket {
+        ticket,
+        expires_s: auth::HANDOVER_TICKET.as_secs(),
+    }))
+}
+
+#[derive(Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Claim {
+    pub ticket: String,
+}
+
+/// Ends the ticket and starts an ordinary session of its user here: the
+/// HMI's first call on the server it moved to in a failover.
+#[utoipa::path(post, path = "/api/session/handover/claim", tag = "session",
+    summary = "Log in with a failover ticket from another server of the pair",
+    request_body = Claim,
+    responses(
+        (status = 204, description = "Logged in; sets the session cookie",
+            headers(("Set-Cookie" = String))),
+        (status = 400),
+        (status = 401, description = "No such ticket, or it has expired or was used"),
+    ))]
+pub async fn claim(
+    State(s): State<WebState>,
+    Extension(client): Extension<crate::ClientInfo>,
+    headers: HeaderMap,
+    body: Result<Json<Claim>, axum::extract::rejection::JsonRejection>,
+) -> ApiResult<Response> {
+    let Json(claim) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
+    let Some(user) = s.auth.sessions.user_untouched(&claim.ticket).await else {
+        return Err(ApiError::new(
+            StatusCode::UNAUTHORIZED,
+            "invalid_ticket",
+            "the failover ticket is unknown, expired or already used: log in",
+        ));
+    };
+    let recorded = auth::Client {
+        address: Some(client.ip.to_string()),
+        user_agent: headers
+            .get(header::USER_AGENT)
+            .and_then(|v| v.to_str().ok())
+            .map(str::to_string),
+    };
+    // Rotation ends the ticket: it is good for one claim.
+    let token = s
+        .auth
+        .sessions
+        .create(&user.user, user.role, Some(&claim.ticket), recorded)
+        .await?;
+    let who = Principal {
+        user: Some(user.user.clone()),
+        role: user.role,
+        group: None,
+        screens: Vec::new(),
+    };
+    audit(
+        &s,
+        &who,
+        "login",
+        "web",
+        format!(
+            "{} logged in from {} with a failover ticket of another server of the pair",
+            user.user, client.ip
+        ),
+    )
+    .await;
+    Ok((
+        StatusCode::NO_CONTENT,
+        [(
+            header::SET_COOKIE,
+            auth::session_cookie(
+                &token,
+                s.auth.secure_cookies || client.https,
+                &s.plant.server.base_path(),
+            ),
+        )],
+    )
+        .into_response())
+}

@@ -25,11 +25,23 @@ pub struct TrendQuery {
     /// Points per series (buckets), at most 5000.
     #[param(minimum = 1, maximum = 5000)]
     pub points: Option<u32>,
+    /// Another site on the same database whose history to read
+    /// (read-only); this server's own site if absent (`GET /api/sites`).
+    pub site: Option<String>,
 }
 
 const MAX_PENS: usize = 16;
 
-fn tag_list<'a>(s: &WebState, who: &Principal, tags: &'a str) -> ApiResult<Vec<&'a str>> {
+/// The tags asked for, checked: known and readable here. Another site's
+/// tags are not in this server's configuration, so only a user whose group
+/// reads every tag may read them (a group limited to screens reads the tags
+/// of this site's screens only).
+fn tag_list<'a>(
+    s: &WebState,
+    who: &Principal,
+    tags: &'a str,
+    other_site: bool,
+) -> ApiResult<Vec<&'a str>> {
     let list: Vec<&str> = tags
         .split(',')
         .map(str::trim)
@@ -43,10 +55,18 @@ fn tag_list<'a>(s: &WebState, who: &Principal, tags: &'a str) -> ApiResult<Vec<&
             "tags: at most {MAX_PENS} tags at once"
         )));
     }
+    let readable = s.readable(who);
+    if other_site {
+        if !readable.all() {
+            return Err(ApiError::forbidden(
+                "another site's trends: your group reads only the tags of this site's screens",
+            ));
+        }
+        return Ok(list);
+    }
     if let Some(unknown) = list.iter().find(|t| s.db.id(t).is_none()) {
         return Err(ApiError::not_found(format!("no tag named '{unknown}'")));
     }
-    let readable = s.readable(who);
     if let Some(hidden) = list.iter().find(|t| !readable.may_read(t)) {
         return Err(ApiError::forbidden(format!(
             "tag '{hidden}' is on no screen your group may open"
@@ -76,14 +96,15 @@ pub async fn trend(
     Extension(who): Extension<Principal>,
     Query(q): Query<TrendQuery>,
 ) -> ApiResult<Json<Trend>> {
-    let tags = tag_list(&s, &who, &q.tags)?;
+    let store = crate::api::history_of(&s, q.site.as_deref()).await?;
+    let tags = tag_list(&s, &who, &q.tags, store.site() != s.store.site())?;
     let from = parse_time("from", &q.from)?;
     let to = parse_time("to", &q.to)?;
     let points = q.points.unwrap_or(500);
     if !(1..=5000).contains(&points) {
         return Err(ApiError::bad_request("points must be 1 to 5000"));
     }
-    let series = s.store.trend(&tags, from, to, points).await?;
+    let series = store.trend(&tags, from, to, points).await?;
     Ok(Json(Trend {
         from,
         to,
@@ -101,6 +122,9 @@ pub struct CsvQuery {
     pub from: String,
     #[param(value_type = shapes::Time, inline)]
     pub to: String,
+    /// Another site on the same database whose history to read
+    /// (read-only); this server's own site if absent (`GET /api/sites`).
+    pub site: Option<String>,
 }
 
 /// Raw samples as CSV, streamed so that a long range never sits in memory.
@@ -113,7 +137,8 @@ pub async fn csv(
     Extension(who): Extension<Principal>,
     Query(q): Query<CsvQuery>,
 ) -> ApiResult<Response> {
-    let tags: Vec<String> = tag_list(&s, &who, &q.tags)?
+    let store = crate::api::history_of(&s, q.site.as_deref()).await?;
+    let tags: Vec<String> = tag_list(&s, &who, &q.tags, store.site() != s.store.site())?
         .into_iter()
         .map(String::from)
         .collect();
@@ -122,7 +147,6 @@ pub async fn csv(
     if from > to {
         return Err(ApiError::bad_request("from must not be after to"));
     }
-    let store = s.store.clone();
     Ok(crate::api::csv_download(
         "trend.csv",
         "CSV export",

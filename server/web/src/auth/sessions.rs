@@ -135,6 +135,10 @@ impl Cached {
     }
 }
 
+/// How long a failover ticket may be claimed: the HMI renews it every
+/// minute, so a takeover plus the HMI's wait always finds one valid.
+pub const HANDOVER_TICKET: Duration = Duration::from_secs(180);
+
 /// The caller of a live session.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct SessionUser {
@@ -203,9 +207,40 @@ impl Sessions {
         previous: Option<&str>,
         client: Client,
     ) -> Result<String, StoreError> {
+        self.create_with(user, role, previous, client, self.policy.expiry(role))
+            .await
+    }
+
+    /// Issues a failover ticket for `user`: a session of its own that only
+    /// lasts [`HANDOVER_TICKET`] and idles out never, which the HMI hands to
+    /// the other server of a redundant pair when it moves there (the cookie
+    /// of one host is not sent to another). Claiming it there ends it and
+    /// starts an ordinary session. `previous`, an earlier ticket of the same
+    /// user, is ended.
+    pub async fn create_ticket(
+        &self,
+        user: &str,
+        role: Role,
+        previous: Option<&str>,
+        client: Client,
+    ) -> Result<String, StoreError> {
+        let expiry = Expiry {
+            idle: None,
+            absolute: Some(HANDOVER_TICKET),
+        };
+        self.create_with(user, role, previous, client, expiry).await
+    }
+
+    async fn create_with(
+        &self,
+        user: &str,
+        role: Role,
+        previous: Option<&str>,
+        client: Client,
+        expiry: Expiry,
+    ) -> Result<String, StoreError> {
         let token = new_token();
         let now = Timestamp::now_utc();
-        let expiry = self.policy.expiry(role);
         let record = SessionRecord {
             key: SessionKey::of_token(&token),
             user: user.to_string(),
