@@ -272,37 +272,54 @@ pub fn ndeath(bd_seq: u64) -> Payload {
     }
 }
 
+/// A DBIRTH and the samples it carries: the deadband must start from
+/// exactly these, not from a second read of the database.
+pub struct Birth {
+    pub payload: Payload,
+    pub carried: Vec<(TagId, Sample)>,
+}
+
 /// DBIRTH: every tag of the device with name, alias, data type, current
 /// value, its timestamp, and properties (units, quality, writable by DCMD).
-pub fn dbirth(model: &EdgeModel, device: usize, db: &TagDb, seq: u64, now_ms: u64) -> Payload {
+///
+/// The samples are read once, in one snapshot of the database. A change
+/// applied after that snapshot reaches the edge through its subscription
+/// and is measured against what the birth carried; a second read (to start
+/// the deadband) could see that change already and hold it back, leaving
+/// the host with the birth's older value for good (it was a status tag
+/// that turned Good while its device's birth was being built).
+pub fn dbirth(model: &EdgeModel, device: usize, db: &TagDb, seq: u64, now_ms: u64) -> Birth {
     let tags = model
         .devices
         .get(device)
         .map(|d| d.tags.as_slice())
         .unwrap_or_default();
-    let metrics = tags
+    let carried = db.snapshot(tags).changes;
+    let metrics = carried
         .iter()
-        .filter_map(|&id| {
-            let meta = db.meta(id)?;
-            let sample = db.get(id)?;
-            let datatype = model.datatype(id);
-            let mut m = data_metric(id, Some(&meta.name), &sample, datatype);
+        .filter_map(|(id, sample)| {
+            let meta = db.meta(*id)?;
+            let datatype = model.datatype(*id);
+            let mut m = data_metric(*id, Some(&meta.name), sample, datatype);
             let props = m.properties.get_or_insert_with(Default::default);
             if !meta.units.is_empty() {
                 props.push(PROP_UNITS, str_prop(&meta.units));
             }
-            props.push(PROP_WRITABLE, bool_prop(model.commandable(id)));
+            props.push(PROP_WRITABLE, bool_prop(model.commandable(*id)));
             if sample.is_never_read() {
                 m.timestamp = Some(now_ms);
             }
             Some(m)
         })
         .collect();
-    Payload {
-        timestamp: Some(now_ms),
-        seq: Some(seq),
-        metrics,
-        ..Default::default()
+    Birth {
+        payload: Payload {
+            timestamp: Some(now_ms),
+            seq: Some(seq),
+            metrics,
+            ..Default::default()
+        },
+        carried,
     }
 }
 
@@ -582,7 +599,7 @@ write_role = "operator"
         let (m, db) = model();
         let volts = db.id("RTU1.Volts").unwrap();
         db.set(volts, 231.5, Quality::GOOD, Timestamp::from_millis(1_000));
-        let p = dbirth(&m, 0, &db, 1, 9_000);
+        let p = dbirth(&m, 0, &db, 1, 9_000).payload;
         assert_eq!(p.seq, Some(1));
         assert_eq!(p.metrics.len(), 5);
         let v = &p.metrics[0];
@@ -629,6 +646,56 @@ write_role = "operator"
         assert_eq!(aliases.len(), 5);
         assert_eq!(tag_of_alias(999, &db), None);
         assert_eq!(tag_of_alias(u64::MAX, &db), None);
+    }
+
+    /// The bug behind status tags stuck Bad at the centre: a status tag
+    /// turned Good between the birth's read and a second read that started
+    /// the deadband, so its change, arriving later, was held back as "no
+    /// change" and the host kept the birth's Bad for good.
+    #[test]
+    fn a_change_just_after_the_birth_snapshot_is_published() {
+        let (m, db) = model();
+        let connected = db.id("RTU1.Comm.Connected").unwrap();
+        let mut deadband = Deadband::new(db.len(), 0.0);
+        let birth = dbirth(&m, 1, &db, 1, 9_000);
+        // The poller's first scan lands while the birth is on its way.
+        db.set(
+            connected,
+            true,
+            Quality::GOOD,
+            Timestamp::from_millis(9_001),
+        );
+        for (id, sample) in &birth.carried {
+            deadband.reset_to(*id, sample);
+        }
+        let carried = &birth
+            .carried
+            .iter()
+            .find(|(id, _)| *id == connected)
+            .unwrap()
+            .1;
+        assert!(
+            carried.is_never_read(),
+            "the birth carried the tag as never read"
+        );
+        let metric = &birth.payload.metrics[0];
+        assert_eq!(metric.alias, Some(alias(connected)));
+        assert_eq!(
+            metric
+                .properties
+                .as_ref()
+                .unwrap()
+                .get(PROP_QUALITY)
+                .unwrap()
+                .value,
+            Some(PropertyValueKind::Int(0)),
+            "the payload says what the carried samples say"
+        );
+        let now = db.get(connected).unwrap();
+        assert!(
+            deadband.offer(connected, &now),
+            "the change after the birth's snapshot goes out as data"
+        );
     }
 
     #[test]
