@@ -64,7 +64,8 @@ def main(tmp):
     mport, central_port = c.free_port(), c.free_port()
     with open(os.path.join(tmp, "mosquitto.conf"), "w") as f:
         f.write(f"listener {mport} 127.0.0.1\nallow_anonymous true\npersistence false\n")
-    c.start([c.MOSQUITTO, "-c", os.path.join(tmp, "mosquitto.conf")], os.path.join(tmp, "mosquitto.log"))
+    broker = c.start([c.MOSQUITTO, "-c", os.path.join(tmp, "mosquitto.conf")],
+                     os.path.join(tmp, "mosquitto.log"))
     time.sleep(0.5)
 
     conf = os.path.join(tmp, "central")
@@ -126,6 +127,64 @@ write_timeout_s = 15
     for i, s in enumerate(SITES):
         good, wrong = c.wait_for(lambda: agree(i)[0], 20, 0.5)[0], agree(i)[1]
         c.check(good, f"{s}: qualities and discrete values at the centre equal the edge's", wrong)
+
+    # The edge's alarms, raised at the centre on the remote tags: a fault
+    # on site-1's first panel trips it; every tag alarm standing at the
+    # edge stands at the centre as site-1.KEY (the alarm definitions come
+    # with the births), in the site's area.
+    alarm_site = 0
+    everything = "?state=normal,unack_active,ack_active,unack_rtn,shelved,suppressed,out_of_service"
+    panel = edge_apis[alarm_site].call("GET", "/api/panels")[1]
+    panel = (panel.get("panels", panel) if isinstance(panel, dict) else panel)[0]
+    panel = panel.get("id") or panel.get("name")
+    status, body = edge_apis[alarm_site].call("POST", "/api/sim/faults",
+                                              {"panel": panel, "zone": 1, "kind": "permanent"})
+    c.check(status in (200, 201, 204), f"a permanent fault on {SITES[alarm_site]}'s panel {panel}", (status, body))
+    tag_kinds = ("hihi", "hi", "lo", "lolo", "discrete")
+
+    def alarms_agree():
+        edge = [a for a in edge_apis[alarm_site].call("GET", "/api/alarms" + everything)[1]["alarms"]
+                if a["kind"] in tag_kinds and a["active"]]
+        centre = {a["key"]: a for a in api.call("GET", "/api/alarms" + everything)[1]["alarms"]
+                  if a["key"].startswith(SITES[alarm_site] + ".") and a["active"]}
+        missing = [a["key"] for a in edge if f"{SITES[alarm_site]}.{a['key']}" not in centre]
+        in_area = all(a["tag"].startswith(SITES[alarm_site] + ".")
+                      and a["selection"].startswith(SITES[alarm_site] + ".") for a in centre.values())
+        return (not missing and in_area and [a["key"] for a in edge],
+                ([a["key"] for a in edge], missing, list(centre)[:5]))
+    ok, secs = c.wait_for(lambda: alarms_agree()[0], 30, 0.5)
+    c.check(ok, f"the edge's {len(ok or [])} standing tag alarms stand at the centre on the remote tags "
+            f"({secs:.1f} s)", alarms_agree()[1])
+    edge_apis[alarm_site].call("DELETE", f"/api/sim/faults/{panel}/1")
+
+    # A broker outage: the edges keep what changed meanwhile and send it as
+    # historical data afterwards; the centre's historian takes it at its own
+    # timestamps (the live value of the window is only the Bad of the lost
+    # broker).
+    counter = next(n for n in sorted(edge_apis[0].tags()) if n.endswith(".Comm.Requests"))
+    broker.terminate()
+    broker.wait()
+    down_from = int(time.time() * 1000)
+    time.sleep(8)
+    down_to = int(time.time() * 1000)
+    broker = c.start([c.MOSQUITTO, "-c", os.path.join(tmp, "mosquitto.conf")],
+                     os.path.join(tmp, "mosquitto-2.log"))
+    tag = f"{SITES[0]}.{counter}"
+
+    def history_in_outage():
+        status, body = api.call(
+            "GET", f"/api/trends?tags={tag}&from={down_from + 1000}&to={down_to - 1000}&points=20")
+        if status != 200:
+            return None
+        buckets = body["series"][0]["buckets"]
+        return [b for b in buckets if b.get("avg") is not None] or None
+    got, secs = c.wait_for(history_in_outage, 60, 1)
+    c.check(got and len(got) >= 3,
+            f"{sum(b['count'] for b in got or [])} samples of {tag} from the broker outage reach the central "
+            f"historian at their own times ({secs:.1f} s)",
+            got)
+    c.check(c.wait_for(lambda: all(agree(i)[0] for i in range(len(SITES))), 60, 0.5)[0],
+            "after the outage every site's tags at the centre equal the edge's again")
 
     # kill -9 one edge: its tags turn Bad at the centre, only its.
     victim = 1

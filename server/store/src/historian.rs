@@ -40,6 +40,28 @@ pub struct HistorySample {
     pub quality: QualityCode,
 }
 
+impl HistorySample {
+    /// The row of one sample as it is, without a logging policy (samples
+    /// that arrive already chosen: a Sparkplug edge's store and forward).
+    /// None for a string value (not logged); a Bad sample is a gap.
+    pub fn of(tag: Arc<str>, sample: &gridscada_tagdb::Sample) -> Option<HistorySample> {
+        if matches!(sample.value, gridscada_tagdb::Value::Str(_)) || sample.is_never_read() {
+            return None;
+        }
+        let bad = sample.quality.code == QualityCode::Bad;
+        Some(HistorySample {
+            tag,
+            ts: sample.timestamp,
+            value: sample.value.as_f64().filter(|v| v.is_finite() && !bad),
+            exact: sample
+                .value
+                .as_i128()
+                .filter(|_| sample.value.is_wide_integer() && !bad),
+            quality: sample.quality.code,
+        })
+    }
+}
+
 /// A sample read back from the historian.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct RawSample {

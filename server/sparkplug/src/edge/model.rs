@@ -25,6 +25,10 @@ pub const PROP_QUALITY: &str = "Quality";
 pub const PROP_QUALITY_REASON: &str = "QualityReason";
 pub const PROP_UNITS: &str = "engUnit";
 pub const PROP_WRITABLE: &str = "Writable";
+/// gridscada's own property: the tag's `[tag.alarm]` as TOML text, so that
+/// a central gridscada raises the same alarms on the remote tag. Other
+/// hosts ignore it.
+pub const PROP_ALARMS: &str = "gridscadaAlarms";
 
 /// OPC-style quality codes as Sparkplug hosts read them.
 pub const QUALITY_GOOD: i32 = 192;
@@ -58,6 +62,8 @@ pub struct EdgeModel {
     commandable: Vec<bool>,
     /// Per tag id: its data type on the wire.
     datatypes: Vec<DataType>,
+    /// Per tag id: its alarm configuration as TOML ([`PROP_ALARMS`]).
+    alarms: Vec<Option<String>>,
 }
 
 impl EdgeModel {
@@ -80,6 +86,7 @@ impl EdgeModel {
         });
         let mut device_of = vec![derived; n];
         let mut commandable = vec![false; n];
+        let mut alarms = vec![None; n];
         let role: Role = *edge.command_role.get_ref();
         for t in &plant.tags {
             let Some(id) = db.id(t.name.get_ref()) else {
@@ -99,6 +106,13 @@ impl EdgeModel {
                 .unwrap_or(Role::Operator);
             commandable[id.index()] =
                 *t.writable.get_ref() && edge.allows_command(t.name.get_ref()) && required <= role;
+            alarms[id.index()] = t.alarm.as_ref().and_then(|a| match toml::to_string(a) {
+                Ok(text) => Some(text),
+                Err(e) => {
+                    tracing::warn!(tag = %t.name.get_ref(), error = %e, "alarm configuration not published");
+                    None
+                }
+            });
         }
         let mut datatypes = Vec::with_capacity(n);
         for (id, meta) in db.all_meta() {
@@ -110,6 +124,7 @@ impl EdgeModel {
             device_of,
             commandable,
             datatypes,
+            alarms,
         }
     }
 
@@ -306,6 +321,9 @@ pub fn dbirth(model: &EdgeModel, device: usize, db: &TagDb, seq: u64, now_ms: u6
                 props.push(PROP_UNITS, str_prop(&meta.units));
             }
             props.push(PROP_WRITABLE, bool_prop(model.commandable(*id)));
+            if let Some(Some(alarms)) = model.alarms.get(id.index()) {
+                props.push(PROP_ALARMS, str_prop(alarms));
+            }
             if sample.is_never_read() {
                 m.timestamp = Some(now_ms);
             }
@@ -500,6 +518,8 @@ kind = "input_register"
 address = 0
 type = "f32"
 units = "V"
+[tag.alarm]
+hi = { limit = 250.0, priority = 700 }
 
 [[tag]]
 name = "RTU1.Setpoint"
@@ -620,6 +640,22 @@ write_role = "operator"
         assert_eq!(
             props.get(PROP_WRITABLE).unwrap().value,
             Some(PropertyValueKind::Boolean(false))
+        );
+        // Its alarms, as the TOML a central gridscada reads back.
+        let Some(PropertyValueKind::String(alarms)) = &props.get(PROP_ALARMS).unwrap().value else {
+            panic!("no alarm property");
+        };
+        let back: gridscada_config::AlarmConfig = toml::from_str(alarms).unwrap();
+        let hi = back.hi.unwrap();
+        assert_eq!((*hi.limit.get_ref(), hi.priority), (250.0, 700));
+        assert!(
+            p.metrics[1]
+                .properties
+                .as_ref()
+                .unwrap()
+                .get(PROP_ALARMS)
+                .is_none(),
+            "a tag without alarms has no alarm property"
         );
         // A tag never read: Bad with its reason, stamped with the birth time.
         let run = &p.metrics[2];
