@@ -57,6 +57,36 @@ def start_edge(tmp, i, mport, hport):
                    os.path.join(tmp, f"{SITES[i]}-{time.time():.0f}.log")), data
 
 
+def browser_test(tmp, central_port, site, site_port):
+    """Runs the remote panel's browser test (node --test, headless Chromium,
+    as tests/e2e/browser.sh does); True if it passed."""
+    browser = os.path.join(ROOT, "tests", "e2e", "browser")
+    env = dict(os.environ)
+    node_bin = os.path.join(ROOT, "target", "test-node", "node_modules", ".bin")
+    if os.path.isdir(node_bin):  # browser.sh's Node.js 22, when Debian's is too old
+        env["PATH"] = node_bin + os.pathsep + env["PATH"]
+    if not os.path.isdir(os.path.join(browser, "node_modules", "playwright-core")):
+        subprocess.run(["npm", "ci", "--no-audit", "--no-fund", "--loglevel=error"], cwd=browser, env=env)
+    env.update({
+        "GRIDSCADA_URL": f"http://127.0.0.1:{central_port}",
+        "GRIDSCADA_CREDENTIALS": os.path.join(tmp, "central-data", "credentials.txt"),
+        "GRIDSCADA_SITE": site,
+        "GRIDSCADA_SITE_URL": f"http://127.0.0.1:{site_port}",
+        "GRIDSCADA_SITE_CREDENTIALS": os.path.join(tmp, site, "data", "credentials.txt"),
+        "GRIDSCADA_ARTIFACTS": os.path.join(tmp, "browser"),
+    })
+    log = os.path.join(tmp, "browser.log")
+    with open(log, "w") as out:
+        try:
+            rc = subprocess.run(["node", "--test", "--test-reporter=spec", "sites/remote-panel.test.js"],
+                                cwd=browser, env=env, stdout=out, stderr=subprocess.STDOUT, timeout=300).returncode
+        except subprocess.TimeoutExpired:
+            rc = -1
+    if rc != 0:
+        print(open(log).read()[-3000:])
+    return rc == 0
+
+
 site_plant_paths = []
 
 
@@ -127,6 +157,12 @@ write_timeout_s = 15
     for i, s in enumerate(SITES):
         good, wrong = c.wait_for(lambda: agree(i)[0], 20, 0.5)[0], agree(i)[1]
         c.check(good, f"{s}: qualities and discrete values at the centre equal the edge's", wrong)
+
+    # A browser on the central server: one remote site's panel, drawn from
+    # its remote tags, live and following the edge's quality
+    # (tests/e2e/browser/sites/remote-panel.test.js).
+    c.check(browser_test(tmp, central_port, SITES[0], edge_ports[0]),
+            f"a browser on the central server shows {SITES[0]}'s panel live, Bad and Good again with the edge")
 
     # The edge's alarms, raised at the centre on the remote tags: a fault
     # on site-1's first panel trips it; every tag alarm standing at the
