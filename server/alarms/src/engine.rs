@@ -403,10 +403,13 @@ impl AlarmEngine {
     /// Adds alarm definitions while the engine runs: the alarms of tags
     /// that appear at run time (a central Sparkplug host's remote tags,
     /// whose edge declares them in its births). A key already defined is
-    /// kept as it is (a rebirth declares the same alarms again); a tag that
-    /// is not in the database yet is an error. Returns the keys added.
+    /// kept as it is (a rebirth declares the same alarms again). A
+    /// definition that cannot be taken (its tag is not in the database, a
+    /// bad limit) is an error; the others are defined all the same. Returns
+    /// the keys added.
     pub fn define(&self, defs: Vec<AlarmDef>) -> Result<Vec<String>, AlarmError> {
         let mut added = Vec::new();
+        let mut refused = None;
         let mut new_tags = Vec::new();
         {
             let mut set = self.set.lock();
@@ -414,37 +417,44 @@ impl AlarmEngine {
                 if set.id_of(&def.key).is_some() {
                     continue;
                 }
-                if let Some(tag) = &def.tag {
-                    if self.db.id(tag).is_none() {
-                        return Err(AlarmError::invalid(
-                            format!("alarm '{}'", def.key),
-                            format!("tag '{tag}' is not in the tag database"),
-                        ));
-                    }
+                if let Some(tag) = def.tag.as_deref().filter(|t| self.db.id(t).is_none()) {
+                    refused.get_or_insert(AlarmError::invalid(
+                        format!("alarm '{}'", def.key),
+                        format!("tag '{tag}' is not in the tag database"),
+                    ));
+                    continue;
                 }
                 let key = def.key.clone();
-                set.define(def)?;
-                added.push(key);
-            }
-            if added.is_empty() {
-                return Ok(added);
-            }
-            let mut bind = self.bind.lock();
-            for (input, tag) in set.inputs() {
-                let Some(id) = self.db.id(tag) else { continue };
-                if bind.len() <= id.index() {
-                    bind.resize(id.index() + 1, None);
+                match set.define(def) {
+                    Ok(_) => added.push(key),
+                    Err(e) => {
+                        refused.get_or_insert(e);
+                    }
                 }
-                if bind[id.index()].is_none() {
-                    bind[id.index()] = Some(input);
-                    new_tags.push(id);
+            }
+            if !added.is_empty() {
+                let mut bind = self.bind.lock();
+                for (input, tag) in set.inputs() {
+                    let Some(id) = self.db.id(tag) else { continue };
+                    if bind.len() <= id.index() {
+                        bind.resize(id.index() + 1, None);
+                    }
+                    if bind[id.index()].is_none() {
+                        bind[id.index()] = Some(input);
+                        new_tags.push(id);
+                    }
                 }
             }
         }
-        self.watched.lock().extend(new_tags);
-        self.rewatch.notify_one();
-        self.version.send_modify(|v| *v += 1);
-        Ok(added)
+        if !added.is_empty() {
+            self.watched.lock().extend(new_tags);
+            self.rewatch.notify_one();
+            self.version.send_modify(|v| *v += 1);
+        }
+        match refused {
+            Some(e) => Err(e),
+            None => Ok(added),
+        }
     }
 
     /// Raises system alarm `key` (sequence lockout, dispatch fallback,

@@ -73,7 +73,7 @@ pub(super) fn start(
         write_timeout: Duration::from_secs_f64(*host.write_timeout_s.get_ref()),
     };
     let (notices_tx, mut notices) = mpsc::channel::<SiteNotice>(256);
-    let (alarms_tx, mut remote_alarms) = mpsc::channel::<RemoteAlarms>(4096);
+    let (alarms_tx, mut remote_alarms) = mpsc::channel::<Vec<RemoteAlarms>>(256);
     let outputs = HostOutputs {
         notices: Some(notices_tx),
         alarms: Some(alarms_tx),
@@ -83,8 +83,10 @@ pub(super) fn start(
         .map_err(|e| anyhow!("starting the Sparkplug host: {e}"))?;
     let engine = alarms.clone();
     tasks.spawn(async move {
-        while let Some(r) = remote_alarms.recv().await {
-            define_remote_alarms(&engine, &r);
+        while let Some(birth) = remote_alarms.recv().await {
+            for r in &birth {
+                define_remote_alarms(&engine, r);
+            }
         }
     });
     tasks.spawn(async move {

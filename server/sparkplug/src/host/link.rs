@@ -87,8 +87,9 @@ pub struct SiteNotice {
 pub struct HostOutputs {
     /// Sites going online and offline, the broker lost.
     pub notices: Option<mpsc::Sender<SiteNotice>>,
-    /// The alarm configurations gridscada edges declare in their births.
-    pub alarms: Option<mpsc::Sender<RemoteAlarms>>,
+    /// The alarm configurations gridscada edges declare in their births
+    /// (those of one birth message together).
+    pub alarms: Option<mpsc::Sender<Vec<RemoteAlarms>>>,
     /// The historian, for historical samples (an edge's store and forward).
     pub history: Option<gridscada_store::HistorianHandle>,
 }
@@ -106,7 +107,7 @@ pub(crate) struct Shared {
     pub notices: Option<mpsc::Sender<SiteNotice>>,
     /// Never waited for: a full channel drops the definitions (logged);
     /// the node's next birth declares them again.
-    pub alarms: Option<mpsc::Sender<RemoteAlarms>>,
+    pub alarms: Option<mpsc::Sender<Vec<RemoteAlarms>>>,
     pub history: Option<gridscada_store::HistorianHandle>,
 }
 
@@ -466,15 +467,12 @@ fn on_publish(
             sites.remote(id).map(|r| r.node.clone()).unwrap_or_default()
         });
     }
-    if let Some(tx) = &shared.alarms {
-        for a in fx.alarms {
-            if tx.try_send(a).is_err() {
-                tracing::warn!(
-                    topic = topic_text,
-                    "alarm definitions of a birth not taken (queue full); the next birth brings them again"
-                );
-                break;
-            }
+    if let (Some(tx), false) = (&shared.alarms, fx.alarms.is_empty()) {
+        if tx.try_send(fx.alarms).is_err() {
+            tracing::warn!(
+                topic = topic_text,
+                "alarm definitions of a birth not taken (queue full); the node's next birth brings them again"
+            );
         }
     }
     if !fx.historical.is_empty() {
