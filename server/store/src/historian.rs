@@ -766,3 +766,32 @@ async fn copy_in(
 fn f_start(from: Timestamp) -> i64 {
     from.as_millis().saturating_sub(1)
 }
+
+#[cfg(test)]
+mod sample_rows {
+    use super::*;
+    use gridscada_tagdb::{Quality, Sample};
+
+    #[test]
+    fn a_sample_becomes_its_row_and_a_bad_one_a_gap() {
+        let at = Timestamp::from_millis(1_600_000_000_000);
+        let row = HistorySample::of("T".into(), &Sample::good(12.5, at)).unwrap();
+        assert_eq!(
+            (row.ts, row.value, row.quality),
+            (at, Some(12.5), QualityCode::Good)
+        );
+        let mut bad = Sample::good(12.5, at);
+        bad.quality = Quality::bad("site offline");
+        let row = HistorySample::of("T".into(), &bad).unwrap();
+        assert_eq!((row.value, row.quality), (None, QualityCode::Bad));
+        assert!(HistorySample::of("T".into(), &Sample::good("text", at)).is_none());
+        assert!(
+            HistorySample::of(
+                "T".into(),
+                &Sample::never_read(gridscada_tagdb::Value::Float(0.0))
+            )
+            .is_none(),
+            "never read"
+        );
+    }
+}
