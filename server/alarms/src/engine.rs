@@ -28,6 +28,7 @@ use serde::Serialize;
 use tokio::sync::{mpsc, watch, Notify};
 
 use crate::events::Event;
+use crate::machine::AlarmDef;
 use crate::model::{
     AlarmError, AlarmFilter, AlarmId, AlarmStateRecord, AlarmTransition, AlarmView,
 };
@@ -96,9 +97,12 @@ pub struct AlarmEngine {
     set: Mutex<AlarmSet>,
     db: Arc<TagDb>,
     clock: Arc<dyn Clock>,
-    /// Input of each tag id, by tag index.
-    bind: Vec<Option<InputId>>,
-    watched: Vec<TagId>,
+    /// Input of each tag id, by tag index. Grows when alarms are defined
+    /// at run time ([`AlarmEngine::define`]).
+    bind: Mutex<Vec<Option<InputId>>>,
+    watched: Mutex<Vec<TagId>>,
+    /// The watched tags changed: the run loop subscribes to the new set.
+    rewatch: Notify,
     outbox: mpsc::UnboundedSender<Output>,
     outbox_rx: Mutex<Option<mpsc::UnboundedReceiver<Output>>>,
     channels: Mutex<Option<AlarmChannels>>,
@@ -183,8 +187,9 @@ impl AlarmEngine {
             set: Mutex::new(set),
             db,
             clock,
-            bind,
-            watched,
+            bind: Mutex::new(bind),
+            watched: Mutex::new(watched),
+            rewatch: Notify::new(),
             outbox,
             outbox_rx: Mutex::new(Some(outbox_rx)),
             channels: Mutex::new(Some(channels)),
@@ -209,9 +214,10 @@ impl AlarmEngine {
         let forwarder = Arc::clone(&self);
         tokio::spawn(async move { forwarder.forward(rx, channels).await });
 
-        let mut sub = self.db.subscribe(&self.watched);
+        let watched = self.watched.lock().clone();
+        let mut sub = self.db.subscribe(&watched);
         // Start from the current values: the subscription only brings changes.
-        let snap = self.db.snapshot(&self.watched);
+        let snap = self.db.snapshot(&watched);
         self.apply_changes(&snap.changes);
         loop {
             let now = self.clock.now();
@@ -233,16 +239,25 @@ impl AlarmEngine {
                 },
                 _ = self.clock.sleep(wait) => {}
                 _ = self.wake.notified() => {}
+                // Alarms defined at run time: watch their tags too, from
+                // their current values.
+                _ = self.rewatch.notified() => {
+                    let watched = self.watched.lock().clone();
+                    let snap = sub.watch(Some(&watched));
+                    self.apply_changes(&snap.batch().changes);
+                }
             }
         }
         tracing::info!("tag database closed; alarm engine stopped");
     }
 
     fn apply_changes(&self, changes: &[(TagId, gridscada_tagdb::Sample)]) {
+        let bind = self.bind.lock();
         let batch: Vec<(InputId, &gridscada_tagdb::Sample)> = changes
             .iter()
-            .filter_map(|(id, s)| self.bind.get(id.index()).copied().flatten().map(|i| (i, s)))
+            .filter_map(|(id, s)| bind.get(id.index()).copied().flatten().map(|i| (i, s)))
             .collect();
+        drop(bind);
         if batch.is_empty() {
             return;
         }
@@ -384,6 +399,63 @@ impl AlarmEngine {
         until: gridscada_tagdb::Timestamp,
     ) -> Result<bool, AlarmError> {
         self.op(|s, now, out| s.set_out_of_service(id, user, true, reason, Some(until), now, out))
+    }
+
+    /// Adds alarm definitions while the engine runs: the alarms of tags
+    /// that appear at run time (a central Sparkplug host's remote tags,
+    /// whose edge declares them in its births). A key already defined is
+    /// kept as it is (a rebirth declares the same alarms again). A
+    /// definition that cannot be taken (its tag is not in the database, a
+    /// bad limit) is an error; the others are defined all the same. Returns
+    /// the keys added.
+    pub fn define(&self, defs: Vec<AlarmDef>) -> Result<Vec<String>, AlarmError> {
+        let mut added = Vec::new();
+        let mut refused = None;
+        let mut new_tags = Vec::new();
+        {
+            let mut set = self.set.lock();
+            for def in defs {
+                if set.id_of(&def.key).is_some() {
+                    continue;
+                }
+                if let Some(tag) = def.tag.as_deref().filter(|t| self.db.id(t).is_none()) {
+                    refused.get_or_insert(AlarmError::invalid(
+                        format!("alarm '{}'", def.key),
+                        format!("tag '{tag}' is not in the tag database"),
+                    ));
+                    continue;
+                }
+                let key = def.key.clone();
+                match set.define(def) {
+                    Ok(_) => added.push(key),
+                    Err(e) => {
+                        refused.get_or_insert(e);
+                    }
+                }
+            }
+            if !added.is_empty() {
+                let mut bind = self.bind.lock();
+                for (input, tag) in set.inputs() {
+                    let Some(id) = self.db.id(tag) else { continue };
+                    if bind.len() <= id.index() {
+                        bind.resize(id.index() + 1, None);
+                    }
+                    if bind[id.index()].is_none() {
+                        bind[id.index()] = Some(input);
+                        new_tags.push(id);
+                    }
+                }
+            }
+        }
+        if !added.is_empty() {
+            self.watched.lock().extend(new_tags);
+            self.rewatch.notify_one();
+            self.version.send_modify(|v| *v += 1);
+        }
+        match refused {
+            Some(e) => Err(e),
+            None => Ok(added),
+        }
     }
 
     /// Raises system alarm `key` (sequence lockout, dispatch fallback,

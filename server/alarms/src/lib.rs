@@ -31,5 +31,7 @@ pub use model::{
     AlarmError, AlarmFilter, AlarmId, AlarmKind, AlarmState, AlarmStateRecord, AlarmTransition,
     AlarmView, ServiceInfo, ShelveInfo, TransitionCause,
 };
-pub use set::{plant_defs, AlarmSet, InputId, Outputs, RestoreReport, MAX_SHELVE};
+pub use set::{
+    plant_defs, tag_alarm_defs, AlarmSet, AlarmSource, InputId, Outputs, RestoreReport, MAX_SHELVE,
+};
 pub use suppression::{default_rules, plant_rules, AlarmMatch, SuppressionRule};

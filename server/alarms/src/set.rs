@@ -28,7 +28,7 @@ mod evaluate;
 mod operations;
 mod records;
 
-pub use defs::{display_value, first_segment, plant_defs};
+pub use defs::{display_value, first_segment, plant_defs, tag_alarm_defs, AlarmSource};
 
 use defs::validate_def;
 use operations::secs;
@@ -159,6 +159,15 @@ impl AlarmSet {
         self.by_key.insert(def.key.clone(), id);
         self.alarms.push(Alarm::new(id, def));
         self.rules_of.push(Vec::new());
+        Ok(id)
+    }
+
+    /// Adds one alarm to a running set (see `AlarmEngine::define`).
+    /// Suppression rules keep the targets they had: a rule does not take
+    /// alarms defined after it.
+    pub fn define(&mut self, def: AlarmDef) -> Result<AlarmId, AlarmError> {
+        let id = self.add(def)?;
+        self.rank_inputs();
         Ok(id)
     }
 

@@ -290,3 +290,83 @@ async fn engine_evaluates_suppresses_and_reports() {
     let lolo = r2.engine.id_of("SS1.PA.V_L1:lolo").unwrap();
     assert_eq!(r2.engine.view(lolo).unwrap().state, AlarmState::Suppressed);
 }
+
+/// A central Sparkplug host's remote tags appear after the engine started:
+/// their alarms are defined then, and evaluated from the current value on.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn alarms_defined_at_run_time_watch_their_new_tags() {
+    let plant = plant();
+    let db =
+        Arc::new(TagDb::with_room(tagdb(&plant).all_meta().map(|(_, m)| m.clone()), 10).unwrap());
+    let clock = Arc::new(ManualClock(AtomicI64::new(1_000_000)));
+    let (ttx, mut transitions) = mpsc::channel(1024);
+    let (etx, _events) = mpsc::channel(1024);
+    let engine = AlarmEngine::new(
+        &plant,
+        Arc::clone(&db),
+        clock.clone(),
+        AlarmChannels {
+            transitions: ttx,
+            events: etx,
+            states: None,
+        },
+        &[],
+        EngineOptions::default(),
+    )
+    .unwrap();
+    tokio::spawn(Arc::clone(&engine).run());
+
+    let tag = "site-1.SS1.PA.V_L1";
+    let config: gridscada_config::AlarmConfig =
+        toml::from_str("selection = \"site-1.SS1\"\nhi = { limit = 253.0, priority = 600 }\n")
+            .unwrap();
+    let source = gridscada_alarms::AlarmSource {
+        name: tag,
+        units: "V",
+        description: "",
+        device: None,
+        states: None,
+    };
+    let defs = || gridscada_alarms::tag_alarm_defs(&source, &config).unwrap();
+    assert!(
+        engine.define(defs()).is_err(),
+        "a tag not in the database yet is refused"
+    );
+    let id = db
+        .add(TagMeta::new(tag, ValueKind::Float).units("V"))
+        .unwrap();
+    // Already high when its alarm is defined: it activates from the
+    // current value, without waiting for a change.
+    db.set(id, 260.0, Quality::GOOD, clock.now());
+    assert_eq!(engine.define(defs()).unwrap(), ["site-1.SS1.PA.V_L1:hi"]);
+    assert!(
+        engine.define(defs()).unwrap().is_empty(),
+        "a rebirth declaring the same alarm adds nothing"
+    );
+    let t = next_hi(&mut transitions).await;
+    assert_eq!(
+        (t.cause, t.to),
+        (TransitionCause::Activate, AlarmState::UnackActive)
+    );
+    let view = engine
+        .view(engine.id_of("site-1.SS1.PA.V_L1:hi").unwrap())
+        .unwrap();
+    assert_eq!(view.selection, "site-1.SS1");
+    // And it follows the tag's changes.
+    clock.set(1001.0);
+    db.set(id, 230.0, Quality::GOOD, clock.now());
+    let t = next_hi(&mut transitions).await;
+    assert_eq!(t.cause, TransitionCause::Return);
+}
+
+async fn next_hi(rx: &mut mpsc::Receiver<AlarmTransition>) -> AlarmTransition {
+    loop {
+        let t = tokio::time::timeout(Duration::from_secs(10), rx.recv())
+            .await
+            .expect("a transition within 10 s")
+            .expect("channel open");
+        if t.key == "site-1.SS1.PA.V_L1:hi" {
+            return t;
+        }
+    }
+}

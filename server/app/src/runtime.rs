@@ -539,6 +539,7 @@ impl Stack {
             writer.clone(),
             events_tx.clone(),
             alarms.clone(),
+            historian.handle(),
             &mut tasks,
         )? {
             Some((host, routed)) => {

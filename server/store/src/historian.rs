@@ -40,6 +40,28 @@ pub struct HistorySample {
     pub quality: QualityCode,
 }
 
+impl HistorySample {
+    /// The row of one sample as it is, without a logging policy (samples
+    /// that arrive already chosen: a Sparkplug edge's store and forward).
+    /// None for a string value (not logged); a Bad sample is a gap.
+    pub fn of(tag: Arc<str>, sample: &gridscada_tagdb::Sample) -> Option<HistorySample> {
+        if matches!(sample.value, gridscada_tagdb::Value::Str(_)) || sample.is_never_read() {
+            return None;
+        }
+        let bad = sample.quality.code == QualityCode::Bad;
+        Some(HistorySample {
+            tag,
+            ts: sample.timestamp,
+            value: sample.value.as_f64().filter(|v| v.is_finite() && !bad),
+            exact: sample
+                .value
+                .as_i128()
+                .filter(|_| sample.value.is_wide_integer() && !bad),
+            quality: sample.quality.code,
+        })
+    }
+}
+
 /// A sample read back from the historian.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct RawSample {
@@ -748,4 +770,33 @@ async fn copy_in(
 /// The keyset cursor that starts at `from` inclusive.
 fn f_start(from: Timestamp) -> i64 {
     from.as_millis().saturating_sub(1)
+}
+
+#[cfg(test)]
+mod sample_rows {
+    use super::*;
+    use gridscada_tagdb::{Quality, Sample};
+
+    #[test]
+    fn a_sample_becomes_its_row_and_a_bad_one_a_gap() {
+        let at = Timestamp::from_millis(1_600_000_000_000);
+        let row = HistorySample::of("T".into(), &Sample::good(12.5, at)).unwrap();
+        assert_eq!(
+            (row.ts, row.value, row.quality),
+            (at, Some(12.5), QualityCode::Good)
+        );
+        let mut bad = Sample::good(12.5, at);
+        bad.quality = Quality::bad("site offline");
+        let row = HistorySample::of("T".into(), &bad).unwrap();
+        assert_eq!((row.value, row.quality), (None, QualityCode::Bad));
+        assert!(HistorySample::of("T".into(), &Sample::good("text", at)).is_none());
+        assert!(
+            HistorySample::of(
+                "T".into(),
+                &Sample::never_read(gridscada_tagdb::Value::Float(0.0))
+            )
+            .is_none(),
+            "never read"
+        );
+    }
 }

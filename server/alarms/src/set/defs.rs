@@ -95,7 +95,34 @@ pub fn plant_defs(plant: &Plant) -> Result<Vec<AlarmDef>, AlarmError> {
 }
 
 fn tag_defs(tag: &TagConfig, a: &AlarmConfig, defs: &mut Vec<AlarmDef>) -> Result<(), AlarmError> {
-    let name = tag.name.get_ref();
+    let source = AlarmSource {
+        name: tag.name.get_ref(),
+        units: &tag.units,
+        description: &tag.description,
+        device: Some(tag.device.get_ref()),
+        states: tag.states.as_ref().map(|s| Arc::new(s.get_ref().clone())),
+    };
+    defs.extend(tag_alarm_defs(&source, a)?);
+    Ok(())
+}
+
+/// The tag an alarm configuration belongs to: what its alarms need to know
+/// of it.
+pub struct AlarmSource<'a> {
+    pub name: &'a str,
+    pub units: &'a str,
+    pub description: &'a str,
+    /// The device the tag is read from (a local tag), if any.
+    pub device: Option<&'a str>,
+    pub states: Option<Arc<std::collections::BTreeMap<String, String>>>,
+}
+
+/// The limit and discrete alarms of one tag's `[tag.alarm]`: for a plant's
+/// own tags, and for a central Sparkplug host's remote tags, whose edge
+/// carries the same configuration in its births.
+pub fn tag_alarm_defs(tag: &AlarmSource, a: &AlarmConfig) -> Result<Vec<AlarmDef>, AlarmError> {
+    let mut defs = Vec::new();
+    let name = tag.name;
     let default_selection = a
         .selection
         .clone()
@@ -125,7 +152,7 @@ fn tag_defs(tag: &TagConfig, a: &AlarmConfig, defs: &mut Vec<AlarmDef>) -> Resul
                 *l.off_delay_s.get_ref(),
             )?,
             key,
-            tag: Some(name.clone()),
+            tag: Some(name.to_owned()),
             kind,
             priority: l.priority,
             selection: l
@@ -135,10 +162,10 @@ fn tag_defs(tag: &TagConfig, a: &AlarmConfig, defs: &mut Vec<AlarmDef>) -> Resul
             message: l
                 .message
                 .clone()
-                .unwrap_or_else(|| default_limit_message(kind, &tag.units)),
-            units: tag.units.clone(),
-            device: Some(tag.device.get_ref().clone()),
-            states: tag.states.as_ref().map(|s| Arc::new(s.get_ref().clone())),
+                .unwrap_or_else(|| default_limit_message(kind, tag.units)),
+            units: tag.units.to_owned(),
+            device: tag.device.map(str::to_owned),
+            states: tag.states.clone(),
             condition,
         });
     }
@@ -173,7 +200,7 @@ fn tag_defs(tag: &TagConfig, a: &AlarmConfig, defs: &mut Vec<AlarmDef>) -> Resul
                 *d.off_delay_s.get_ref(),
             )?,
             key,
-            tag: Some(name.clone()),
+            tag: Some(name.to_owned()),
             kind: AlarmKind::Discrete,
             priority: d.priority,
             selection: d
@@ -181,13 +208,13 @@ fn tag_defs(tag: &TagConfig, a: &AlarmConfig, defs: &mut Vec<AlarmDef>) -> Resul
                 .clone()
                 .unwrap_or_else(|| default_selection.clone()),
             message,
-            units: tag.units.clone(),
-            device: Some(tag.device.get_ref().clone()),
-            states: tag.states.as_ref().map(|s| Arc::new(s.get_ref().clone())),
+            units: tag.units.to_owned(),
+            device: tag.device.map(str::to_owned),
+            states: tag.states.clone(),
             condition: Condition::Equals(when),
         });
     }
-    Ok(())
+    Ok(defs)
 }
 
 fn default_limit_message(kind: AlarmKind, units: &str) -> String {

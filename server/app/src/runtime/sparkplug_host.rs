@@ -8,7 +8,9 @@ use std::time::Duration;
 use anyhow::anyhow;
 use gridscada_alarms::AlarmEngine;
 use gridscada_config::Plant;
-use gridscada_sparkplug::host::{Host, HostOptions, HostStats, SiteNotice, SitesPolicy};
+use gridscada_sparkplug::host::{
+    Host, HostOptions, HostOutputs, HostStats, RemoteAlarms, SiteNotice, SitesPolicy,
+};
 use gridscada_store::NewEvent;
 use gridscada_tagdb::{Clock, TagDb, TagWriter};
 use tokio::sync::mpsc;
@@ -32,7 +34,10 @@ pub(super) fn room(plant: &Plant) -> usize {
 /// Starts the host if configured; its writer sends remote tags to their
 /// edge and every other tag to `field`. A site going offline (or the
 /// broker lost) is an event and a system alarm `sparkplug:NODE` (area: the
-/// node) until it is born again (a task in `tasks`).
+/// node) until it is born again (a task in `tasks`). The alarms a
+/// gridscada edge declares in its births are raised on the remote tags
+/// here (another task), and its historical samples go to `history`.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn start(
     plant: &Plant,
     db: Arc<TagDb>,
@@ -40,6 +45,7 @@ pub(super) fn start(
     field: Arc<dyn TagWriter>,
     events: mpsc::Sender<NewEvent>,
     alarms: Arc<AlarmEngine>,
+    history: gridscada_store::HistorianHandle,
     tasks: &mut JoinSet<()>,
 ) -> anyhow::Result<Option<(Host, Arc<dyn TagWriter>)>> {
     let Some((mqtt, host)) = plant
@@ -67,8 +73,22 @@ pub(super) fn start(
         write_timeout: Duration::from_secs_f64(*host.write_timeout_s.get_ref()),
     };
     let (notices_tx, mut notices) = mpsc::channel::<SiteNotice>(256);
-    let started = Host::start(opts, db, clock.clone(), Some(notices_tx))
+    let (alarms_tx, mut remote_alarms) = mpsc::channel::<Vec<RemoteAlarms>>(256);
+    let outputs = HostOutputs {
+        notices: Some(notices_tx),
+        alarms: Some(alarms_tx),
+        history: Some(history),
+    };
+    let started = Host::start(opts, db, clock.clone(), outputs)
         .map_err(|e| anyhow!("starting the Sparkplug host: {e}"))?;
+    let engine = alarms.clone();
+    tasks.spawn(async move {
+        while let Some(birth) = remote_alarms.recv().await {
+            for r in &birth {
+                define_remote_alarms(&engine, r);
+            }
+        }
+    });
     tasks.spawn(async move {
         while let Some(n) = notices.recv().await {
             crate::sinks::system_alarm(
@@ -88,6 +108,49 @@ pub(super) fn start(
     });
     let writer = started.writer(Some(field));
     Ok(Some((started, writer)))
+}
+
+/// Raises on a remote tag the alarms its edge configured: the same limits,
+/// delays and messages, keyed by the remote tag's name, in the area
+/// `NODE.SELECTION` (the edge's selection, by default the first part of
+/// the tag's name there). Refused definitions are logged.
+fn define_remote_alarms(engine: &AlarmEngine, r: &RemoteAlarms) {
+    let source = gridscada_alarms::AlarmSource {
+        name: &r.tag,
+        units: &r.units,
+        description: &r.description,
+        device: None,
+        states: None,
+    };
+    let at_edge = gridscada_alarms::set::first_segment(&r.metric).to_owned();
+    let mut config = r.config.clone();
+    let area =
+        |s: &Option<String>| Some(format!("{}.{}", r.node, s.as_deref().unwrap_or(&at_edge)));
+    let default_area = area(&config.selection);
+    for l in [
+        &mut config.hihi,
+        &mut config.hi,
+        &mut config.lo,
+        &mut config.lolo,
+    ]
+    .into_iter()
+    .flatten()
+    {
+        l.selection = l.selection.as_ref().and(area(&l.selection));
+    }
+    for d in &mut config.discrete {
+        d.selection = d.selection.as_ref().and(area(&d.selection));
+    }
+    config.selection = default_area;
+    let defined =
+        gridscada_alarms::tag_alarm_defs(&source, &config).and_then(|defs| engine.define(defs));
+    match defined {
+        Ok(keys) if !keys.is_empty() => {
+            tracing::info!(tag = %r.tag, alarms = keys.len(), "alarms of a remote tag defined from its birth")
+        }
+        Ok(_) => {}
+        Err(e) => tracing::warn!(tag = %r.tag, error = %e, "alarms of a remote tag refused"),
+    }
 }
 
 /// The host's families in `/metrics`.
@@ -134,6 +197,11 @@ pub(super) fn render(s: &HostStats, out: &mut gridscada_web::metrics::Prom) {
             "gridscada_sparkplug_host_writes_failed_total",
             "Writes to remote tags that failed or timed out.",
             s.writes_failed,
+        ),
+        (
+            "gridscada_sparkplug_host_historical_samples_total",
+            "Historical samples (an edge's store and forward) handed to the historian at their own timestamps.",
+            s.historical,
         ),
     ] {
         out.counter(name, help, &[], v as f64);

@@ -370,16 +370,13 @@ impl Edge {
     async fn dbirth(&mut self, d: usize) {
         let now = self.now_ms();
         let seq = self.seq.advance();
-        let payload = model::dbirth(&self.model, d, &self.ctx.db, seq, now);
-        // The birth carries the current samples: the deadband starts there,
-        // and gathered changes of this device are in it.
-        for m in &payload.metrics {
-            if let Some(id) = m.alias.and_then(|a| model::tag_of_alias(a, &self.ctx.db)) {
-                if let Some(s) = self.ctx.db.get(id) {
-                    self.deadband.reset_to(id, &s);
-                }
-            }
+        let birth = model::dbirth(&self.model, d, &self.ctx.db, seq, now);
+        // The deadband starts from what the birth carries (the same read);
+        // changes of this device gathered before it are in it.
+        for (id, sample) in &birth.carried {
+            self.deadband.reset_to(*id, sample);
         }
+        let payload = birth.payload;
         let model = &self.model;
         self.pending
             .retain(|(id, _)| model.device_of(*id) != Some(d));

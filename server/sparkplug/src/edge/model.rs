@@ -25,6 +25,10 @@ pub const PROP_QUALITY: &str = "Quality";
 pub const PROP_QUALITY_REASON: &str = "QualityReason";
 pub const PROP_UNITS: &str = "engUnit";
 pub const PROP_WRITABLE: &str = "Writable";
+/// gridscada's own property: the tag's `[tag.alarm]` as TOML text, so that
+/// a central gridscada raises the same alarms on the remote tag. Other
+/// hosts ignore it.
+pub const PROP_ALARMS: &str = "gridscadaAlarms";
 
 /// OPC-style quality codes as Sparkplug hosts read them.
 pub const QUALITY_GOOD: i32 = 192;
@@ -58,6 +62,8 @@ pub struct EdgeModel {
     commandable: Vec<bool>,
     /// Per tag id: its data type on the wire.
     datatypes: Vec<DataType>,
+    /// Per tag id: its alarm configuration as TOML ([`PROP_ALARMS`]).
+    alarms: Vec<Option<String>>,
 }
 
 impl EdgeModel {
@@ -80,6 +86,7 @@ impl EdgeModel {
         });
         let mut device_of = vec![derived; n];
         let mut commandable = vec![false; n];
+        let mut alarms = vec![None; n];
         let role: Role = *edge.command_role.get_ref();
         for t in &plant.tags {
             let Some(id) = db.id(t.name.get_ref()) else {
@@ -99,6 +106,13 @@ impl EdgeModel {
                 .unwrap_or(Role::Operator);
             commandable[id.index()] =
                 *t.writable.get_ref() && edge.allows_command(t.name.get_ref()) && required <= role;
+            alarms[id.index()] = t.alarm.as_ref().and_then(|a| match toml::to_string(a) {
+                Ok(text) => Some(text),
+                Err(e) => {
+                    tracing::warn!(tag = %t.name.get_ref(), error = %e, "alarm configuration not published");
+                    None
+                }
+            });
         }
         let mut datatypes = Vec::with_capacity(n);
         for (id, meta) in db.all_meta() {
@@ -110,6 +124,7 @@ impl EdgeModel {
             device_of,
             commandable,
             datatypes,
+            alarms,
         }
     }
 
@@ -272,37 +287,57 @@ pub fn ndeath(bd_seq: u64) -> Payload {
     }
 }
 
+/// A DBIRTH and the samples it carries: the deadband must start from
+/// exactly these, not from a second read of the database.
+pub struct Birth {
+    pub payload: Payload,
+    pub carried: Vec<(TagId, Sample)>,
+}
+
 /// DBIRTH: every tag of the device with name, alias, data type, current
 /// value, its timestamp, and properties (units, quality, writable by DCMD).
-pub fn dbirth(model: &EdgeModel, device: usize, db: &TagDb, seq: u64, now_ms: u64) -> Payload {
+///
+/// The samples are read once, in one snapshot of the database. A change
+/// applied after that snapshot reaches the edge through its subscription
+/// and is measured against what the birth carried; a second read (to start
+/// the deadband) could see that change already and hold it back, leaving
+/// the host with the birth's older value for good (it was a status tag
+/// that turned Good while its device's birth was being built).
+pub fn dbirth(model: &EdgeModel, device: usize, db: &TagDb, seq: u64, now_ms: u64) -> Birth {
     let tags = model
         .devices
         .get(device)
         .map(|d| d.tags.as_slice())
         .unwrap_or_default();
-    let metrics = tags
+    let carried = db.snapshot(tags).changes;
+    let metrics = carried
         .iter()
-        .filter_map(|&id| {
-            let meta = db.meta(id)?;
-            let sample = db.get(id)?;
-            let datatype = model.datatype(id);
-            let mut m = data_metric(id, Some(&meta.name), &sample, datatype);
+        .filter_map(|(id, sample)| {
+            let meta = db.meta(*id)?;
+            let datatype = model.datatype(*id);
+            let mut m = data_metric(*id, Some(&meta.name), sample, datatype);
             let props = m.properties.get_or_insert_with(Default::default);
             if !meta.units.is_empty() {
                 props.push(PROP_UNITS, str_prop(&meta.units));
             }
-            props.push(PROP_WRITABLE, bool_prop(model.commandable(id)));
+            props.push(PROP_WRITABLE, bool_prop(model.commandable(*id)));
+            if let Some(Some(alarms)) = model.alarms.get(id.index()) {
+                props.push(PROP_ALARMS, str_prop(alarms));
+            }
             if sample.is_never_read() {
                 m.timestamp = Some(now_ms);
             }
             Some(m)
         })
         .collect();
-    Payload {
-        timestamp: Some(now_ms),
-        seq: Some(seq),
-        metrics,
-        ..Default::default()
+    Birth {
+        payload: Payload {
+            timestamp: Some(now_ms),
+            seq: Some(seq),
+            metrics,
+            ..Default::default()
+        },
+        carried,
     }
 }
 
@@ -483,6 +518,8 @@ kind = "input_register"
 address = 0
 type = "f32"
 units = "V"
+[tag.alarm]
+hi = { limit = 250.0, priority = 700 }
 
 [[tag]]
 name = "RTU1.Setpoint"
@@ -582,7 +619,7 @@ write_role = "operator"
         let (m, db) = model();
         let volts = db.id("RTU1.Volts").unwrap();
         db.set(volts, 231.5, Quality::GOOD, Timestamp::from_millis(1_000));
-        let p = dbirth(&m, 0, &db, 1, 9_000);
+        let p = dbirth(&m, 0, &db, 1, 9_000).payload;
         assert_eq!(p.seq, Some(1));
         assert_eq!(p.metrics.len(), 5);
         let v = &p.metrics[0];
@@ -603,6 +640,22 @@ write_role = "operator"
         assert_eq!(
             props.get(PROP_WRITABLE).unwrap().value,
             Some(PropertyValueKind::Boolean(false))
+        );
+        // Its alarms, as the TOML a central gridscada reads back.
+        let Some(PropertyValueKind::String(alarms)) = &props.get(PROP_ALARMS).unwrap().value else {
+            panic!("no alarm property");
+        };
+        let back: gridscada_config::AlarmConfig = toml::from_str(alarms).unwrap();
+        let hi = back.hi.unwrap();
+        assert_eq!((*hi.limit.get_ref(), hi.priority), (250.0, 700));
+        assert!(
+            p.metrics[1]
+                .properties
+                .as_ref()
+                .unwrap()
+                .get(PROP_ALARMS)
+                .is_none(),
+            "a tag without alarms has no alarm property"
         );
         // A tag never read: Bad with its reason, stamped with the birth time.
         let run = &p.metrics[2];
@@ -629,6 +682,56 @@ write_role = "operator"
         assert_eq!(aliases.len(), 5);
         assert_eq!(tag_of_alias(999, &db), None);
         assert_eq!(tag_of_alias(u64::MAX, &db), None);
+    }
+
+    /// The bug behind status tags stuck Bad at the centre: a status tag
+    /// turned Good between the birth's read and a second read that started
+    /// the deadband, so its change, arriving later, was held back as "no
+    /// change" and the host kept the birth's Bad for good.
+    #[test]
+    fn a_change_just_after_the_birth_snapshot_is_published() {
+        let (m, db) = model();
+        let connected = db.id("RTU1.Comm.Connected").unwrap();
+        let mut deadband = Deadband::new(db.len(), 0.0);
+        let birth = dbirth(&m, 1, &db, 1, 9_000);
+        // The poller's first scan lands while the birth is on its way.
+        db.set(
+            connected,
+            true,
+            Quality::GOOD,
+            Timestamp::from_millis(9_001),
+        );
+        for (id, sample) in &birth.carried {
+            deadband.reset_to(*id, sample);
+        }
+        let carried = &birth
+            .carried
+            .iter()
+            .find(|(id, _)| *id == connected)
+            .unwrap()
+            .1;
+        assert!(
+            carried.is_never_read(),
+            "the birth carried the tag as never read"
+        );
+        let metric = &birth.payload.metrics[0];
+        assert_eq!(metric.alias, Some(alias(connected)));
+        assert_eq!(
+            metric
+                .properties
+                .as_ref()
+                .unwrap()
+                .get(PROP_QUALITY)
+                .unwrap()
+                .value,
+            Some(PropertyValueKind::Int(0)),
+            "the payload says what the carried samples say"
+        );
+        let now = db.get(connected).unwrap();
+        assert!(
+            deadband.offer(connected, &now),
+            "the change after the birth's snapshot goes out as data"
+        );
     }
 
     #[test]

@@ -16,7 +16,7 @@ use rumqttc::{AsyncClient, Event, EventLoop, LastWill, MqttOptions, Packet, QoS}
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 
-use super::sites::{Sites, SitesPolicy, HOST_OFFLINE};
+use super::sites::{RemoteAlarms, Sites, SitesPolicy, HOST_OFFLINE};
 use super::stats::{Counters, HostStats};
 use super::writer::{Pending, RoutedWriter};
 use crate::proto::Payload;
@@ -82,6 +82,18 @@ pub struct SiteNotice {
     pub message: String,
 }
 
+/// Where the host hands on what is not a live value. Each is optional.
+#[derive(Default)]
+pub struct HostOutputs {
+    /// Sites going online and offline, the broker lost.
+    pub notices: Option<mpsc::Sender<SiteNotice>>,
+    /// The alarm configurations gridscada edges declare in their births
+    /// (those of one birth message together).
+    pub alarms: Option<mpsc::Sender<Vec<RemoteAlarms>>>,
+    /// The historian, for historical samples (an edge's store and forward).
+    pub history: Option<gridscada_store::HistorianHandle>,
+}
+
 /// State shared by the session task and the writer.
 pub(crate) struct Shared {
     pub db: Arc<TagDb>,
@@ -93,6 +105,10 @@ pub(crate) struct Shared {
     pub write_timeout: Duration,
     /// Never waited for: a full channel drops the notice (logged anyway).
     pub notices: Option<mpsc::Sender<SiteNotice>>,
+    /// Never waited for: a full channel drops the definitions (logged);
+    /// the node's next birth declares them again.
+    pub alarms: Option<mpsc::Sender<Vec<RemoteAlarms>>>,
+    pub history: Option<gridscada_store::HistorianHandle>,
 }
 
 impl Shared {
@@ -128,7 +144,7 @@ impl Host {
         opts: HostOptions,
         db: Arc<TagDb>,
         clock: Arc<dyn Clock>,
-        notices: Option<mpsc::Sender<SiteNotice>>,
+        outputs: HostOutputs,
     ) -> Result<Host, String> {
         // One timestamp for the will and every online STATE of this run,
         // as Sparkplug 3.0 asks: a host's birth and death certificates match.
@@ -143,7 +159,9 @@ impl Host {
             counters: Counters::default(),
             client,
             write_timeout: opts.write_timeout,
-            notices,
+            notices: outputs.notices,
+            alarms: outputs.alarms,
+            history: outputs.history,
         });
         let (stop, stop_rx) = watch::channel(false);
         let task = tokio::spawn(run(opts, shared.clone(), events, born, stop_rx));
@@ -448,6 +466,24 @@ fn on_publish(
         shared.pending.lock().offer(&fx.samples, |id| {
             sites.remote(id).map(|r| r.node.clone()).unwrap_or_default()
         });
+    }
+    if let (Some(tx), false) = (&shared.alarms, fx.alarms.is_empty()) {
+        if tx.try_send(fx.alarms).is_err() {
+            tracing::warn!(
+                topic = topic_text,
+                "alarm definitions of a birth not taken (queue full); the node's next birth brings them again"
+            );
+        }
+    }
+    if !fx.historical.is_empty() {
+        if let Some(history) = &shared.history {
+            let rows = fx.historical.iter().filter_map(|(id, sample)| {
+                let name = shared.db.meta(*id)?.name.clone();
+                gridscada_store::HistorySample::of(name, sample)
+            });
+            let taken = history.push_all(rows);
+            counters.historical(taken);
+        }
     }
     counters.set_sites(online, tags);
     if let Some(node) = fx.rebirth {

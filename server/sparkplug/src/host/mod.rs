@@ -12,10 +12,10 @@ mod sites;
 mod stats;
 mod writer;
 
-pub use link::{Host, HostOptions, SiteNotice};
+pub use link::{Host, HostOptions, HostOutputs, SiteNotice};
 pub use sites::{
-    Effects, Problem, Remote, Sites, SitesPolicy, DEVICE_OFFLINE, HOST_OFFLINE, REBIRTH,
-    SITE_OFFLINE,
+    Effects, Problem, Remote, RemoteAlarms, Sites, SitesPolicy, DEVICE_OFFLINE, HOST_OFFLINE,
+    PROP_ALARMS, REBIRTH, SITE_OFFLINE,
 };
 pub use stats::{HostStats, MESSAGE_KINDS};
 pub use writer::RoutedWriter;

@@ -25,6 +25,10 @@ pub const SITE_OFFLINE: &str = "site offline";
 pub const DEVICE_OFFLINE: &str = "device offline";
 pub const HOST_OFFLINE: &str = "central host lost the broker";
 
+/// A gridscada edge's metric property with the tag's alarm configuration
+/// (TOML of `[tag.alarm]`).
+pub const PROP_ALARMS: &str = crate::edge::model::PROP_ALARMS;
+
 /// The metric that carries a node's birth/death session number.
 const BD_SEQ: &str = "bdSeq";
 /// The node control metric that asks an edge node for a rebirth.
@@ -112,6 +116,27 @@ pub struct Effects {
     pub added: usize,
     /// The node went online (a birth) or offline (a death).
     pub online_changed: bool,
+    /// Alarm configurations a birth carried (a gridscada edge's
+    /// `gridscadaAlarms` property), for the alarm engine.
+    pub alarms: Vec<RemoteAlarms>,
+    /// Historical samples (an edge's store and forward): for the historian
+    /// at their own timestamps, never the current value.
+    pub historical: Vec<(TagId, Sample)>,
+}
+
+/// The alarms an edge declared for one of its metrics, to be raised on the
+/// remote tag here.
+#[derive(Debug, Clone)]
+pub struct RemoteAlarms {
+    /// The remote tag's name here (`NODE.METRIC`).
+    pub tag: String,
+    /// The edge node: the alarms' area.
+    pub node: String,
+    /// The metric's name at the edge.
+    pub metric: String,
+    pub units: String,
+    pub description: String,
+    pub config: gridscada_config::AlarmConfig,
 }
 
 /// Where a remote tag comes from: what a command to it must name.
@@ -469,6 +494,28 @@ impl Sites {
                     writable: db.meta(id).is_some_and(|meta| meta.writable),
                 },
             );
+            if let Some(text) = string_prop(props, &[PROP_ALARMS]) {
+                match toml::from_str::<gridscada_config::AlarmConfig>(&text) {
+                    Ok(config) => fx.alarms.push(RemoteAlarms {
+                        tag: tag.clone(),
+                        node: node.to_owned(),
+                        metric: name.to_owned(),
+                        units: db.meta(id).map(|m| m.units.to_string()).unwrap_or_default(),
+                        description: db
+                            .meta(id)
+                            .map(|m| m.description.to_string())
+                            .unwrap_or_default(),
+                        config,
+                    }),
+                    Err(e) => fx.problems.push(Problem::BadMetric {
+                        node: node.to_owned(),
+                        reason: format!(
+                            "metric '{name}': its {PROP_ALARMS} property is no alarm configuration ({})",
+                            e.message()
+                        ),
+                    }),
+                }
+            }
             let n = self.nodes.entry(node.to_owned()).or_default();
             if let Some(alias) = m.alias {
                 n.aliases.insert(alias, id);
@@ -542,11 +589,6 @@ impl Sites {
                     continue;
                 }
             };
-            // Historical samples (store and forward) are the edge's past:
-            // they do not replace the current value.
-            if m.is_historical == Some(true) {
-                continue;
-            }
             let (Some(remote), Some(meta)) = (self.remotes.get(&id), db.meta(id)) else {
                 continue;
             };
@@ -556,7 +598,14 @@ impl Sites {
                 .unwrap_or(remote.datatype);
             let last = db.get(id).map(|s| s.value);
             let sample = sample_of(m, datatype, meta.kind, last, payload.timestamp, now);
-            fx.samples.push((id, sample));
+            // Historical samples (store and forward) are the edge's past:
+            // the historian takes them at their timestamps; they do not
+            // replace the current value.
+            if m.is_historical == Some(true) {
+                fx.historical.push((id, sample));
+            } else {
+                fx.samples.push((id, sample));
+            }
         }
         if let Some(alias) = unknown {
             fx.problems.push(Problem::UnknownAlias {

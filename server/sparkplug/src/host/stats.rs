@@ -29,6 +29,7 @@ pub(crate) struct Counters {
     rebirths_requested: AtomicU64,
     writes_confirmed: AtomicU64,
     writes_failed: AtomicU64,
+    historical: AtomicU64,
     connected: AtomicBool,
     sites_online: AtomicU64,
     tags: AtomicU64,
@@ -48,6 +49,8 @@ pub struct HostStats {
     pub rebirths_requested: u64,
     pub writes_confirmed: u64,
     pub writes_failed: u64,
+    /// Historical samples (store and forward) handed to the historian.
+    pub historical: u64,
     pub connected: bool,
     /// Edge nodes online (born and not dead).
     pub sites_online: u64,
@@ -84,6 +87,9 @@ impl Counters {
         };
         c.fetch_add(1, Relaxed);
     }
+    pub fn historical(&self, n: usize) {
+        self.historical.fetch_add(n as u64, Relaxed);
+    }
     pub fn set_connected(&self, on: bool) {
         self.connected.store(on, Relaxed);
     }
@@ -108,6 +114,7 @@ impl Counters {
             rebirths_requested: self.rebirths_requested.load(Relaxed),
             writes_confirmed: self.writes_confirmed.load(Relaxed),
             writes_failed: self.writes_failed.load(Relaxed),
+            historical: self.historical.load(Relaxed),
             connected: self.connected.load(Relaxed),
             sites_online: self.sites_online.load(Relaxed),
             tags: self.tags.load(Relaxed),

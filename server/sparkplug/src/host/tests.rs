@@ -587,3 +587,77 @@ fn the_rebirth_request_is_the_node_control_metric() {
     assert_eq!(p.metrics[0].name.as_deref(), Some(REBIRTH));
     assert_eq!(p.metrics[0].value, Some(MetricValue::Boolean(true)));
 }
+
+fn str_prop(v: &str) -> PropertyValue {
+    PropertyValue {
+        r#type: Some(DataType::String.code()),
+        value: Some(PropertyValueKind::String(v.into())),
+        ..Default::default()
+    }
+}
+
+#[test]
+fn a_birth_carries_the_edge_alarms_of_its_metrics() {
+    let (mut s, db) = (sites(), db());
+    let mut p = nbirth(7);
+    let volts = p
+        .metrics
+        .iter_mut()
+        .find(|m| m.name.as_deref() == Some("Feeder/Volts"))
+        .unwrap();
+    volts.properties.as_mut().unwrap().push(
+        PROP_ALARMS,
+        str_prop("hi = { limit = 253.0, priority = 600 }\n"),
+    );
+    let mut bad = metric("Feeder/Amps", 5, DataType::Float, MetricValue::Float(1.0));
+    let mut props = PropertySet::default();
+    props.push(PROP_ALARMS, str_prop("hi = \"not a table\""));
+    bad.properties = Some(props);
+    p.metrics.push(bad);
+    let fx = run(&mut s, &db, node(MessageType::NBirth, "site-a"), p, 0);
+    assert_eq!(fx.alarms.len(), 1);
+    let a = &fx.alarms[0];
+    assert_eq!(
+        (a.tag.as_str(), a.node.as_str(), a.metric.as_str()),
+        ("site-a.Feeder.Volts", "site-a", "Feeder/Volts")
+    );
+    assert_eq!(a.units, "V");
+    assert_eq!(*a.config.hi.as_ref().unwrap().limit.get_ref(), 253.0);
+    assert!(
+        fx.problems
+            .iter()
+            .any(|p| p.label() == "bad_metric" && p.to_string().contains("Feeder/Amps")),
+        "{:?}",
+        fx.problems
+    );
+    // The tag is taken all the same.
+    assert!(db.id("site-a.Feeder.Amps").is_some());
+}
+
+#[test]
+fn historical_data_goes_to_the_history_not_the_current_value() {
+    let (mut s, db) = (sites(), db());
+    born_site(&mut s, &db, "site-a");
+    let id = db.id("site-a.Feeder.Volts").unwrap();
+    let mut past = by_alias(1, MetricValue::Float(199.0));
+    past.is_historical = Some(true);
+    past.timestamp = Some(1_600_000_000_000);
+    let fx = run(
+        &mut s,
+        &db,
+        node(MessageType::NData, "site-a"),
+        msg(Some(2), vec![past]),
+        1,
+    );
+    assert!(fx.samples.is_empty());
+    assert_eq!(fx.historical.len(), 1);
+    let (hid, h) = &fx.historical[0];
+    assert_eq!(*hid, id);
+    assert_eq!(h.value, Value::Float(199.0));
+    assert_eq!(h.timestamp, Timestamp::from_millis(1_600_000_000_000));
+    assert_eq!(
+        db.get(id).unwrap().value,
+        Value::Float(230.5),
+        "the current value stays"
+    );
+}
