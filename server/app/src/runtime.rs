@@ -739,6 +739,9 @@ async fn run(
 ) -> anyhow::Result<()> {
     // A wrong certificate or key stops the start before anything runs.
     let https = crate::https::load(&plant)?;
+    // The data folder of this run (the demo's --data): where reports go.
+    let mut plant = plant;
+    plant.data_dir = data.to_path_buf();
     let store = open_store(&plant, data).await?;
     let clock: Arc<dyn Clock> = match &scenario {
         Some(live) => live.clock(),

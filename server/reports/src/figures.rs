@@ -182,15 +182,17 @@ impl<'a> TagIndex<'a> {
         self.plant.tags.iter().find(|t| t.name.get_ref() == name)
     }
 
-    /// How long a sample of `name` holds: 1.5 × its max interval, so one late
-    /// re-log is not a gap.
+    /// How long a sample of `name` holds: twice its max interval and 5
+    /// minutes more. The recorder re-logs a flat value at the max interval on
+    /// a timer that a busy server (or a replay's leaping clock) runs late, so
+    /// only a longer silence means nothing was recorded (the server was off).
     pub fn hold_ms(&self, name: &str) -> i64 {
         let s = self
             .tag(name)
             .map(|t| *t.history.max_interval_s.get_ref())
             .filter(|s| s.is_finite() && *s > 0.0)
             .unwrap_or(DEFAULT_HOLD_S);
-        (s * 1500.0).min(1.0e12) as i64
+        ((2.0 * s + 300.0) * 1000.0).min(1.0e12) as i64
     }
 
     /// kW per unit of `name`'s value (1 when its units are not power).

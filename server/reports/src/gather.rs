@@ -171,14 +171,24 @@ pub async fn generate(
     while day < to {
         let end = (day + 86_400_000).min(to);
         let data = samples(store, &tags, day, end).await?;
-        let h = (end - day) as f64 / 3_600_000.0;
-        add_energy(&mut energy, figures::energy(plant, &data, day, end), h);
-        let o = figures::outages(plant, &data, day, end);
+        // Past the last sample of any of the tags nothing was recorded (the
+        // server stopped): the day's figures end there, and do not hold the
+        // last values to midnight.
+        let recorded = data
+            .values()
+            .filter_map(|v| v.last())
+            .map(|s| s.ts + 1)
+            .max()
+            .unwrap_or(day);
+        let until = end.min(recorded.max(day));
+        let h = (until - day) as f64 / 3_600_000.0;
+        add_energy(&mut energy, figures::energy(plant, &data, day, until), h);
+        let o = figures::outages(plant, &data, day, until);
         for (c, p) in reliability_cov.iter_mut().zip(&o.panels) {
             *c += p.coverage * h;
         }
         outages.push(o);
-        coverage_h += h;
+        coverage_h += (end - day) as f64 / 3_600_000.0;
         day = end;
     }
     let mut energy = energy.expect("at least one day");

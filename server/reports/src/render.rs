@@ -37,7 +37,7 @@ pub fn time_text(ms: i64) -> String {
 
 fn num(v: Option<f64>, digits: usize) -> String {
     match v {
-        Some(v) if v.is_finite() => format!("{v:.digits$}"),
+        Some(v) if v.is_finite() => format!("{:.digits$}", v + 0.0),
         _ => "—".to_string(),
     }
 }
@@ -68,7 +68,8 @@ th { background: #eee; }
 .note { color: #555; font-size: 12px; }
 @media print {
   @page { size: A4; margin: 15mm; }
-  body { margin: 0; font-size: 10pt; }
+  body { margin: 0; font-size: 9pt; }
+  th, td { padding: 2px 5px; }
   h2 { break-after: avoid; }
   table { break-inside: avoid; }
   th { background: #eee !important; -webkit-print-color-adjust: exact; print-color-adjust: exact; }
@@ -262,19 +263,25 @@ fn field(o: &mut String, s: &str) {
     gridscada_store::csv_field(o, s);
 }
 
+/// One row. `value` is a number or time this module formatted, written as
+/// is (a negative number is not a formula); the names go through the guard.
 fn row(o: &mut String, section: &str, subject: &str, figure: &str, value: &str, unit: &str) {
-    for (i, f) in [section, subject, figure, value, unit].iter().enumerate() {
-        if i > 0 {
-            o.push(',');
-        }
-        field(o, f);
-    }
+    field(o, section);
+    o.push(',');
+    field(o, subject);
+    o.push(',');
+    field(o, figure);
+    o.push(',');
+    o.push_str(value);
+    o.push(',');
+    field(o, unit);
     o.push('\n');
 }
 
 fn val(v: Option<f64>) -> String {
+    // + 0.0 turns a negative zero into zero.
     v.filter(|v| v.is_finite())
-        .map_or(String::new(), |v| format!("{v:.4}"))
+        .map_or(String::new(), |v| format!("{:.4}", v + 0.0))
 }
 
 /// The report as CSV: `section,subject,figure,value,unit`.

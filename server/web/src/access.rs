@@ -28,12 +28,16 @@ const TOOLS: &[(&str, &str)] = &[
     ("alarms", "Alarms"),
     ("events", "Events"),
     ("trends", "Trends"),
+    ("reports", "Reports"),
     ("editor", "Screen editor"),
     ("users", "Users"),
 ];
 
 /// Screens only an Administrator's group gets by default.
 const ADMIN_ONLY: &[&str] = &["users", "editor"];
+
+/// Screens a Supervisor's group gets by default, an Operator's not.
+const SUPERVISOR_UP: &[&str] = &["reports"];
 
 /// What kind of screen an entry is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -150,7 +154,10 @@ pub fn default_screens(plant: &Plant, library: &ScreenLibrary, role: Role) -> Ve
         .into_iter()
         .filter(|e| match role {
             Role::Administrator => true,
-            Role::Supervisor | Role::Operator => !ADMIN_ONLY.contains(&e.id.as_str()),
+            Role::Supervisor => !ADMIN_ONLY.contains(&e.id.as_str()),
+            Role::Operator => {
+                !ADMIN_ONLY.contains(&e.id.as_str()) && !SUPERVISOR_UP.contains(&e.id.as_str())
+            }
             Role::Guest | Role::Display => {
                 matches!(e.kind, ScreenKind::Builtin)
                     && ["main", "microgrid", "alarms", "trends"].contains(&e.id.as_str())

@@ -51,7 +51,7 @@ async fn the_catalog_is_the_plants_own() {
     // The test plant has no panel and no microgrid: no screens for them.
     assert_eq!(
         ids(&cat.json()),
-        ["tags", "devices", "alarms", "events", "trends", "editor", "users"]
+        ["tags", "devices", "alarms", "events", "trends", "reports", "editor", "users"]
     );
     let guest = h.login("guest", PASSWORD).await;
     let cat = h
