@@ -17,6 +17,7 @@ import microgrid from './screens/microgrid.js';
 import units from './screens/units.js';
 import alarms from './screens/alarms.js';
 import events from './screens/events.js';
+import reports from './screens/reports.js';
 import trends from './screens/trends.js';
 import users from './screens/users.js';
 import tagBrowser from './screens/tags.js';
@@ -36,6 +37,7 @@ const BUILTIN = {
   alarms,
   events,
   trends,
+  reports,
   editor,
   users,
 };

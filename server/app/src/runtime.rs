@@ -772,6 +772,16 @@ async fn run(
     let clock = stack.clock.clone();
     let store = stack.store.clone();
     let events_tx = stack.events.clone();
+    // Scheduled reports ([reports]), into the data folder.
+    if let Some(schedule) = gridscada_reports::Schedule::from_config(&stack.plant.reports) {
+        tokio::spawn(gridscada_reports::archive::run_schedule(
+            store.clone(),
+            stack.plant.clone(),
+            gridscada_reports::Archive::in_data_dir(data),
+            schedule,
+            clock.clone(),
+        ));
+    }
 
     // Users.
     let credentials = match mode {

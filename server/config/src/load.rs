@@ -46,6 +46,8 @@ pub struct Plant {
     /// `[[notify]]`: alarm notification routes (none: no alarm leaves the
     /// server).
     pub notify: Vec<NotifyConfig>,
+    /// `[reports]`: when reports are made on their own.
+    pub reports: ReportsConfig,
 }
 
 /// Where HTTPS takes its certificate and key, and its other settings.
@@ -230,6 +232,7 @@ pub fn load_with(
         opcua: main_cfg.opcua,
         redundancy: main_cfg.redundancy,
         notify: main_cfg.notify,
+        reports: main_cfg.reports,
     })
 }
 
@@ -330,6 +333,7 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
     let mut opcua = None;
     let mut redundancy = None;
     let mut notify = vec![];
+    let mut reports = ReportsConfig::default();
     let before = diags.len();
     for (key, value) in root.iter() {
         match key.get_ref().as_ref() {
@@ -342,10 +346,11 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
             "opcua" => opcua = de(file, value, "[opcua]", diags),
             "redundancy" => redundancy = de(file, value, "[redundancy]", diags),
             "notify" => notify = de_each(file, value, "notify", diags),
+            "reports" => reports = de(file, value, "[reports]", diags).unwrap_or_default(),
             other => diags.push(file.error_at(
                 key.span(),
                 format!(
-                    "unknown key '{other}' in the main file; expected one of tag_files, server, storage, panel, microgrid, mqtt, opcua, redundancy, notify"
+                    "unknown key '{other}' in the main file; expected one of tag_files, server, storage, panel, microgrid, mqtt, opcua, redundancy, notify, reports"
                 ),
             )),
         }
@@ -373,6 +378,7 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
         opcua,
         redundancy,
         notify,
+        reports,
     })
 }
 

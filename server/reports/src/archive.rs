@@ -152,6 +152,59 @@ impl Schedule {
     }
 }
 
+impl Schedule {
+    /// From `[reports]`; `None` when neither report is scheduled.
+    pub fn from_config(c: &gridscada_config::ReportsConfig) -> Option<Schedule> {
+        (c.daily || c.monthly).then(|| Schedule {
+            daily: c.daily,
+            monthly: c.monthly,
+            delay_s: (c.delay_min.get_ref().clamp(0.0, 1440.0) * 60.0) as u64,
+        })
+    }
+}
+
+/// How often the schedule looks for a report due.
+const SCHEDULE_CHECK: std::time::Duration = std::time::Duration::from_secs(60);
+
+/// Makes the scheduled reports as they fall due, for as long as the server
+/// runs. A report that fails (the store away) is tried again at the next
+/// check; each one made or failed is logged.
+pub async fn run_schedule(
+    store: gridscada_store::Store,
+    plant: std::sync::Arc<gridscada_config::Plant>,
+    archive: Archive,
+    schedule: Schedule,
+    clock: std::sync::Arc<dyn gridscada_tagdb::Clock>,
+) {
+    loop {
+        let now = clock.now();
+        let due = {
+            let a = archive.clone();
+            schedule.due(now, &move |p| a.has(p))
+        };
+        for period in due {
+            match crate::generate(&store, &plant, period, now).await {
+                Ok(report) => {
+                    let a = archive.clone();
+                    match tokio::task::spawn_blocking(move || a.save(&report)).await {
+                        Ok(Ok(())) => {
+                            tracing::info!(%period, dir = %archive.dir().display(), "report made")
+                        }
+                        Ok(Err(e)) => {
+                            tracing::error!(%period, error = %e, "cannot write the report")
+                        }
+                        Err(e) => tracing::error!(%period, error = %e, "report writer failed"),
+                    }
+                }
+                Err(e) => {
+                    tracing::warn!(%period, error = %e, "cannot make the scheduled report; trying again")
+                }
+            }
+        }
+        tokio::time::sleep(SCHEDULE_CHECK).await;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -180,5 +233,28 @@ mod tests {
         );
         let all = |_: Period| true;
         assert!(s.due(at("2024-07-01T00:20:00Z"), &all).is_empty());
+    }
+
+    #[test]
+    fn the_report_folder_lists_what_was_saved_and_ignores_other_files() {
+        let dir = std::env::temp_dir().join(format!("gs-reports-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let a = Archive::in_data_dir(&dir);
+        assert!(a.list().unwrap().is_empty());
+        std::fs::create_dir_all(a.dir()).unwrap();
+        for name in [
+            "2024-06-21.html",
+            "2024-06-21.csv",
+            "2024-06.html",
+            "notes.html",
+            "2024-06-22.csv",
+        ] {
+            std::fs::write(a.dir().join(name), "x").unwrap();
+        }
+        let l = a.list().unwrap();
+        let ids: Vec<(&str, &str)> = l.iter().map(|e| (e.id.as_str(), e.kind)).collect();
+        assert_eq!(ids, [("2024-06-21", "day"), ("2024-06", "month")]);
+        assert_eq!(l[0].formats, ["html", "csv"]);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
