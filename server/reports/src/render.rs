@@ -218,10 +218,10 @@ pub fn html(r: &Report) -> String {
             p.zones,
             p.sustained,
             p.momentary,
-            p.saifi,
-            p.saidi_min,
-            p.maifi,
-            p.ens_kwh,
+            p.saifi + 0.0,
+            p.saidi_min + 0.0,
+            p.maifi + 0.0,
+            p.ens_kwh + 0.0,
             p.coverage * 100.0
         );
     }
