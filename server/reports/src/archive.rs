@@ -176,14 +176,22 @@ pub async fn run_schedule(
     schedule: Schedule,
     clock: std::sync::Arc<dyn gridscada_tagdb::Clock>,
 ) {
+    // Periods with nothing recorded (a fresh install's yesterday): no
+    // report, and not tried again.
+    let mut empty: std::collections::HashSet<Period> = std::collections::HashSet::new();
     loop {
         let now = clock.now();
-        let due = {
+        let due: Vec<Period> = {
             let a = archive.clone();
             schedule.due(now, &move |p| a.has(p))
         };
+        let due: Vec<Period> = due.into_iter().filter(|p| !empty.contains(p)).collect();
         for period in due {
             match crate::generate(&store, &plant, period, now).await {
+                Ok(report) if report.is_empty() => {
+                    tracing::info!(%period, "nothing recorded in the period: no scheduled report");
+                    empty.insert(period);
+                }
                 Ok(report) => {
                     let a = archive.clone();
                     match tokio::task::spawn_blocking(move || a.save(&report)).await {

@@ -50,4 +50,14 @@ impl Report {
     pub fn title(&self) -> String {
         format!("{} {}", self.period.label(), self.id)
     }
+
+    /// Nothing was recorded in the period: no sample of any tag the report
+    /// reads, no alarm.
+    pub fn is_empty(&self) -> bool {
+        self.energy.panels.iter().all(|p| p.coverage == 0.0)
+            && self.energy.units.iter().all(|u| u.coverage == 0.0)
+            && self.energy.demand_kwh.is_none()
+            && self.outages.panels.iter().all(|p| p.coverage == 0.0)
+            && self.alarms.activations == 0
+    }
 }
