@@ -128,6 +128,10 @@ pub struct PanelReliability {
 pub struct Outages {
     pub interruptions: Vec<Interruption>,
     pub panels: Vec<PanelReliability>,
+    /// The loads before the interruptions still running at the end: the
+    /// next day's baselines (see [`outages`]).
+    #[serde(skip)]
+    pub open_baselines: Baselines,
 }
 
 #[derive(Debug, Clone, Serialize, PartialEq)]
@@ -435,6 +439,11 @@ fn supply(
     out
 }
 
+/// The load before an interruption still running at a day's end, by panel id
+/// (from the panel's meter) or `PANEL/ZONE` (a zone's meter): the next day
+/// starts with the zones already out, so its own window before shows no load.
+pub type Baselines = HashMap<String, f64>;
+
 /// Interruptions of every zone, and each panel's reliability figures.
 ///
 /// Energy not supplied: with a zone meter, the zone's mean load over the
@@ -443,9 +452,16 @@ fn supply(
 /// mean load over the window before is the baseline; while zones are out,
 /// the drop below it (baseline − load) is shared equally among the zones out.
 /// Exact for one zone out; an estimate when several are out at once.
-pub fn outages(plant: &Plant, data: &SampleMap, from: i64, to: i64) -> Outages {
+pub fn outages(
+    plant: &Plant,
+    data: &SampleMap,
+    from: i64,
+    to: i64,
+    carried: &Baselines,
+) -> Outages {
     let ix = TagIndex::new(plant);
     let mut interruptions = Vec::new();
+    let mut open_baselines = Baselines::new();
     let mut panels = Vec::new();
     for panel in &plant.panels {
         let n = *panel.zones.get_ref();
@@ -482,7 +498,17 @@ pub fn outages(plant: &Plant, data: &SampleMap, from: i64, to: i64) -> Outages {
             i.duration_s = (i.end.unwrap_or(to) - i.start) as f64 / 1000.0;
             i.sustained = i.duration_s >= SUSTAINED_S;
         }
-        energy_not_supplied(&ix, data, panel, &zone_supply, &mut mine, from, to);
+        let period = Span { from, to };
+        energy_not_supplied(
+            &ix,
+            data,
+            panel,
+            &zone_supply,
+            &mut mine,
+            period,
+            carried,
+            &mut open_baselines,
+        );
         let zones = f64::from(n.max(1));
         let sustained: Vec<&Interruption> = mine.iter().filter(|i| i.sustained).collect();
         let momentary = mine.len() - sustained.len();
@@ -512,7 +538,15 @@ pub fn outages(plant: &Plant, data: &SampleMap, from: i64, to: i64) -> Outages {
     Outages {
         interruptions,
         panels,
+        open_baselines,
     }
+}
+
+/// A stretch of time, ms.
+#[derive(Clone, Copy)]
+struct Span {
+    from: i64,
+    to: i64,
 }
 
 fn energy_not_supplied(
@@ -521,9 +555,11 @@ fn energy_not_supplied(
     panel: &PanelConfig,
     zone_supply: &[Vec<Segment>],
     list: &mut [Interruption],
-    from: i64,
-    to: i64,
+    Span { from, to }: Span,
+    carried: &Baselines,
+    open: &mut Baselines,
 ) {
+    let id = panel.id.get_ref();
     let owner = |list: &[Interruption], zone: u8, t: i64| {
         list.iter()
             .position(|i| i.zone == zone && i.start <= t && i.end.is_none_or(|e| t < e))
@@ -536,9 +572,16 @@ fn energy_not_supplied(
             continue;
         };
         *m = true;
+        let key = format!("{id}/{z}");
         for i in list.iter_mut().filter(|i| i.zone == z) {
-            let before = ix.segs(data, meter, i.start - BASELINE_MS, i.start);
-            i.ens_kwh = mean(&before).map(|kw| kw.max(0.0) * i.duration_s / 3600.0);
+            let kw = match (i.began_before, carried.get(&key)) {
+                (true, Some(&kw)) => Some(kw),
+                _ => mean(&ix.segs(data, meter, i.start - BASELINE_MS, i.start)),
+            };
+            i.ens_kwh = kw.map(|kw| kw.max(0.0) * i.duration_s / 3600.0);
+            if let (None, Some(kw)) = (i.end, kw) {
+                open.insert(key.clone(), kw);
+            }
         }
     }
     let Some(meter) = ix.panel_meter(panel) else {
@@ -560,6 +603,9 @@ fn energy_not_supplied(
             baseline = None;
             continue;
         }
+        if baseline.is_none() && w[0] == from {
+            baseline = carried.get(id).copied();
+        }
         if baseline.is_none() {
             let before: Vec<Segment> = p
                 .iter()
@@ -571,6 +617,10 @@ fn energy_not_supplied(
                 })
                 .collect();
             baseline = mean(&before);
+        }
+        if let (true, Some(b)) = (w[1] == to, baseline) {
+            // Still out at the end: the next day goes on from this baseline.
+            open.insert(id.clone(), b);
         }
         let (Some(base), Some(now)) = (baseline, value_at(&p, w[0])) else {
             continue;

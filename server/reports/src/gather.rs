@@ -18,6 +18,10 @@ use crate::{Period, Report};
 /// (more than every 0.2 s) is cut, and the report says its coverage.
 const MAX_SAMPLES_PER_TAG_DAY: u32 = 500_000;
 
+/// How far past a day's end samples are read, to tell a day whose recording
+/// went on from one where the server stopped.
+const LOOK_AHEAD_MS: i64 = 3_600_000;
+
 /// Alarm history rows read per page.
 const ALARM_PAGE: u32 = 5_000;
 
@@ -146,6 +150,7 @@ fn join_outages(plant: &Plant, days: Vec<Outages>) -> Outages {
     Outages {
         interruptions: all,
         panels,
+        open_baselines: Default::default(),
     }
 }
 
@@ -167,23 +172,28 @@ pub async fn generate(
     let mut outages: Vec<Outages> = Vec::new();
     let mut coverage_h = 0.0;
     let mut reliability_cov: Vec<f64> = vec![0.0; plant.panels.len()];
+    let mut baselines = figures::Baselines::new();
     let mut day = from;
     while day < to {
         let end = (day + 86_400_000).min(to);
-        let data = samples(store, &tags, day, end).await?;
+        // An hour past the day's end (not past now) is read too: it shows
+        // whether recording went on after the day.
+        let ahead = (end + LOOK_AHEAD_MS).min(now.as_millis()).max(end);
+        let data = samples(store, &tags, day, ahead).await?;
         // Past the last sample of any of the tags nothing was recorded (the
         // server stopped): the day's figures end there, and do not hold the
         // last values to midnight.
         let recorded = data
             .values()
             .filter_map(|v| v.last())
-            .map(|s| s.ts + 1)
+            .map(|s| s.ts)
             .max()
             .unwrap_or(day);
         let until = end.min(recorded.max(day));
         let h = (until - day) as f64 / 3_600_000.0;
         add_energy(&mut energy, figures::energy(plant, &data, day, until), h);
-        let o = figures::outages(plant, &data, day, until);
+        let o = figures::outages(plant, &data, day, until, &baselines);
+        baselines = o.open_baselines.clone();
         for (c, p) in reliability_cov.iter_mut().zip(&o.panels) {
             *c += p.coverage * h;
         }

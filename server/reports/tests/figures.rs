@@ -82,7 +82,7 @@ fn panel_energy_is_the_meter_integrated() {
 
 #[test]
 fn interruptions_durations_and_energy_not_supplied() {
-    let o = outages(&plant(), &day(), 0, 4 * H);
+    let o = outages(&plant(), &day(), 0, 4 * H, &Default::default());
     let mine: Vec<_> = o.interruptions.iter().filter(|i| i.panel == "pa").collect();
     assert_eq!(mine.len(), 3, "{mine:#?}");
     let z2 = mine.iter().find(|i| i.zone == 2 && i.start == H).unwrap();
@@ -128,7 +128,7 @@ fn an_interruption_still_running_at_the_end_counts_to_the_end() {
         "PA.Zone1.Closed".into(),
         steps(&[(-H, 1.0), (3 * H + 30 * MIN, 0.0)], 4 * H),
     );
-    let o = outages(&plant(), &d, 0, 4 * H);
+    let o = outages(&plant(), &d, 0, 4 * H, &Default::default());
     let open = o
         .interruptions
         .iter()
