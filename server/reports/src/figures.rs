@@ -498,15 +498,14 @@ pub fn outages(
             i.duration_s = (i.end.unwrap_or(to) - i.start) as f64 / 1000.0;
             i.sustained = i.duration_s >= SUSTAINED_S;
         }
-        let period = Span { from, to };
+        let day = Day { from, to, carried };
         energy_not_supplied(
             &ix,
             data,
             panel,
             &zone_supply,
             &mut mine,
-            period,
-            carried,
+            day,
             &mut open_baselines,
         );
         let zones = f64::from(n.max(1));
@@ -542,11 +541,12 @@ pub fn outages(
     }
 }
 
-/// A stretch of time, ms.
+/// The stretch of time computed (ms), with the baselines carried into it.
 #[derive(Clone, Copy)]
-struct Span {
+struct Day<'a> {
     from: i64,
     to: i64,
+    carried: &'a Baselines,
 }
 
 fn energy_not_supplied(
@@ -555,8 +555,7 @@ fn energy_not_supplied(
     panel: &PanelConfig,
     zone_supply: &[Vec<Segment>],
     list: &mut [Interruption],
-    Span { from, to }: Span,
-    carried: &Baselines,
+    Day { from, to, carried }: Day<'_>,
     open: &mut Baselines,
 ) {
     let id = panel.id.get_ref();
