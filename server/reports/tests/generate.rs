@@ -19,14 +19,54 @@ fn at(text: &str) -> i64 {
 
 #[tokio::test]
 async fn a_month_joins_days_and_an_interruption_across_midnight() {
-    let plant = gridscada_config::load_path(
-        &Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/plants/three-panels"),
-    )
-    .unwrap();
     let dir = tempfile::tempdir().unwrap();
     let store = Store::open("sqlite://test.db", &OpenOptions::new(dir.path()))
         .await
         .unwrap();
+    a_month(store, dir.path()).await;
+}
+
+/// The same on PostgreSQL (`GRIDSCADA_TEST_PG_URL`; required with
+/// `GRIDSCADA_REQUIRE_PG=1`), in a schema of its own.
+#[tokio::test]
+async fn a_month_on_postgres() {
+    let url = match std::env::var("GRIDSCADA_TEST_PG_URL") {
+        Ok(u) if !u.is_empty() => u,
+        _ => {
+            assert_ne!(
+                std::env::var("GRIDSCADA_REQUIRE_PG").as_deref(),
+                Ok("1"),
+                "GRIDSCADA_REQUIRE_PG=1 but GRIDSCADA_TEST_PG_URL is not set"
+            );
+            eprintln!("SKIPPED the PostgreSQL variant: GRIDSCADA_TEST_PG_URL is not set");
+            return;
+        }
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let mut opts = OpenOptions::new(dir.path());
+    opts.pg_schema = Some(format!("gs_reports_{}", std::process::id()));
+    let schema = opts.pg_schema.clone().unwrap();
+    let store = Store::open(&url, &opts).await.unwrap();
+    a_month(store, dir.path()).await;
+    // With psql, the real client: this crate speaks no SQL.
+    let out = std::process::Command::new("psql")
+        .arg(&url)
+        .args([
+            "-q",
+            "-c",
+            &format!("DROP SCHEMA IF EXISTS {schema} CASCADE"),
+        ])
+        .output();
+    if !out.as_ref().is_ok_and(|o| o.status.success()) {
+        eprintln!("test schema {schema} not dropped: {out:?}");
+    }
+}
+
+async fn a_month(store: Store, dir: &Path) {
+    let plant = gridscada_config::load_path(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/plants/three-panels"),
+    )
+    .unwrap();
     store.migrate().await.unwrap();
 
     // Panel pa: 4 kW on zone 1, 6 kW on zone 2; zone 2 out from 22:00 on
@@ -99,7 +139,7 @@ async fn a_month_joins_days_and_an_interruption_across_midnight() {
     assert!(!r.is_empty());
 
     // Saved and listed; its CSV and page carry the figures.
-    let archive = Archive::in_data_dir(dir.path());
+    let archive = Archive::in_data_dir(dir);
     archive.save(&r).unwrap();
     assert_eq!(archive.list().unwrap()[0].id, "2024-03");
     let csv = std::fs::read_to_string(archive.path(march, "csv")).unwrap();
