@@ -82,7 +82,8 @@ fn period_of(id: &str) -> ApiResult<Period> {
 #[utoipa::path(get, path = "/api/reports/{id}/{format}", tag = "reports", summary = "A report's file",
     params(("id" = String, Path, description = "YYYY-MM-DD or YYYY-MM"),
         ("format" = String, Path, description = "html, csv or json"), FileQuery),
-    responses((status = 200, description = "The file", body = String, content_type = "text/html"),
+    responses((status = 200, description = "The file",
+            content((String = "text/html"), (String = "text/csv"), (Object = "application/json"))),
         (status = 400), (status = 404)))]
 pub async fn file(
     State(s): State<WebState>,
