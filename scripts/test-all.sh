@@ -42,7 +42,8 @@ root_cmd=()
 # gcc and libc6-dev: the linker and C compiler that rustc and build scripts
 # call; ca-certificates: cargo and pip over HTTPS.
 debian_packages=(postgresql socat mbpoll libmodbus-dev pkg-config curl python3-venv nginx
-    gcc libc6-dev ca-certificates mosquitto)
+    gcc libc6-dev ca-certificates mosquitto
+    poppler-utils)
 # Debian's nodejs comes without npm (the browser tests install playwright-core with it).
 command -v npm >/dev/null 2>&1 || debian_packages+=(npm)
 missing=()

@@ -18,6 +18,7 @@ import units from './screens/units.js';
 import alarms from './screens/alarms.js';
 import alarmkpi from './screens/alarmkpi.js';
 import events from './screens/events.js';
+import reports from './screens/reports.js';
 import trends from './screens/trends.js';
 import users from './screens/users.js';
 import tagBrowser from './screens/tags.js';
@@ -39,6 +40,7 @@ const BUILTIN = {
   alarmkpi,
   events,
   trends,
+  reports,
   editor,
   users,
   simulation,

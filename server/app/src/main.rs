@@ -12,6 +12,7 @@ mod https;
 mod logging;
 mod pair;
 mod replay;
+mod reports_cmd;
 mod runtime;
 mod settings;
 mod sinks;
@@ -140,6 +141,15 @@ enum Command {
     Dispatch {
         #[command(subcommand)]
         command: DispatchCommand,
+    },
+    /// Make the report of a day (YYYY-MM-DD) or a month (YYYY-MM), UTC,
+    /// from the database, into the data folder's reports/ (HTML, CSV and
+    /// JSON), as the schedule and the Reports screen do.
+    Report {
+        /// The day or month.
+        period: String,
+        #[command(flatten)]
+        at: UserTable,
     },
     /// TLS certificates for HTTPS ([server.tls]).
     Cert {
@@ -368,6 +378,9 @@ fn main() -> ExitCode {
         Command::Dispatch {
             command: DispatchCommand::Solve { file },
         } => ExitCode::from(dispatch_cmd::run_solve(&file).clamp(0, 255) as u8),
+        Command::Report { period, at } => runtime::block_on(async move {
+            runtime::report(reports_cmd::run(period, at.target()).await)
+        }),
         Command::Cert {
             command:
                 CertCommand::SelfSigned {

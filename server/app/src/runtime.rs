@@ -769,6 +769,9 @@ async fn run(
 ) -> anyhow::Result<()> {
     // A wrong certificate or key stops the start before anything runs.
     let https = crate::https::load(&plant)?;
+    // The data folder of this run (the demo's --data): where reports go.
+    let mut plant = plant;
+    plant.data_dir = data.to_path_buf();
     let store = open_store(&plant, data).await?;
     let clock: Arc<dyn Clock> = match &scenario {
         Some(live) => live.clock(),
@@ -799,6 +802,16 @@ async fn run(
     let clock = stack.clock.clone();
     let store = stack.store.clone();
     let events_tx = stack.events.clone();
+    // Scheduled reports ([reports]), into the data folder.
+    if let Some(schedule) = gridscada_reports::Schedule::from_config(&stack.plant.reports) {
+        tokio::spawn(gridscada_reports::archive::run_schedule(
+            store.clone(),
+            stack.plant.clone(),
+            gridscada_reports::Archive::in_data_dir(data),
+            schedule,
+            clock.clone(),
+        ));
+    }
 
     // Users.
     let credentials = match mode {

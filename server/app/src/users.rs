@@ -113,6 +113,13 @@ pub enum Target {
 
 /// Opens the user table that `serve` (or the demo) uses.
 async fn open(target: Target) -> anyhow::Result<Store> {
+    Ok(open_with_plant(target).await?.0)
+}
+
+/// Opens the store of `target`, with its plant and data folder.
+pub async fn open_with_plant(
+    target: Target,
+) -> anyhow::Result<(Store, gridscada_config::Plant, std::path::PathBuf)> {
     let (plant, data) = match target {
         Target::Config(path) => {
             // The same database `serve` opens: the same files and environment.
@@ -126,7 +133,8 @@ async fn open(target: Target) -> anyhow::Result<Store> {
             (plant, data)
         }
     };
-    crate::data::open_store(&plant, &data).await
+    let store = crate::data::open_store(&plant, &data).await?;
+    Ok((store, plant, data))
 }
 
 /// A password piped in on standard input (checked for strength), or, from a

@@ -49,6 +49,8 @@ pub struct Plant {
     /// `[[suppression]]`: configured suppression rules (besides the panels'
     /// built-in ones).
     pub suppression: Vec<SuppressionConfig>,
+    /// `[reports]`: when reports are made on their own.
+    pub reports: ReportsConfig,
 }
 
 /// Where HTTPS takes its certificate and key, and its other settings.
@@ -234,6 +236,7 @@ pub fn load_with(
         redundancy: main_cfg.redundancy,
         notify: main_cfg.notify,
         suppression: main_cfg.suppression,
+        reports: main_cfg.reports,
     })
 }
 
@@ -335,6 +338,7 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
     let mut redundancy = None;
     let mut notify = vec![];
     let mut suppression = vec![];
+    let mut reports = ReportsConfig::default();
     let before = diags.len();
     for (key, value) in root.iter() {
         match key.get_ref().as_ref() {
@@ -348,10 +352,11 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
             "redundancy" => redundancy = de(file, value, "[redundancy]", diags),
             "notify" => notify = de_each(file, value, "notify", diags),
             "suppression" => suppression = de_each(file, value, "suppression", diags),
+            "reports" => reports = de(file, value, "[reports]", diags).unwrap_or_default(),
             other => diags.push(file.error_at(
                 key.span(),
                 format!(
-                    "unknown key '{other}' in the main file; expected one of tag_files, server, storage, panel, microgrid, mqtt, opcua, redundancy, notify, suppression"
+                    "unknown key '{other}' in the main file; expected one of tag_files, server, storage, panel, microgrid, mqtt, opcua, redundancy, notify, suppression, reports"
                 ),
             )),
         }
@@ -380,6 +385,7 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
         redundancy,
         notify,
         suppression,
+        reports,
     })
 }
 

@@ -131,7 +131,7 @@ impl<'a, W: AsyncWrite + Unpin> CsvWriter<'a, W> {
 /// A CSV field, quoted when it holds a separator, quote or line break. A
 /// leading `=`, `+`, `-` or `@` is prefixed with `'` so a spreadsheet does not
 /// run a tag name as a formula.
-fn field(out: &mut String, s: &str) {
+pub fn field(out: &mut String, s: &str) {
     let formula = s.starts_with(['=', '+', '-', '@']);
     let quote = formula || s.contains([',', '"', '\n', '\r']);
     if quote {

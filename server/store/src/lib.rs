@@ -54,6 +54,7 @@ mod lease;
 mod notifications;
 mod panels;
 mod recorder;
+mod report_samples;
 mod rollup;
 mod screens;
 #[macro_use]
@@ -67,6 +68,7 @@ pub use alarms::{
     ActivationCount, AlarmHistoryFilter, AlarmStateRecord, AlarmTransition, AlarmTransitionRecord,
 };
 pub use audit::{AuditBody, AuditRecord, AuditTable};
+pub use csv::field as csv_field;
 pub use dispatch::{DispatchRecord, NewDispatch};
 pub use error::StoreError;
 pub use events::{Event, EventFilter, NewEvent};

@@ -29,6 +29,7 @@ const TOOLS: &[(&str, &str)] = &[
     ("alarmkpi", "Alarm KPIs"),
     ("events", "Events"),
     ("trends", "Trends"),
+    ("reports", "Reports"),
     ("editor", "Screen editor"),
     ("users", "Users"),
 ];
@@ -40,8 +41,8 @@ const ADMIN_ONLY: &[&str] = &["users", "editor", SIMULATION];
 pub const SIMULATION: &str = "simulation";
 
 /// Screens a Supervisor's group gets by default, an Operator's not: alarm
-/// rationalisation (the ISA-18.2 KPIs) is the supervisors' work.
-const SUPERVISOR_UP: &[&str] = &["alarmkpi"];
+/// rationalisation (the ISA-18.2 KPIs) and reports are the supervisors' work.
+const SUPERVISOR_UP: &[&str] = &["alarmkpi", "reports"];
 
 /// What kind of screen an entry is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]

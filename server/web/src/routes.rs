@@ -351,6 +351,28 @@ pub fn table() -> Vec<Route> {
             || get(api::alarms::metrics),
             doc::<api::alarms::__path_metrics>,
         ),
+        // Reports: Supervisors and up, with the reports screen.
+        r(
+            Method::GET,
+            "/api/reports",
+            Perm::RoleScreen(Supervisor, "reports"),
+            || get(api::reports::list),
+            doc::<api::reports::__path_list>,
+        ),
+        r(
+            Method::POST,
+            "/api/reports",
+            Perm::RoleScreen(Supervisor, "reports"),
+            || post(api::reports::make),
+            doc::<api::reports::__path_make>,
+        ),
+        r(
+            Method::GET,
+            "/api/reports/{id}/{format}",
+            Perm::RoleScreen(Supervisor, "reports"),
+            || get(api::reports::file),
+            doc::<api::reports::__path_file>,
+        ),
         // Events and trends.
         r(
             Method::GET,
@@ -898,11 +920,14 @@ async fn security_headers(
     let set = |h: &mut HeaderMap, k: &'static str, v: &'static str| {
         h.insert(k, HeaderValue::from_static(v));
     };
-    set(
-        h,
-        "content-security-policy",
+    // A response with its own policy (a report page) keeps it.
+    if !h.contains_key(header::CONTENT_SECURITY_POLICY) {
+        set(
+            h,
+            "content-security-policy",
         "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data:; connect-src 'self'; font-src 'self'; object-src 'none'; base-uri 'none'; form-action 'self'; frame-ancestors 'none'",
-    );
+        );
+    }
     set(h, "x-content-type-options", "nosniff");
     set(h, "x-frame-options", "DENY");
     set(h, "referrer-policy", "same-origin");

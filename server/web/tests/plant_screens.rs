@@ -59,6 +59,7 @@ async fn the_catalog_is_the_plants_own() {
             "alarmkpi",
             "events",
             "trends",
+            "reports",
             "editor",
             "users",
             "simulation"

@@ -24,6 +24,7 @@ mod opcua;
 mod panels;
 mod proxy;
 mod redundancy;
+mod reports;
 mod server;
 mod tags;
 
@@ -36,6 +37,7 @@ pub use opcua::*;
 pub use panels::*;
 pub use proxy::*;
 pub use redundancy::*;
+pub use reports::*;
 pub use server::*;
 pub use tags::*;
 
@@ -61,6 +63,9 @@ pub struct MainFile {
     /// `[[suppression]]`: configured suppression rules.
     #[serde(default)]
     pub suppression: Vec<SuppressionConfig>,
+    /// `[reports]`: the report schedule.
+    #[serde(default)]
+    pub reports: ReportsConfig,
 }
 
 /// A tag file: devices and the tags read from them.

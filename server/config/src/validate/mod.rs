@@ -232,6 +232,17 @@ fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
     if let Some(ua) = &main.opcua {
         check_opcua(cx, main, ua);
     }
+    let delay = &main.reports.delay_min;
+    if !(delay.get_ref().is_finite() && (0.0..=1440.0).contains(delay.get_ref())) {
+        cx.err(
+            0,
+            delay.span(),
+            format!(
+                "[reports] delay_min: {} must be 0 to 1440 minutes",
+                delay.get_ref()
+            ),
+        );
+    }
     let sessions = &main.server.sessions;
     for (role, minutes) in sessions.idle_minutes.get_ref() {
         if !(minutes.is_finite() && (0.0..=10_080.0).contains(minutes)) {

@@ -8,6 +8,7 @@ pub mod live;
 pub mod misc;
 pub mod pair;
 pub mod panels;
+pub mod reports;
 pub mod screens;
 pub mod session;
 pub mod sim;
