@@ -99,7 +99,8 @@ fn transient_fault_replays_through_the_stack_deterministically() {
 }
 
 /// A report without what depends on the machine: the wall time and speed-up
-/// of the main run and the note with the baseline's wall time.
+/// of the main run, the note with the baseline's wall time and the
+/// perfect-foresight optimum's solve time.
 fn without_wall_time(mut r: Value) -> Value {
     let o = r.as_object_mut().unwrap();
     o.remove("wall_s");
@@ -107,6 +108,13 @@ fn without_wall_time(mut r: Value) -> Value {
     let figures = o["figures"].as_object_mut().unwrap();
     figures.remove("wall_s");
     figures.remove("speedup");
+    if let Some(optimum) = o
+        .get_mut("cost")
+        .and_then(|c| c.get_mut("optimum"))
+        .and_then(Value::as_object_mut)
+    {
+        optimum.remove("solve_ms");
+    }
     if let Some(notes) = o.get_mut("notes").and_then(Value::as_array_mut) {
         notes.retain(|n| !n.as_str().is_some_and(|t| t.contains("of wall time")));
     }
