@@ -344,8 +344,8 @@ impl Store {
             return Err(StoreError::Invalid("trend time range too long".into()));
         }
         let level = Level::for_trend(t - f, n);
-        // Roll-ups: one query for every tag (a year of 10 tags is 87,600
-        // hour rows; one plan and one round trip instead of one per tag).
+        // Roll-ups: every tag at once (on PostgreSQL one query: a year of
+        // 10 tags is 87,600 hour rows, one plan instead of one per tag).
         let from_rollup = match level {
             Some(level) => {
                 let mut logged: Vec<i64> = ids.values().copied().collect();
@@ -464,24 +464,30 @@ impl Store {
         let first = rollup::bucket_of(f, level.width());
         let rows: Vec<MultiLevelRow> = match &self.inner.backend {
             crate::store::Backend::Sqlite(s) => {
-                // SQLite looks the last sample up by primary key on its own.
+                // One query per tag: SQLite walks each tag's primary-key
+                // range in order and looks the last sample up by key (a
+                // list of tags through json_each measured 4x slower).
                 let sql = format!(
                     "{} SELECT g.tag_id, g.idx, g.n, g.mn, g.mx, g.sm, g.nv, r.last_ts, \
                             r.last_value, r.last_quality, g.bad \
                      FROM g JOIN {table} r ON r.tag_id = g.tag_id AND r.bucket = g.lastb \
-                     ORDER BY g.tag_id, g.idx",
-                    grouped("IN (SELECT value FROM json_each($1))")
+                     ORDER BY g.idx",
+                    grouped("= $1")
                 );
-                let list = serde_json::to_string(ids).unwrap_or_else(|_| "[]".into());
-                sqlx::query_as(&sql)
-                    .bind(list)
-                    .bind(f)
-                    .bind(t)
-                    .bind(n)
-                    .bind(first)
-                    .fetch_all(s.reader())
-                    .await
-                    .map_err(db("querying a historian trend"))?
+                let mut rows = Vec::new();
+                for &id in ids {
+                    let mut one: Vec<MultiLevelRow> = sqlx::query_as(&sql)
+                        .bind(id)
+                        .bind(f)
+                        .bind(t)
+                        .bind(n)
+                        .bind(first)
+                        .fetch_all(s.reader())
+                        .await
+                        .map_err(db("querying a historian trend"))?;
+                    rows.append(&mut one);
+                }
+                rows
             }
             crate::store::Backend::Postgres(p) => {
                 // A plain join makes PostgreSQL hash every roll-up row of the
