@@ -1,6 +1,7 @@
 //! `gridscada replay` end to end, through the binary: a short scenario runs
-//! the whole stack and passes; the same scenario gives the same figures twice
-//! (virtual clock); a failing expectation exits 1; a broken scenario exits 2
+//! the whole stack and passes; the same scenario gives the same report twice,
+//! byte for byte but for the wall time (virtual clock, the rule-based
+//! baseline running beside the main run); a failing expectation exits 1; a broken scenario exits 2
 //! with a located error.
 
 use std::path::{Path, PathBuf};
@@ -41,7 +42,6 @@ fn transient_fault_replays_through_the_stack_deterministically() {
             &file,
             &[
                 "--max",
-                "--no-compare",
                 "--report",
                 json.to_str().unwrap(),
                 "--html",
@@ -72,7 +72,8 @@ fn transient_fault_replays_through_the_stack_deterministically() {
         assert!(!page.contains("src=\"http") && !page.contains("href=\"http"));
         runs.push(r);
     }
-    // Same scenario, same outcome: every deterministic figure is identical.
+    // Same scenario, same outcome: the baseline ran beside the main run.
+    assert!(runs[0]["cost"]["rule"].is_object(), "{}", runs[0]["cost"]);
     for (k, v) in runs[0]["figures"].as_object().unwrap() {
         if k == "wall_s" || k == "speedup" {
             continue;
@@ -84,6 +85,40 @@ fn transient_fault_replays_through_the_stack_deterministically() {
         );
     }
     assert_eq!(runs[0]["faults"], runs[1]["faults"]);
+    // And the whole report, byte for byte, once the wall times are out.
+    let texts: Vec<String> = runs
+        .into_iter()
+        .map(|r| serde_json::to_string_pretty(&without_wall_time(r)).unwrap())
+        .collect();
+    assert!(
+        texts[0] == texts[1],
+        "reports differ:\n{}\n---\n{}",
+        texts[0],
+        texts[1]
+    );
+}
+
+/// A report without what depends on the machine: the wall time and speed-up
+/// of the main run, the note with the baseline's wall time and the
+/// perfect-foresight optimum's solve time.
+fn without_wall_time(mut r: Value) -> Value {
+    let o = r.as_object_mut().unwrap();
+    o.remove("wall_s");
+    o.remove("speedup");
+    let figures = o["figures"].as_object_mut().unwrap();
+    figures.remove("wall_s");
+    figures.remove("speedup");
+    if let Some(optimum) = o
+        .get_mut("cost")
+        .and_then(|c| c.get_mut("optimum"))
+        .and_then(Value::as_object_mut)
+    {
+        optimum.remove("solve_ms");
+    }
+    if let Some(notes) = o.get_mut("notes").and_then(Value::as_array_mut) {
+        notes.retain(|n| !n.as_str().is_some_and(|t| t.contains("of wall time")));
+    }
+    r
 }
 
 #[test]

@@ -3,8 +3,13 @@
 //! time of a 500-point trend of 10 tags over a day of 1 s data (864,000
 //! rows) and over a year of 5 min data (1,051,200 rows).
 //!
-//! cargo run --release -p gridscada-store --example bench [-- INGEST_SAMPLES]
+//! cargo run --release -p gridscada-store --example bench [-- INGEST_SAMPLES [ROUNDS]]
 //! PostgreSQL runs too when GRIDSCADA_TEST_PG_URL is set (in a throwaway schema).
+//!
+//! The writer and its peers are timed ROUNDS times (default 5), alternating
+//! which goes first, each round into fresh tags; the table gives the median
+//! of the rounds and the median of the per-round ratios, so one hiccup of a
+//! shared machine does not decide the comparison.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -38,11 +43,11 @@ enum Raw {
 /// The baseline: multi-row INSERTs of 1,000 rows, 5,000 rows per transaction,
 /// straight into the samples table with known tag ids; no buffering or tag
 /// lookup.
-async fn plain_insert(raw: &mut Raw, n: usize) -> Duration {
+async fn plain_insert(raw: &mut Raw, n: usize, round: usize) -> Duration {
     let rows: Vec<(i64, i64, f64)> = (0..n)
         .map(|i| {
             (
-                1_000_000 + (i % 10) as i64,
+                1_000_000 + (round * 10 + i % 10) as i64,
                 (i / 10) as i64 * 1000,
                 i as f64,
             )
@@ -78,7 +83,7 @@ async fn plain_insert(raw: &mut Raw, n: usize) -> Duration {
 /// The peer on PostgreSQL: COPY in text format straight into the samples
 /// table with known tag ids, 5,000 rows per transaction (the writer's batch),
 /// nothing else.
-async fn plain_copy(c: &mut sqlx::PgConnection, n: usize) -> Duration {
+async fn plain_copy(c: &mut sqlx::PgConnection, n: usize, round: usize) -> Duration {
     use std::fmt::Write;
     let started = Instant::now();
     for chunk in (0..n).collect::<Vec<_>>().chunks(5_000) {
@@ -88,7 +93,7 @@ async fn plain_copy(c: &mut sqlx::PgConnection, n: usize) -> Duration {
             let _ = writeln!(
                 text,
                 "{}\t{}\t{v}\t\\N\t0",
-                2_000_000 + (i % 10) as i64,
+                2_000_000 + (round * 10 + i % 10) as i64,
                 (i / 10) as i64 * 1000
             );
         }
@@ -104,8 +109,8 @@ async fn plain_copy(c: &mut sqlx::PgConnection, n: usize) -> Duration {
     started.elapsed()
 }
 
-async fn through_writer(store: &Store, n: usize) -> Duration {
-    let data = samples("bench.w", n, 10, 0, 1000);
+async fn through_writer(store: &Store, n: usize, round: usize) -> Duration {
+    let data = samples(&format!("bench.w{round}"), n, 10, 0, 1000);
     let hist = Historian::spawn(
         store.clone(),
         HistorianConfig {
@@ -131,9 +136,14 @@ async fn through_writer(store: &Store, n: usize) -> Duration {
 
 struct Row {
     backend: &'static str,
+    /// Medians over the rounds, samples/s.
     writer: f64,
     plain: f64,
     copy: Option<f64>,
+    /// Median of the rounds' writer / COPY.
+    ratio: Option<f64>,
+    /// Every round's writer / COPY, as run.
+    ratios: Vec<f64>,
     load: f64,
     trend_ms: Vec<f64>,
     year_load: f64,
@@ -167,15 +177,41 @@ async fn trends(store: &Store, tags: &[&str], from: i64, span_ms: i64, rows: u64
     ms
 }
 
-async fn run(backend: &'static str, url: &str, options: OpenOptions, raw: Raw, n: usize) -> Row {
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+async fn run(
+    backend: &'static str,
+    url: &str,
+    options: OpenOptions,
+    raw: Raw,
+    n: usize,
+    rounds: usize,
+) -> Row {
     let store = Store::open(url, &options).await.expect("open");
     let mut raw = raw;
-    let plain = plain_insert(&mut raw, n).await;
-    let copy = match &mut raw {
-        Raw::Pg(c) => Some(n as f64 / plain_copy(c, n).await.as_secs_f64()),
-        Raw::Sqlite(_) => None,
-    };
-    let writer = through_writer(&store, n).await;
+    let rate = |d: Duration| n as f64 / d.as_secs_f64();
+    let (mut writer, mut plain, mut copy, mut ratios) = (vec![], vec![], vec![], vec![]);
+    for round in 0..rounds {
+        // Alternate the order, so a table growing round by round (or load
+        // drifting) favours neither side.
+        let peers_first = round % 2 == 0;
+        if !peers_first {
+            writer.push(rate(through_writer(&store, n, round).await));
+        }
+        plain.push(rate(plain_insert(&mut raw, n, round).await));
+        if let Raw::Pg(c) = &mut raw {
+            copy.push(rate(plain_copy(c, n, round).await));
+        }
+        if peers_first {
+            writer.push(rate(through_writer(&store, n, round).await));
+        }
+        if let Some(&c) = copy.last() {
+            ratios.push(writer[round] / c);
+        }
+    }
     // A day of 1 s data for 10 tags; the day starts on a minute, so a
     // minute-aligned trend holds exactly the day.
     let t0 = 1_700_000_040_000;
@@ -212,9 +248,11 @@ async fn run(backend: &'static str, url: &str, options: OpenOptions, raw: Raw, n
     store.close().await;
     Row {
         backend,
-        writer: n as f64 / writer.as_secs_f64(),
-        plain: n as f64 / plain.as_secs_f64(),
-        copy,
+        writer: median(writer),
+        plain: median(plain),
+        copy: (!copy.is_empty()).then(|| median(copy)),
+        ratio: (!ratios.is_empty()).then(|| median(ratios.clone())),
+        ratios,
         load: 864_000.0 / load.as_secs_f64(),
         trend_ms,
         year_load: (10 * per_tag) as f64 / year_load.as_secs_f64(),
@@ -228,6 +266,11 @@ async fn main() {
         .nth(1)
         .and_then(|a| a.parse().ok())
         .unwrap_or(200_000);
+    let rounds: usize = std::env::args()
+        .nth(2)
+        .and_then(|a| a.parse().ok())
+        .unwrap_or(5)
+        .max(1);
     let mut rows = Vec::new();
 
     let dir = tempfile::tempdir().unwrap();
@@ -254,6 +297,7 @@ async fn main() {
             options,
             Raw::Sqlite(raw),
             n,
+            rounds,
         )
         .await,
     );
@@ -269,7 +313,7 @@ async fn main() {
                 .execute(&mut raw)
                 .await
                 .unwrap();
-            rows.push(run("PostgreSQL", &url, options, Raw::Pg(raw), n).await);
+            rows.push(run("PostgreSQL", &url, options, Raw::Pg(raw), n, rounds).await);
             let mut c = sqlx::PgConnection::connect(&url).await.unwrap();
             sqlx::query(&format!("DROP SCHEMA {schema} CASCADE"))
                 .execute(&mut c)
@@ -279,15 +323,27 @@ async fn main() {
         Err(_) => eprintln!("GRIDSCADA_TEST_PG_URL not set: PostgreSQL skipped"),
     }
 
-    println!("\nhistorian ingest of {n} samples (10 tags); 500-point trends of 10 tags over a day of 1 s data (864,000 rows) and a year of 5 min data (1,051,200 rows)\n");
+    let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+    println!("\nload average at the end: {}", load.trim());
+    println!("\nhistorian ingest of {n} samples (10 tags), median of {rounds} alternating rounds; 500-point trends of 10 tags over a day of 1 s data (864,000 rows) and a year of 5 min data (1,051,200 rows)\n");
     println!(
-        "| backend | writer task samples/s | plain batched INSERT samples/s | plain COPY samples/s | writer / COPY | day load samples/s | year load samples/s | trend, day: min / median ms | trend, year: min / median ms |"
+        "| backend | writer task samples/s | plain batched INSERT samples/s | plain COPY samples/s | writer / COPY (median; each round) | day load samples/s | year load samples/s | trend, day: min / median ms | trend, year: min / median ms |"
     );
     println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
     for r in rows {
-        let (copy, ratio) = match r.copy {
-            Some(c) => (format!("{c:.0}"), format!("{:.2}", r.writer / c)),
-            None => ("—".into(), "—".into()),
+        let (copy, ratio) = match (r.copy, r.ratio) {
+            (Some(c), Some(x)) => (
+                format!("{c:.0}"),
+                format!(
+                    "{x:.2} ({})",
+                    r.ratios
+                        .iter()
+                        .map(|x| format!("{x:.2}"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            ),
+            _ => ("—".into(), "—".into()),
         };
         println!(
             "| {} | {:.0} | {:.0} | {copy} | {ratio} | {:.0} | {:.0} | {:.1} / {:.1} | {:.1} / {:.1} |",

@@ -169,9 +169,10 @@ type BucketRow = (
     i64,
 );
 
-/// From a roll-up: bucket, count, min, max, sum, values, last_ts, last value,
-/// last quality, Bad ms.
-type LevelRow = (
+/// From a roll-up: tag id, bucket, count, min, max, sum, values, last_ts,
+/// last value, last quality, Bad ms.
+type MultiLevelRow = (
+    i64,
     i64,
     i64,
     Option<f64>,
@@ -365,6 +366,16 @@ impl Store {
             return Err(StoreError::Invalid("trend time range too long".into()));
         }
         let level = Level::for_trend(t - f, n);
+        // Roll-ups: every tag at once (on PostgreSQL one query: a year of
+        // 10 tags is 87,600 hour rows, one plan instead of one per tag).
+        let from_rollup = match level {
+            Some(level) => {
+                let mut logged: Vec<i64> = ids.values().copied().collect();
+                logged.sort_unstable();
+                self.trend_from_rollup(level, &logged, f, t, n).await?
+            }
+            None => HashMap::new(),
+        };
         let mut out = Vec::with_capacity(tags.len());
         for &tag in tags {
             let Some(&id) = ids.get(tag) else {
@@ -375,7 +386,8 @@ impl Store {
                 continue;
             };
             let buckets = match level {
-                Some(level) => self.trend_from_rollup(level, id, f, t, n).await?,
+                // A tag asked twice gets its buckets twice.
+                Some(_) => from_rollup.get(&id).cloned().unwrap_or_default(),
                 None => self.trend_from_raw(id, f, t, n).await?,
             };
             out.push(TagTrend {
@@ -439,18 +451,18 @@ impl Store {
             .collect())
     }
 
-    /// A trend of one tag from a roll-up level: each trend bucket gathers
-    /// whole level buckets, so its edges are whole minutes or hours (see
-    /// [`rollup::edges`]) and its min, max, count and last are exactly those
-    /// of the raw samples between those edges.
+    /// Trends of several tags from a roll-up level, by tag id: each trend
+    /// bucket gathers whole level buckets, so its edges are whole minutes or
+    /// hours (see [`rollup::edges`]) and its min, max, count and last are
+    /// exactly those of the raw samples between those edges.
     async fn trend_from_rollup(
         &self,
         level: Level,
-        id: i64,
+        ids: &[i64],
         f: i64,
         t: i64,
         n: i64,
-    ) -> Result<Vec<TrendBucket>> {
+    ) -> Result<HashMap<i64, Vec<TrendBucket>>> {
         let table = level.table();
         // The counts of one level bucket fit 32 bits (an hour holds 3.6 M
         // ms), and PostgreSQL sums 32-bit integers into 64 bits far faster
@@ -458,51 +470,89 @@ impl Store {
         // A level bucket starting before `from` (at most one) divides to 0:
         // SQL integer division truncates towards zero, and it starts less
         // than one trend bucket before `from`.
-        let sql = format!(
-            "WITH g AS ( \
-               SELECT (bucket - $2) * $4 / ($3 - $2) AS idx, \
-                      CAST(sum(CAST(n AS INTEGER)) AS BIGINT) AS n, \
-                      min(min_value) AS mn, max(max_value) AS mx, sum(sum_value) AS sm, \
-                      CAST(sum(CAST(n_value AS INTEGER)) AS BIGINT) AS nv, max(bucket) AS lastb, \
-                      CAST(sum(CAST(bad_ms AS INTEGER)) AS BIGINT) AS bad \
-               FROM {table} WHERE tag_id = $1 AND bucket >= $5 AND bucket < $3 \
-               GROUP BY (bucket - $2) * $4 / ($3 - $2)) \
-             SELECT g.idx, g.n, g.mn, g.mx, g.sm, g.nv, r.last_ts, r.last_value, \
-                    r.last_quality, g.bad \
-             FROM g JOIN {table} r ON r.tag_id = $1 AND r.bucket = g.lastb \
-             ORDER BY g.idx"
-        );
-        let first = rollup::bucket_of(f, level.width());
-        let rows: Vec<LevelRow> = on_backend!(self, reader, |p| {
-            sqlx::query_as(&sql)
-                .bind(id)
-                .bind(f)
-                .bind(t)
-                .bind(n)
-                .bind(first)
-                .fetch_all(p)
-                .await
-                .map_err(db("querying a historian trend"))?
-        });
-        let edge = rollup::edges(level, f, t, n);
-        Ok(rows
-            .into_iter()
-            .map(
-                |(b, cnt, mn, mx, sm, nv, last_ts, last, q, bad)| TrendBucket {
-                    index: b as u32,
-                    start: Timestamp::from_millis(edge(b)),
-                    end: Timestamp::from_millis(edge(b + 1)),
-                    count: cnt.max(0) as u64,
-                    min: mn,
-                    max: mx,
-                    avg: sm.filter(|_| nv > 0).map(|s| s / nv as f64),
-                    last,
-                    last_ts: Timestamp::from_millis(last_ts),
-                    last_quality: quality_from_code(q),
-                    bad_ms: bad.max(0) as u64,
-                },
+        let grouped = |tag_filter: &str| {
+            format!(
+                "WITH g AS ( \
+                   SELECT tag_id, (bucket - $2) * $4 / ($3 - $2) AS idx, \
+                          CAST(sum(CAST(n AS INTEGER)) AS BIGINT) AS n, \
+                          min(min_value) AS mn, max(max_value) AS mx, sum(sum_value) AS sm, \
+                          CAST(sum(CAST(n_value AS INTEGER)) AS BIGINT) AS nv, \
+                          max(bucket) AS lastb, \
+                          CAST(sum(CAST(bad_ms AS INTEGER)) AS BIGINT) AS bad \
+                   FROM {table} WHERE tag_id {tag_filter} AND bucket >= $5 AND bucket < $3 \
+                   GROUP BY tag_id, (bucket - $2) * $4 / ($3 - $2)) "
             )
-            .collect())
+        };
+        let first = rollup::bucket_of(f, level.width());
+        let rows: Vec<MultiLevelRow> = match &self.inner.backend {
+            crate::store::Backend::Sqlite(s) => {
+                // One query per tag: SQLite walks each tag's primary-key
+                // range in order and looks the last sample up by key (a
+                // list of tags through json_each measured 4x slower).
+                let sql = format!(
+                    "{} SELECT g.tag_id, g.idx, g.n, g.mn, g.mx, g.sm, g.nv, r.last_ts, \
+                            r.last_value, r.last_quality, g.bad \
+                     FROM g JOIN {table} r ON r.tag_id = g.tag_id AND r.bucket = g.lastb \
+                     ORDER BY g.idx",
+                    grouped("= $1")
+                );
+                let mut rows = Vec::new();
+                for &id in ids {
+                    let mut one: Vec<MultiLevelRow> = sqlx::query_as(&sql)
+                        .bind(id)
+                        .bind(f)
+                        .bind(t)
+                        .bind(n)
+                        .bind(first)
+                        .fetch_all(s.reader())
+                        .await
+                        .map_err(db("querying a historian trend"))?;
+                    rows.append(&mut one);
+                }
+                rows
+            }
+            crate::store::Backend::Postgres(p) => {
+                // A plain join makes PostgreSQL hash every roll-up row of the
+                // tags (it expects ten times the groups it gets); the lateral
+                // lookup with LIMIT stays one primary-key probe per bucket.
+                let sql = format!(
+                    "{} SELECT g.tag_id, g.idx, g.n, g.mn, g.mx, g.sm, g.nv, r.last_ts, \
+                            r.last_value, r.last_quality, g.bad \
+                     FROM g CROSS JOIN LATERAL (SELECT last_ts, last_value, last_quality \
+                         FROM {table} r WHERE r.tag_id = g.tag_id AND r.bucket = g.lastb \
+                         LIMIT 1) r \
+                     ORDER BY g.tag_id, g.idx",
+                    grouped("= ANY($1)")
+                );
+                sqlx::query_as(&sql)
+                    .bind(ids)
+                    .bind(f)
+                    .bind(t)
+                    .bind(n)
+                    .bind(first)
+                    .fetch_all(p)
+                    .await
+                    .map_err(db("querying a historian trend"))?
+            }
+        };
+        let edge = rollup::edges(level, f, t, n);
+        let mut out: HashMap<i64, Vec<TrendBucket>> = HashMap::new();
+        for (id, b, cnt, mn, mx, sm, nv, last_ts, last, q, bad) in rows {
+            out.entry(id).or_default().push(TrendBucket {
+                index: b as u32,
+                start: Timestamp::from_millis(edge(b)),
+                end: Timestamp::from_millis(edge(b + 1)),
+                count: cnt.max(0) as u64,
+                min: mn,
+                max: mx,
+                avg: sm.filter(|_| nv > 0).map(|s| s / nv as f64),
+                last,
+                last_ts: Timestamp::from_millis(last_ts),
+                last_quality: quality_from_code(q),
+                bad_ms: bad.max(0) as u64,
+            });
+        }
+        Ok(out)
     }
 
     /// Raw samples of `tags` in `from..to`, oldest first, at most `limit` rows.

@@ -105,25 +105,43 @@ pub fn replay(args: ReplayArgs) -> ExitCode {
 }
 
 fn replay_checked(scn: &Scenario, plant: &Plant, args: &ReplayArgs) -> anyhow::Result<Report> {
-    let main = run_once(
-        scn,
-        plant,
-        args.pace,
-        DispatchPolicy::Optimal,
-        args.data.as_deref(),
-        "replay",
-    )?;
-    let rule = if scn.compare_rule && !args.no_compare && plant.microgrid.is_some() {
-        Some(run_once(
+    let compare = scn.compare_rule && !args.no_compare && plant.microgrid.is_some();
+    let main = |quiet_progress: bool| {
+        run_once(
             scn,
             plant,
             args.pace,
-            DispatchPolicy::Rule,
-            None,
-            "rule baseline",
-        )?)
+            DispatchPolicy::Optimal,
+            args.data.as_deref(),
+            ("replay", quiet_progress),
+        )
+    };
+    let (main, rule) = if compare {
+        // The baseline is a second, independent stack on its own runtime,
+        // clock and database: run it on the other core, beside the main run.
+        // Neither shares state with the other, so each stays deterministic.
+        std::thread::scope(|s| {
+            let rule = std::thread::Builder::new()
+                .name("replay-baseline".into())
+                .spawn_scoped(s, || {
+                    run_once(
+                        scn,
+                        plant,
+                        args.pace,
+                        DispatchPolicy::Rule,
+                        None,
+                        ("rule baseline", true),
+                    )
+                })
+                .context("starting the baseline run's thread")?;
+            let main = main(false);
+            let rule = rule
+                .join()
+                .map_err(|_| anyhow!("the baseline run panicked"))?;
+            anyhow::Ok((main?, Some(rule?)))
+        })?
     } else {
-        None
+        (main(false)?, None)
     };
     let report = build_report(scn, plant, args.pace, main, rule);
     if let Some(path) = &args.report {

@@ -6,20 +6,23 @@ use std::time::{Duration, Instant};
 use gridscada_sim::scenario::{self, Scenario};
 
 /// The progress line on stderr: a bar when it is a terminal, a plain line
-/// every 10 % otherwise.
+/// every 10 % otherwise; a quiet one (a run beside another, whose bar it
+/// would overwrite) says only when it starts and ends.
 pub(super) struct Progress {
     label: String,
     tty: bool,
+    quiet: bool,
     started: Instant,
     last_draw: Instant,
     last_tenth: u64,
 }
 
 impl Progress {
-    pub(super) fn new(label: &str, scn: &Scenario) -> Self {
+    pub(super) fn new(label: &str, scn: &Scenario, quiet: bool) -> Self {
         let p = Progress {
             label: format!("{} [{}]", scn.name, label),
-            tty: std::io::stderr().is_terminal(),
+            tty: std::io::stderr().is_terminal() && !quiet,
+            quiet,
             started: Instant::now(),
             last_draw: Instant::now(),
             last_tenth: 0,
@@ -31,6 +34,9 @@ impl Progress {
     }
 
     pub(super) fn update(&mut self, now: Duration, total: Duration) {
+        if self.quiet {
+            return;
+        }
         let frac = (now.as_secs_f64() / total.as_secs_f64().max(1e-9)).clamp(0.0, 1.0);
         let wall = self.started.elapsed().as_secs_f64().max(1e-6);
         let speed = now.as_secs_f64() / wall;

@@ -46,13 +46,15 @@ pub(super) struct RunOutcome {
     pub(super) foresight: ForesightRecorder,
 }
 
+/// Runs the scenario once; `progress` is the progress line's label and
+/// whether it stays quiet (a run beside another).
 pub(super) fn run_once(
     scn: &Scenario,
     plant: &Plant,
     pace: Pace,
     policy: DispatchPolicy,
     data: Option<&Path>,
-    label: &str,
+    progress: (&str, bool),
 ) -> anyhow::Result<RunOutcome> {
     let tmp;
     let data = match data {
@@ -78,7 +80,7 @@ pub(super) fn run_once(
                 Some(clock),
                 policy,
                 &data,
-                label,
+                progress,
             ))
         }
         Pace::Scaled(speed) => {
@@ -88,7 +90,7 @@ pub(super) fn run_once(
                 .context("starting the replay runtime")?;
             let clock: Arc<dyn Clock> =
                 Arc::new(FlooredClock(ScaledClock::new(clock_start(scn), speed)));
-            rt.block_on(run_stack(scn, plant, clock, None, policy, &data, label))
+            rt.block_on(run_stack(scn, plant, clock, None, policy, &data, progress))
         }
     }
 }
@@ -105,7 +107,7 @@ async fn run_stack(
     virt: Option<Arc<VirtualClock>>,
     policy: DispatchPolicy,
     data: &Path,
-    label: &str,
+    (label, quiet): (&str, bool),
 ) -> anyhow::Result<RunOutcome> {
     let store = open_store(plant, data).await?;
     let stack = Stack::start(
@@ -126,7 +128,7 @@ async fn run_stack(
         v.start(move || stats.in_flight());
     }
     let wall = Instant::now();
-    let driven = drive(&stack, scn, Progress::new(label, scn)).await;
+    let driven = drive(&stack, scn, Progress::new(label, scn, quiet)).await;
     let wall = wall.elapsed();
     if let Some(v) = &virt {
         v.freeze();

@@ -1,0 +1,232 @@
+#!/usr/bin/env python3
+"""Memory and CPU of `gridscada serve` at scale (issue 19, part 5).
+
+A generated plant of DEVICES Modbus TCP devices (one pymodbus server each, in
+a child process) with TAGS tags in all, every one logged by the historian
+(deadband 0.5 % of its 0-100 span), a high-limit alarm on every tenth tag,
+and CLIENTS WebSocket clients on /api/live (each subscribed to one device's
+tags). Every second a tenth of the registers take a random step, so the
+poller, the historian, the alarms and the push all have work. The server's
+RSS and CPU are sampled every 10 s; the verdict is whether RSS grew after
+the first minute.
+
+    target/test-venv/bin/python scripts/bench-memory.py --seconds 600
+    (GRIDSCADA_BIN: the binary, target/release/gridscada by default)
+"""
+import argparse
+import asyncio
+import json
+import os
+import random
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SPAN_RAW = 1000  # registers hold 0..1000, scale 0.1: 0..100 in engineering units
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def write_plant(folder, ports, per_device, http):
+    files = []
+    for d, port in enumerate(ports):
+        name = f"d{d:02d}.toml"
+        files.append(name)
+        lines = [f'[[device]]\nname = "D{d:02d}"\nprotocol = "tcp"\naddress = "127.0.0.1:{port}"\n'
+                 'unit_id = 1\nscan_ms = 1000\ntimeout_ms = 1000\nretries = 1\n']
+        for a in range(per_device):
+            lines.append(f'[[tag]]\nname = "D{d:02d}.T{a:04d}"\ndevice = "D{d:02d}"\n'
+                         f'kind = "holding_register"\naddress = {a}\nscale = 0.1\n'
+                         'history = { deadband = 0.5 }\n')
+            if a % 10 == 0:
+                lines.append('alarm = { hi = { limit = 52.0, priority = 500, deadband = 0.5 } }\n')
+        with open(os.path.join(folder, name), "w") as f:
+            f.write("\n".join(lines))
+    with open(os.path.join(folder, "gridscada.toml"), "w") as f:
+        f.write(f'tag_files = {json.dumps(files)}\n\n[server]\nhttp = "{http}"\n'
+                f'data_dir = "data"\n\n[storage]\nurl = "sqlite://gridscada.db"\n')
+
+
+def serve_devices(ports, per_device):
+    """The child process: one pymodbus server per port, registers walking."""
+    from pymodbus.datastore import (ModbusSequentialDataBlock, ModbusServerContext,
+                                    ModbusSlaveContext)
+    from pymodbus.server import ModbusTcpServer
+
+    rng = random.Random(19)
+    contexts = []
+
+    async def walk():
+        while True:
+            for slave, values in contexts:
+                for a in rng.sample(range(per_device), per_device // 10):
+                    values[a] = min(SPAN_RAW, max(0, values[a] + rng.randint(-10, 10)))
+                slave.setValues(3, 0, values)
+            await asyncio.sleep(1.0)
+
+    async def main():
+        servers = []
+        for port in ports:
+            block = ModbusSequentialDataBlock(0, [500] * (per_device + 1))
+            slave = ModbusSlaveContext(hr=block)
+            ctx = ModbusServerContext(slaves=slave, single=True)
+            contexts.append((slave, [500] * per_device))
+            servers.append(ModbusTcpServer(ctx, address=("127.0.0.1", port)))
+        tasks = [asyncio.create_task(s.serve_forever()) for s in servers]
+        tasks.append(asyncio.create_task(walk()))
+        await asyncio.gather(*tasks)
+
+    asyncio.run(main())
+
+
+def proc_sample(pid):
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    cpu_s = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    rss_mib = 0.0
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                rss_mib = int(line.split()[1]) / 1024
+    return cpu_s, rss_mib
+
+
+def metrics(base):
+    out = {}
+    with urllib.request.urlopen(base + "/metrics", timeout=10) as r:
+        for line in r.read().decode().splitlines():
+            if line and not line.startswith("#"):
+                k, _, v = line.rpartition(" ")
+                try:
+                    out[k] = float(v)
+                except ValueError:
+                    pass
+    return out
+
+
+def login(base, user, password):
+    req = urllib.request.Request(base + "/api/session", method="POST",
+                                 data=json.dumps({"username": user, "password": password}).encode(),
+                                 headers={"Content-Type": "application/json", "Origin": base})
+    with urllib.request.urlopen(req, timeout=10) as r:
+        for k, v in r.headers.items():
+            if k.lower() == "set-cookie":
+                return v.split(";", 1)[0]
+    raise RuntimeError("login gave no session cookie")
+
+
+async def ws_client(k, port, cookie, prefix, counts, stop):
+    import websockets
+    async with websockets.connect(f"ws://127.0.0.1:{port}/api/live",
+                                  additional_headers={"Cookie": cookie,
+                                                      "Origin": f"http://127.0.0.1:{port}"},
+                                  max_size=None) as ws:
+        await ws.send(json.dumps({"subscribe": {"prefixes": [prefix]}}))
+        while not stop.is_set():
+            try:
+                msg = await asyncio.wait_for(ws.recv(), 1.0)
+            except asyncio.TimeoutError:
+                continue
+            counts[k] += 1 if isinstance(msg, str) and '"tags"' in msg else 0
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--tags", type=int, default=100_000)
+    ap.add_argument("--devices", type=int, default=50)
+    ap.add_argument("--clients", type=int, default=20)
+    ap.add_argument("--seconds", type=int, default=600)
+    ap.add_argument("--every", type=int, default=10)
+    ap.add_argument("--serve-devices", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    per_device = args.tags // args.devices
+    if args.serve_devices:
+        serve_devices([int(p) for p in args.serve_devices.split(",")], per_device)
+        return
+    binary = os.environ.get("GRIDSCADA_BIN", os.path.join(ROOT, "target", "release", "gridscada"))
+    tmp = tempfile.mkdtemp(prefix="bench-memory-")
+    ports = [free_port() for _ in range(args.devices)]
+    hport = free_port()
+    base = f"http://127.0.0.1:{hport}"
+    write_plant(tmp, ports, per_device, f"127.0.0.1:{hport}")
+    procs = []
+    try:
+        procs.append(subprocess.Popen([sys.executable, __file__, "--tags", str(args.tags),
+                                       "--devices", str(args.devices),
+                                       "--serve-devices", ",".join(map(str, ports))]))
+        password = "bench-memory-" + str(random.randrange(10**9))
+        subprocess.run([binary, "user", "add", "bench", "--role", "display", "--config", tmp],
+                       input=password + "\n", text=True, check=True, capture_output=True)
+        server = subprocess.Popen([binary, "serve", "--config", tmp],
+                                  stdout=open(f"{tmp}/serve.log", "w"), stderr=subprocess.STDOUT)
+        procs.append(server)
+        for _ in range(600):
+            try:
+                urllib.request.urlopen(base + "/healthz", timeout=1)
+                break
+            except OSError:
+                if server.poll() is not None:
+                    sys.exit(f"serve exited: see {tmp}/serve.log")
+                time.sleep(0.2)
+        cookies = [login(base, "bench", password) for _ in range((args.clients + 7) // 8)]
+        counts = [0] * args.clients
+        loop = asyncio.new_event_loop()
+        stop = asyncio.Event()
+
+        async def clients():
+            await asyncio.gather(*(ws_client(k, hport, cookies[k // 8],
+                                             f"D{k % args.devices:02d}.", counts, stop)
+                                   for k in range(args.clients)))
+
+        import threading
+        t = threading.Thread(target=lambda: loop.run_until_complete(clients()), daemon=True)
+        t.start()
+        started = time.monotonic()
+        last_cpu, last_t = proc_sample(server.pid)[0], started
+        series = []
+        print(f"load average at the start: {open('/proc/loadavg').read().strip()}", flush=True)
+        print("| t (s) | RSS (MiB) | CPU (% of one core) | tags | historian samples written | "
+              "live messages | load 1 min |")
+        print("|---:|---:|---:|---:|---:|---:|---:|", flush=True)
+        while time.monotonic() - started < args.seconds:
+            time.sleep(args.every)
+            now = time.monotonic()
+            cpu, rss = proc_sample(server.pid)
+            m = metrics(base)
+            tags = m.get("gridscada_tags", float("nan"))
+            written = m.get("gridscada_historian_samples_written_total", float("nan"))
+            pct = 100 * (cpu - last_cpu) / (now - last_t)
+            last_cpu, last_t = cpu, now
+            row = (now - started, rss, pct, tags, written, sum(counts),
+                   float(open("/proc/loadavg").read().split()[0]))
+            series.append(row)
+            print("| %.0f | %.1f | %.1f | %.0f | %.0f | %d | %.2f |" % row, flush=True)
+        after = [r for r in series if r[0] >= 60]
+        if after:
+            first, peak, end = after[0][1], max(r[1] for r in after), after[-1][1]
+            print(f"\nRSS after the first minute: {first:.1f} MiB at {after[0][0]:.0f} s, "
+                  f"peak {peak:.1f} MiB, end {end:.1f} MiB (growth {end - first:+.1f} MiB); "
+                  f"mean CPU {sum(r[2] for r in after) / len(after):.1f} % of one core")
+        loop.call_soon_threadsafe(stop.set)
+        t.join(10)
+    finally:
+        for p in procs:
+            p.terminate()
+        for p in procs:
+            try:
+                p.wait(10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+        print(f"(plant, log and data in {tmp})")
+
+
+if __name__ == "__main__":
+    main()
