@@ -127,10 +127,13 @@ fn another_plant_is_usable_whole() {
             "tags",
             "devices",
             "alarms",
+            "alarmkpi",
             "events",
             "trends",
+            "reports",
             "editor",
-            "users"
+            "users",
+            "simulation"
         ]
     );
     let panels = admin.get_ok("/api/panels");
