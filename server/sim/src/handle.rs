@@ -204,12 +204,26 @@ impl SimHandle {
     ) -> Result<(), Error> {
         profile.check().map_err(Error::BadValue)?;
         self.shared.with_plant(|p| {
-            let now = p.now();
             let mg = p
                 .microgrid
                 .as_mut()
                 .ok_or_else(|| Error::NotFound("the plant has no microgrid".into()))?;
             set(mg, profile);
+            Ok(())
+        })
+    }
+
+    /// Reads the input profiles now instead of at the plant's next step, so
+    /// a trainer's change shows on the meters at once. A replay sets its
+    /// inputs every step and must not call this: it would move them a step
+    /// earlier than the scenarios' expectations were measured with.
+    pub fn sample_inputs_now(&self) -> Result<(), Error> {
+        self.shared.with_plant(|p| {
+            let now = p.now();
+            let mg = p
+                .microgrid
+                .as_mut()
+                .ok_or_else(|| Error::NotFound("the plant has no microgrid".into()))?;
             mg.sample_environment(now);
             Ok(())
         })

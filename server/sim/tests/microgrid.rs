@@ -170,6 +170,7 @@ async fn scaled_profiles_reach_the_registers() {
     rig.wait(Duration::from_millis(300)).await;
     let builtin = h.snapshot().microgrid.unwrap().demand_kw;
     h.set_demand(Profile::Scaled(0.5)).unwrap();
+    h.sample_inputs_now().unwrap();
     // At once, without waiting for the plant's next step.
     let snap = h.snapshot().microgrid.unwrap();
     assert!(

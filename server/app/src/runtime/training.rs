@@ -55,6 +55,7 @@ pub(super) fn set_input(
         PlantInput::WindSpeed => sim.set_wind_speed(p),
         PlantInput::Demand => sim.set_demand(p),
     }
+    .and_then(|()| sim.sample_inputs_now())
     .map_err(|e| e.to_string())
 }
 
