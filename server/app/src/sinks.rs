@@ -521,7 +521,11 @@ pub async fn historian_feed(
             .collect(),
     };
     let mut overflow = historian.overflow();
-    let mut tick = tokio::time::interval(Duration::from_secs(1));
+    // The max-interval re-logs are due in plant time: a wall-time tick
+    // would re-log a steady tag only every few hundred plant seconds under
+    // a replay's virtual clock, and a report would read its gaps as unknown.
+    const TICK: Duration = Duration::from_secs(1);
+    let mut tick = clock.sleep(TICK);
     let mut last_retention = None;
     loop {
         tokio::select! {
@@ -550,7 +554,8 @@ pub async fn historian_feed(
                     historian.push_all(samples);
                 }
             }
-            _ = tick.tick() => {
+            _ = &mut tick => {
+                tick = clock.sleep(TICK);
                 let now = clock.now();
                 let due = recorder.tick(now);
                 if recording() {
