@@ -166,23 +166,6 @@ impl Drop for Cluster {
     }
 }
 
-fn rows(url: &str, sql: &str) -> Vec<String> {
-    let out = Command::new("psql")
-        .arg(url)
-        .args(["-At", "-v", "ON_ERROR_STOP=1", "-c", sql])
-        .output()
-        .expect("psql");
-    assert!(
-        out.status.success(),
-        "{sql}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout)
-        .lines()
-        .map(str::to_string)
-        .collect()
-}
-
 /// What the database holds at one moment: the ids of events and alarm
 /// transitions, and the historian samples (kept in a table of the test's,
 /// by key; its row count kept here so that losing it would show).

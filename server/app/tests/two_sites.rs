@@ -14,30 +14,11 @@
 mod common;
 
 use std::path::Path;
-use std::process::Command;
 use std::time::Duration;
 
 use common::pair::*;
 use common::{now_ms, wait_for, Client};
 use serde_json::Value;
-
-/// One column of a query's rows, by psql.
-fn rows(url: &str, sql: &str) -> Vec<String> {
-    let out = Command::new("psql")
-        .arg(url)
-        .args(["-At", "-v", "ON_ERROR_STOP=1", "-c", sql])
-        .output()
-        .expect("psql");
-    assert!(
-        out.status.success(),
-        "{sql}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout)
-        .lines()
-        .map(str::to_string)
-        .collect()
-}
 
 fn ids(list: &Value, field: &str) -> Vec<i64> {
     list[field]

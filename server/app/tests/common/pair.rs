@@ -74,6 +74,24 @@ pub fn psql(url: &str, sql: &str) {
     );
 }
 
+/// One column of a query's rows, by psql.
+pub fn rows(url: &str, sql: &str) -> Vec<String> {
+    let out = Command::new("psql")
+        .arg(url)
+        .args(["-At", "-v", "ON_ERROR_STOP=1", "-c", sql])
+        .output()
+        .expect("psql");
+    assert!(
+        out.status.success(),
+        "{sql}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(str::to_string)
+        .collect()
+}
+
 /// The demo plant's files in `dir`, its devices moved to ports from
 /// `port_base` (so parallel tests do not collide), on `storage`, as server
 /// `name` of the pair `servers`.

@@ -75,13 +75,7 @@ pub async fn login(
     let previous =
         auth::token_from_cookies(headers.get(header::COOKIE).and_then(|v| v.to_str().ok()));
     // Stored before the cookie is sent, so the session outlives a restart.
-    let recorded = auth::Client {
-        address: Some(ip.to_string()),
-        user_agent: headers
-            .get(header::USER_AGENT)
-            .and_then(|v| v.to_str().ok())
-            .map(str::to_string),
-    };
+    let recorded = recorded_client(ip, &headers);
     let token = s
         .auth
         .sessions
@@ -256,13 +250,7 @@ pub async fn handover(
             }
         }
     }
-    let recorded = auth::Client {
-        address: Some(client.ip.to_string()),
-        user_agent: headers
-            .get(header::USER_AGENT)
-            .and_then(|v| v.to_str().ok())
-            .map(str::to_string),
-    };
+    let recorded = recorded_client(client.ip, &headers);
     let ticket = s
         .auth
         .sessions
@@ -305,13 +293,7 @@ pub async fn claim(
             "the failover ticket is unknown, expired or already used: log in",
         ));
     };
-    let recorded = auth::Client {
-        address: Some(client.ip.to_string()),
-        user_agent: headers
-            .get(header::USER_AGENT)
-            .and_then(|v| v.to_str().ok())
-            .map(str::to_string),
-    };
+    let recorded = recorded_client(client.ip, &headers);
     // Rotation ends the ticket: it is good for one claim.
     let token = s
         .auth
@@ -347,4 +329,15 @@ pub async fn claim(
         )],
     )
         .into_response())
+}
+
+/// What a new session records of its client: the address and the browser.
+fn recorded_client(ip: std::net::IpAddr, headers: &HeaderMap) -> auth::Client {
+    auth::Client {
+        address: Some(ip.to_string()),
+        user_agent: headers
+            .get(header::USER_AGENT)
+            .and_then(|v| v.to_str().ok())
+            .map(str::to_string),
+    }
 }
