@@ -181,6 +181,7 @@ fn main() {
     let mut plans = Vec::new();
     let mut nodes = Vec::new();
     let mut proven = 0usize;
+    let mut costs = Vec::new();
     for start in (0..96).step_by(4) {
         for soc in [30.0, 100.0, 170.0] {
             for running in [false, true] {
@@ -189,11 +190,20 @@ fn main() {
                 let t = Instant::now();
                 let sol = p.solve().expect("look-ahead with commitment");
                 plans.push(t.elapsed().as_secs_f64() * 1e3);
+                costs.push(sol.objective);
                 proven += usize::from(sol.commitment.as_ref().is_some_and(|c| c.proven));
                 nodes.push(sol.commitment.map_or(0, |c| c.nodes) as f64);
             }
         }
     }
+    // The total and the plans' summed cost: a faster search must find
+    // schedules as good (docs/BENCHMARKS.md compares them between builds).
+    println!(
+        "look-ahead total {:.0} ms for {} plans, summed cost {:.4}",
+        plans.iter().sum::<f64>(),
+        plans.len(),
+        costs.iter().sum::<f64>()
+    );
     report("look-ahead 16 x 15 min, commitment (ms)", plans);
     let n = nodes.len();
     report("  relaxations per plan (count, not ms)", nodes);

@@ -67,6 +67,9 @@ pub(crate) struct Model {
     pub rows: Vec<Row>,
 }
 
+/// A solve's point and row prices, or why there is none.
+type Solved = Result<(Vec<f64>, Vec<f64>), SolveFailure>;
+
 /// Why a model has no answer.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) enum SolveFailure {
@@ -186,11 +189,30 @@ impl Model {
     /// A relaxation inside branch and bound: looser tolerances, since its
     /// answer only bounds and guides the search (the chosen commitment is
     /// solved again at full precision).
+    ///
+    /// First without iterative refinement of the KKT solves (a branch and
+    /// bound solves hundreds of these, and the refinement is about 40 % of
+    /// each: docs/BENCHMARKS.md); only an answer the solver calls clean
+    /// (solved, or proven infeasible) is taken from that pass, anything
+    /// else is solved again with refinement, so a numerically hard node is
+    /// never dropped as infeasible on a rough solve.
     pub fn solve_relaxation(&self) -> Result<Vec<f64>, SolveFailure> {
-        self.solve_to(1e-8).map(|(x, _)| x)
+        const TOL: f64 = 1e-8;
+        match self.solve_with(TOL, false) {
+            (true, r) => r,
+            (false, _) => self.solve_to(TOL),
+        }
+        .map(|(x, _)| x)
     }
 
-    fn solve_to(&self, tol: f64) -> Result<(Vec<f64>, Vec<f64>), SolveFailure> {
+    fn solve_to(&self, tol: f64) -> Solved {
+        self.solve_with(tol, true).1
+    }
+
+    /// Solves to `tol`, with or without iterative refinement; the flag says
+    /// whether clarabel ended cleanly (solved, or primal infeasible with a
+    /// certificate) rather than "almost" or not at all.
+    fn solve_with(&self, tol: f64, refine: bool) -> (bool, Solved) {
         let n = self.n();
         // Where each of `self.rows` lands in clarabel's cone order.
         let mut slot = vec![0usize; self.rows.len()];
@@ -262,19 +284,42 @@ impl Model {
             .tol_feas(tol)
             .tol_ktratio(tol * 100.0)
             .presolve_enable(true)
-            .build()
-            .map_err(|e| SolveFailure::Solver(format!("solver settings: {e:?}")))?;
-        let mut solver = DefaultSolver::new(&p, &self.cost, &a, &b, &cones, settings)
-            .map_err(|e| SolveFailure::Solver(format!("solver setup: {e}")))?;
+            .iterative_refinement_enable(refine)
+            .build();
+        let settings = match settings {
+            Ok(s) => s,
+            Err(e) => {
+                return (
+                    false,
+                    Err(SolveFailure::Solver(format!("solver settings: {e:?}"))),
+                )
+            }
+        };
+        let mut solver = match DefaultSolver::new(&p, &self.cost, &a, &b, &cones, settings) {
+            Ok(s) => s,
+            Err(e) => {
+                return (
+                    false,
+                    Err(SolveFailure::Solver(format!("solver setup: {e}"))),
+                )
+            }
+        };
         solver.solve();
         let sol = &solver.solution;
-        match sol.status {
+        let clean = matches!(
+            sol.status,
+            SolverStatus::Solved | SolverStatus::PrimalInfeasible
+        );
+        let result = match sol.status {
             SolverStatus::Solved | SolverStatus::AlmostSolved => {
                 let mut x = sol.x.clone();
                 if x.len() != n || x.iter().any(|v| !v.is_finite()) {
-                    return Err(SolveFailure::Solver(
-                        "solver returned a non-finite point".into(),
-                    ));
+                    return (
+                        false,
+                        Err(SolveFailure::Solver(
+                            "solver returned a non-finite point".into(),
+                        )),
+                    );
                 }
                 self.clip(&mut x);
                 // clarabel solves min c·x s.t. Ax + s = b, s ∈ K, whose
@@ -301,7 +346,8 @@ impl Model {
             other => Err(SolveFailure::Solver(format!(
                 "solver stopped without an answer: {other:?}"
             ))),
-        }
+        };
+        (clean, result)
     }
 }
 

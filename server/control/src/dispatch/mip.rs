@@ -99,13 +99,19 @@ pub(crate) fn solve_binary(
 
 /// [`solve_binary`] starting from a known integer point `start` (its
 /// objective prunes from the first node on).
+///
+/// Both cores work: the two best open nodes are taken together and their
+/// relaxations solved at once ([`relax_pair`]), then handled one after the
+/// other in the order they were taken. That order never depends on which
+/// solve finishes first, so the same problem still gives the same answer
+/// on any machine (a replay stays byte for byte the same).
 pub(crate) fn solve_binary_from(
     model: &Model,
     binaries: &[usize],
     limits: MipLimits,
     start: Option<Vec<f64>>,
 ) -> Result<MipSolution, SolveFailure> {
-    let mut work = model.clone();
+    let mut works = [model.clone(), model.clone()];
     let mut nodes = 0usize;
     let mut seq = 0usize;
     let mut best: Option<(f64, Vec<f64>)> = start.map(|x| (model.objective(&x), x));
@@ -119,80 +125,99 @@ pub(crate) fn solve_binary_from(
     let close_enough =
         |bound: f64, inc: f64| inc - bound <= limits.abs_gap.max(limits.rel_gap * inc.abs());
     let mut proven = true;
-    while let Some(node) = heap.pop() {
-        if let Some((inc, _)) = &best {
-            if close_enough(node.bound, *inc) {
-                // Every node left has a bound at least this one's.
-                heap.clear();
+    while proven && !heap.is_empty() {
+        // The (at most) two best nodes the incumbent does not settle.
+        let mut batch: Vec<Node> = Vec::with_capacity(2);
+        while batch.len() < 2 {
+            let Some(node) = heap.pop() else { break };
+            if let Some((inc, _)) = &best {
+                if close_enough(node.bound, *inc) {
+                    // Every node left has a bound at least this one's.
+                    heap.clear();
+                    break;
+                }
+            }
+            if nodes + batch.len() >= limits.max_nodes {
+                heap.push(node);
+                proven = false;
                 break;
             }
+            batch.push(node);
         }
-        if nodes >= limits.max_nodes {
-            heap.push(node);
-            proven = false;
-            break;
-        }
-        nodes += 1;
-        let x = match relax(model, &mut work, &node.fixes) {
-            Ok(x) => x,
-            Err(e) => {
-                if node.fixes.is_empty() {
-                    root_failure = Some(e);
+        let solved = match batch.as_slice() {
+            [] => break,
+            [a] => vec![relax(model, &mut works[0], &a.fixes)],
+            [a, b, ..] => {
+                let (ra, rb) = relax_pair(model, &mut works, &a.fixes, &b.fixes);
+                vec![ra, rb]
+            }
+        };
+        for (node, relaxed) in batch.into_iter().zip(solved) {
+            nodes += 1;
+            let x = match relaxed {
+                Ok(x) => x,
+                Err(e) => {
+                    if node.fixes.is_empty() {
+                        root_failure = Some(e);
+                    }
+                    continue; // an infeasible branch holds no integer point
                 }
-                continue; // an infeasible branch holds no integer point
+            };
+            let value = model.objective(&x);
+            if let Some((inc, _)) = &best {
+                if close_enough(value, *inc) {
+                    continue;
+                }
             }
-        };
-        let value = model.objective(&x);
-        if let Some((inc, _)) = &best {
-            if close_enough(value, *inc) {
+            let fractional = binaries
+                .iter()
+                .copied()
+                .filter(|&j| x[j] > INT_TOL && x[j] < 1.0 - INT_TOL)
+                .max_by(|&a, &b| {
+                    let fa = 0.5 - (x[a] - 0.5).abs();
+                    let fb = 0.5 - (x[b] - 0.5).abs();
+                    fa.total_cmp(&fb).then(b.cmp(&a))
+                });
+            let Some(j) = fractional else {
+                let mut xi = x;
+                for &b in binaries {
+                    xi[b] = xi[b].round();
+                }
+                if best.as_ref().is_none_or(|(inc, _)| value < *inc) {
+                    best = Some((value, xi));
+                }
                 continue;
-            }
-        }
-        let fractional = binaries
-            .iter()
-            .copied()
-            .filter(|&j| x[j] > INT_TOL && x[j] < 1.0 - INT_TOL)
-            .max_by(|&a, &b| {
-                let fa = 0.5 - (x[a] - 0.5).abs();
-                let fb = 0.5 - (x[b] - 0.5).abs();
-                fa.total_cmp(&fb).then(b.cmp(&a))
-            });
-        let Some(j) = fractional else {
-            let mut xi = x;
-            for &b in binaries {
-                xi[b] = xi[b].round();
-            }
-            if best.as_ref().is_none_or(|(inc, _)| value < *inc) {
-                best = Some((value, xi));
-            }
-            continue;
-        };
-        // Rounding dives: at the root and now and then, fix every binary to
-        // a rounded value and solve the rest, for an incumbent to prune with.
-        if nodes == 1 || nodes.is_multiple_of(16) {
-            for threshold in [INT_TOL, 0.5] {
-                let fixes: Vec<(usize, f64)> = binaries
-                    .iter()
-                    .map(|&b| (b, if x[b] > threshold { 1.0 } else { 0.0 }))
-                    .collect();
-                nodes += 1;
-                if let Ok(xr) = relax(model, &mut work, &fixes) {
+            };
+            // Rounding dives: at the root and now and then, fix every binary
+            // to a rounded value (two thresholds, solved together) and solve
+            // the rest, for an incumbent to prune with.
+            if nodes == 1 || nodes.is_multiple_of(16) {
+                let rounded = |threshold: f64| -> Vec<(usize, f64)> {
+                    binaries
+                        .iter()
+                        .map(|&b| (b, if x[b] > threshold { 1.0 } else { 0.0 }))
+                        .collect()
+                };
+                let (low, half) = (rounded(INT_TOL), rounded(0.5));
+                nodes += 2;
+                let (rl, rh) = relax_pair(model, &mut works, &low, &half);
+                for xr in [rl, rh].into_iter().flatten() {
                     let v = model.objective(&xr);
                     if best.as_ref().is_none_or(|(inc, _)| v < *inc) {
                         best = Some((v, xr));
                     }
                 }
             }
-        }
-        for value_of_j in [1.0, 0.0] {
-            let mut fixes = node.fixes.clone();
-            fixes.push((j, value_of_j));
-            seq += 1;
-            heap.push(Node {
-                bound: value,
-                fixes,
-                seq,
-            });
+            for value_of_j in [1.0, 0.0] {
+                let mut fixes = node.fixes.clone();
+                fixes.push((j, value_of_j));
+                seq += 1;
+                heap.push(Node {
+                    bound: value,
+                    fixes,
+                    seq,
+                });
+            }
         }
     }
     // Stopped short: polish the incumbent by single flips (each binary
@@ -200,7 +225,7 @@ pub(crate) fn solve_binary_from(
     // one improves it.
     if !proven {
         if let Some((v, x)) = best.take() {
-            let (v, x, tried) = improve_by_flips(model, &mut work, binaries, v, x);
+            let (v, x, tried) = improve_by_flips(model, &mut works, binaries, v, x);
             nodes += tried;
             best = Some((v, x));
         }
@@ -233,42 +258,65 @@ pub(crate) fn solve_binary_from(
 
 /// First-improvement local search over single flips of the binaries, at
 /// most three passes; returns the point, its objective and the
-/// relaxations solved.
+/// relaxations solved. Flips are tried two at a time: when the first of a
+/// pair improves, the second (solved against the old point) is discarded
+/// and tried again from the new one, so the walk is that of one at a time.
 fn improve_by_flips(
     model: &Model,
-    work: &mut Model,
+    works: &mut [Model; 2],
     binaries: &[usize],
     mut value: f64,
     mut x: Vec<f64>,
 ) -> (f64, Vec<f64>, usize) {
     let mut tried = 0;
+    let flipped = |x: &[f64], flip: usize| -> Vec<(usize, f64)> {
+        binaries
+            .iter()
+            .map(|&b| {
+                let v = x[b].round();
+                (b, if b == flip { 1.0 - v } else { v })
+            })
+            .collect()
+    };
+    let better = |v: f64, value: f64| v < value - 1e-9 * value.abs().max(1.0);
     for _pass in 0..3 {
         let mut improved = false;
-        for &flip in binaries {
-            let fixes: Vec<(usize, f64)> = binaries
-                .iter()
-                .map(|&b| {
-                    (
-                        b,
-                        if b == flip {
-                            1.0 - x[b].round()
-                        } else {
-                            x[b].round()
-                        },
-                    )
-                })
-                .collect();
-            tried += 1;
-            if let Ok(xr) = relax(model, work, &fixes) {
-                let v = model.objective(&xr);
-                if v < value - 1e-9 * value.abs().max(1.0) {
-                    value = v;
-                    x = xr;
-                    for &b in binaries {
-                        x[b] = x[b].round();
-                    }
-                    improved = true;
+        let mut i = 0;
+        while i < binaries.len() {
+            let first = flipped(&x, binaries[i]);
+            let (r1, r2) = match binaries.get(i + 1) {
+                Some(&next) => {
+                    let second = flipped(&x, next);
+                    let (r1, r2) = relax_pair(model, works, &first, &second);
+                    tried += 2;
+                    (r1, Some(r2))
                 }
+                None => {
+                    tried += 1;
+                    (relax(model, &mut works[0], &first), None)
+                }
+            };
+            i += 1;
+            let mut take = |r: Result<Vec<f64>, SolveFailure>| -> bool {
+                let Ok(xr) = r else { return false };
+                let v = model.objective(&xr);
+                if !better(v, value) {
+                    return false;
+                }
+                value = v;
+                x = xr;
+                for &b in binaries {
+                    x[b] = x[b].round();
+                }
+                improved = true;
+                true
+            };
+            if take(r1) {
+                continue; // the second flip is tried again from the new point
+            }
+            if let Some(r2) = r2 {
+                i += 1;
+                take(r2);
             }
         }
         if !improved {
@@ -319,6 +367,30 @@ pub(crate) fn relax_and_fix(
         x[j] = x[j].round();
     }
     Some(x)
+}
+
+/// The relaxations of `model` under `a` and under `b`, solved at once on
+/// two threads (each on its own working copy).
+fn relax_pair(
+    model: &Model,
+    works: &mut [Model; 2],
+    a: &[(usize, f64)],
+    b: &[(usize, f64)],
+) -> (
+    Result<Vec<f64>, SolveFailure>,
+    Result<Vec<f64>, SolveFailure>,
+) {
+    let [wa, wb] = works;
+    std::thread::scope(|s| {
+        let second = s.spawn(|| relax(model, wb, b));
+        let ra = relax(model, wa, a);
+        let rb = second.join().unwrap_or_else(|_| {
+            Err(SolveFailure::Solver(
+                "the relaxation's worker thread failed".into(),
+            ))
+        });
+        (ra, rb)
+    })
 }
 
 /// Solves the relaxation of `model` with `fixes` applied to a working copy
@@ -405,6 +477,46 @@ mod tests {
                 assert!(sol.x[b] == 0.0 || sol.x[b] == 1.0);
             }
             m.check(&sol.x, 1e-5).unwrap();
+        }
+    }
+
+    #[test]
+    fn the_search_on_two_threads_gives_the_same_answer_every_time() {
+        // Two plants' worth of generators and a demand that leaves
+        // several near-ties: the paired relaxations, the dives and the
+        // flips must come out in the same order on every run.
+        let (m1, b1) = commitment(125.0);
+        let (m2, b2) = commitment(61.0);
+        let mut m = m1;
+        let offset = m.lb.len();
+        for j in 0..m2.lb.len() {
+            m.var(format!("b{j}"), m2.lb[j], m2.ub[j], m2.cost[j]);
+        }
+        for r in &m2.rows {
+            let coefs = r.coefs.iter().map(|&(j, a)| (j + offset, a)).collect();
+            m.row(format!("b {}", r.name), coefs, r.sense, r.rhs);
+        }
+        let bins: Vec<usize> = b1
+            .into_iter()
+            .chain(b2.iter().map(|b| b + offset))
+            .collect();
+        for max_nodes in [3, 7, 4000] {
+            let limits = MipLimits {
+                max_nodes,
+                ..MipLimits::default()
+            };
+            let first = solve_binary(&m, &bins, limits).unwrap();
+            for _ in 0..10 {
+                let again = solve_binary(&m, &bins, limits).unwrap();
+                assert_eq!(again.x, first.x, "max_nodes {max_nodes}");
+                assert_eq!(again.nodes, first.nodes);
+                assert_eq!(again.bound.to_bits(), first.bound.to_bits());
+            }
+            if max_nodes == 4000 {
+                let exact = brute_force(&m, &bins).unwrap();
+                assert!(first.proven);
+                assert!((first.objective - exact).abs() <= 1e-3 + 1e-4 * exact.abs());
+            }
         }
     }
 
