@@ -36,7 +36,7 @@ use tokio_modbus::{Request, Response};
 use crate::decode::{self, Codec, Encoded};
 use crate::frame::{self, Answer};
 use crate::plan::Block;
-use crate::transport::{LinkError, Transport};
+use crate::transport::{Deadline, LinkError, Transport};
 
 /// First wait before reconnecting a dropped connection; doubles to the cap.
 const RECONNECT_FIRST: Duration = Duration::from_millis(250);
@@ -381,11 +381,14 @@ impl Link {
     /// One request to device `d`, with its timeout, counted.
     async fn request(&mut self, d: usize, req: &Request<'_>) -> Result<Answer, LinkError> {
         let dev = &self.devices[d];
-        let wall = self.clock.to_wall(dev.timeout);
+        let deadline = Deadline::new(
+            self.clock.to_wall(dev.timeout),
+            self.clock.request_wait(dev.timeout),
+        );
         let unit = dev.unit;
         let started = tokio::time::Instant::now();
         let busy = InFlight::new(&self.counters);
-        let result = self.transport.transact(unit, req, wall).await;
+        let result = self.transport.transact(unit, req, deadline).await;
         drop(busy);
         let elapsed = started.elapsed();
         let lc = self.transport.counters();

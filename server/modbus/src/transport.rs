@@ -11,9 +11,11 @@
 //! dropped; on RTU the line is drained until quiet before the next request and
 //! the reply is searched for by slave id, function code, length and CRC.
 
+use std::future::Future;
 use std::time::Duration;
 
 use gridscada_config::{Parity, SerialConfig};
+use gridscada_tagdb::SleepFuture;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 use tokio::time::{timeout_at, Instant};
@@ -21,6 +23,63 @@ use tokio_modbus::Request;
 use tokio_serial::SerialPortBuilderExt;
 
 use crate::frame::{self, Answer, Mbap};
+
+/// When a request gives up: a wall-clock instant and, under a clock that
+/// measures a device's silence otherwise ([`gridscada_tagdb::Clock::request_wait`]),
+/// that clock's wait, whichever ends first.
+pub struct Deadline {
+    wall: Instant,
+    wait: Option<SleepFuture>,
+    expired: bool,
+}
+
+/// Under a clock's own wait, the wall-clock time is only a backstop.
+const WAIT_BACKSTOP: Duration = Duration::from_secs(10);
+
+/// The deadline passed.
+struct Expired;
+
+impl Deadline {
+    /// `wall` from now, or the clock's `wait` (with a long wall backstop).
+    pub fn new(wall: Duration, wait: Option<SleepFuture>) -> Self {
+        let wall = if wait.is_some() {
+            wall.max(WAIT_BACKSTOP)
+        } else {
+            wall
+        };
+        Deadline {
+            wall: Instant::now() + wall,
+            wait,
+            expired: false,
+        }
+    }
+
+    /// Runs `f` until it ends or the deadline passes. The operation is
+    /// polled first, so an answer that is there wins over a deadline that
+    /// passed at the same time.
+    async fn run<F: Future>(&mut self, f: F) -> Result<F::Output, Expired> {
+        if self.expired {
+            return Err(Expired);
+        }
+        let wall = self.wall;
+        let r = match self.wait.as_mut() {
+            None => timeout_at(wall, f).await.map_err(|_| Expired),
+            Some(wait) => tokio::select! {
+                biased;
+                r = f => Ok(r),
+                _ = tokio::time::sleep_until(wall) => Err(Expired),
+                _ = wait.as_mut() => Err(Expired),
+            },
+        };
+        // A finished wait must not be polled again.
+        self.expired = r.is_err();
+        r
+    }
+
+    fn remaining(&self) -> Duration {
+        self.wall.saturating_duration_since(Instant::now())
+    }
+}
 
 /// Why a transaction got no usable answer.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -96,16 +155,16 @@ impl Transport {
         }
     }
 
-    /// One request and its answer. `timeout` is wall time.
+    /// One request and its answer, given up at `deadline`.
     pub async fn transact(
         &mut self,
         unit: u8,
         req: &Request<'_>,
-        timeout: Duration,
+        deadline: Deadline,
     ) -> Result<Answer, LinkError> {
         match self {
-            Transport::Tcp(t) => t.transact(unit, req, timeout).await,
-            Transport::Rtu(r) => r.transact(unit, req, timeout).await,
+            Transport::Tcp(t) => t.transact(unit, req, deadline).await,
+            Transport::Rtu(r) => r.transact(unit, req, deadline).await,
         }
     }
 }
@@ -153,17 +212,16 @@ impl TcpLine {
         &mut self,
         unit: u8,
         req: &Request<'_>,
-        timeout: Duration,
+        mut deadline: Deadline,
     ) -> Result<Answer, LinkError> {
         let pdu = frame::encode_request(req).map_err(LinkError::Protocol)?;
-        let deadline = Instant::now() + timeout;
         self.transaction = self.transaction.wrapping_add(1);
         let tid = self.transaction;
         let adu = frame::tcp_adu(tid, unit, &pdu);
         let Some(stream) = self.stream.as_mut() else {
             return Err(LinkError::NotConnected(self.address.clone()));
         };
-        match timeout_at(deadline, stream.write_all(&adu)).await {
+        match deadline.run(stream.write_all(&adu)).await {
             Ok(Ok(())) => {}
             Ok(Err(e)) => return Err(self.fail(LinkError::Io(e.to_string()))),
             // Part of the frame may be out: the stream can no longer be trusted.
@@ -190,7 +248,7 @@ impl TcpLine {
             let Some(stream) = self.stream.as_mut() else {
                 return Err(LinkError::NotConnected(self.address.clone()));
             };
-            match timeout_at(deadline, stream.read(&mut chunk)).await {
+            match deadline.run(stream.read(&mut chunk)).await {
                 Err(_) => return Err(LinkError::Timeout),
                 Ok(Ok(0)) => {
                     return Err(self.fail(LinkError::Io("connection closed by the device".into())))
@@ -319,23 +377,23 @@ impl RtuLine {
         &mut self,
         unit: u8,
         req: &Request<'_>,
-        timeout: Duration,
+        mut deadline: Deadline,
     ) -> Result<Answer, LinkError> {
         let pdu = frame::encode_request(req).map_err(LinkError::Protocol)?;
         let function = pdu[0];
         let adu = frame::rtu_adu(unit, &pdu);
-        let deadline = Instant::now() + timeout;
-        self.drain(timeout).await?;
+        self.drain(deadline.remaining()).await?;
         tokio::time::sleep_until(self.last_traffic + self.silence).await;
         let port = self.config.port.get_ref().clone();
         let Some(stream) = self.stream.as_mut() else {
             return Err(LinkError::NotConnected(port));
         };
-        let sent = timeout_at(deadline, async {
-            stream.write_all(&adu).await?;
-            stream.flush().await
-        })
-        .await;
+        let sent = deadline
+            .run(async {
+                stream.write_all(&adu).await?;
+                stream.flush().await
+            })
+            .await;
         match sent {
             Ok(Ok(())) => {}
             Ok(Err(e)) => {
@@ -370,7 +428,7 @@ impl RtuLine {
             let Some(stream) = self.stream.as_mut() else {
                 return Err(LinkError::NotConnected(port));
             };
-            match timeout_at(deadline, stream.read(&mut chunk)).await {
+            match deadline.run(stream.read(&mut chunk)).await {
                 Err(_) => {
                     self.dirty = true;
                     if !self.buf.is_empty() {

@@ -226,6 +226,14 @@ pub trait Clock: Send + Sync + 'static {
     fn to_wall(&self, d: Duration) -> Duration {
         d.div_f64(self.speed().max(1e-9))
     }
+    /// How long a request to a device waits for its answer, where this
+    /// clock measures that otherwise than [`Clock::to_wall`] of wall time:
+    /// a replay's virtual clock counts only the time its runtime sat idle
+    /// waiting, so a runtime that was busy (a long solve) or descheduled
+    /// never times out a device that did answer. `None`: wall time.
+    fn request_wait(&self, _d: Duration) -> Option<SleepFuture> {
+        None
+    }
 }
 
 /// The live plant: plant time is wall time.

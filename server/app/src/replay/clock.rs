@@ -3,10 +3,10 @@
 //! [`Pace`], which picks one.
 
 use std::collections::BTreeMap;
-use std::sync::atomic::{AtomicBool, AtomicI64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 use std::task::{Poll, Waker};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use gridscada_tagdb::{Clock, ScaledClock, SleepFuture, Timestamp};
 
@@ -20,14 +20,49 @@ use gridscada_tagdb::{Clock, ScaledClock, SleepFuture, Timestamp};
 /// simulator step therefore happens at its exact plant time, in the same
 /// order on every run, and the replay goes as fast as the CPU allows.
 ///
-/// A request to a device that does not answer waits a short wall-time
-/// timeout ([`VirtualClock::to_wall`]) and costs no plant time.
+/// A request to a device that does not answer waits a short timeout and
+/// costs no plant time. The timeout counts only wall time the runtime spent
+/// parked, waiting ([`Clock::request_wait`]): time spent running other
+/// tasks, in a long solve, or descheduled on a loaded machine is not the
+/// device's silence, and counting it made the same scenario time out a
+/// request on one run and not on the next.
 pub struct VirtualClock {
     now_ms: AtomicI64,
+    idle: Arc<IdleMeter>,
     timers: Mutex<Timers>,
     /// Set once the stack is up: how many transport operations are in flight.
     busy: OnceLock<Box<dyn Fn() -> u64 + Send + Sync>>,
     frozen: AtomicBool,
+}
+
+/// Wall time the runtime has spent parked (between its park and unpark
+/// hooks), summed.
+#[derive(Default)]
+struct IdleMeter {
+    total_ns: AtomicU64,
+    parked_at: Mutex<Option<Instant>>,
+}
+
+impl IdleMeter {
+    fn park(&self) {
+        *self.parked_at.lock().unwrap_or_else(|e| e.into_inner()) = Some(Instant::now());
+    }
+
+    fn unpark(&self) {
+        let since = self
+            .parked_at
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .take();
+        if let Some(t) = since {
+            let ns = u64::try_from(t.elapsed().as_nanos()).unwrap_or(u64::MAX);
+            self.total_ns.fetch_add(ns, Ordering::SeqCst);
+        }
+    }
+
+    fn total(&self) -> u64 {
+        self.total_ns.load(Ordering::SeqCst)
+    }
 }
 
 #[derive(Default)]
@@ -53,6 +88,7 @@ impl VirtualClock {
     pub fn new(start: Timestamp) -> Arc<Self> {
         Arc::new(VirtualClock {
             now_ms: AtomicI64::new(start.as_millis()),
+            idle: Arc::default(),
             timers: Mutex::new(Timers::default()),
             busy: OnceLock::new(),
             frozen: AtomicBool::new(false),
@@ -69,8 +105,19 @@ impl VirtualClock {
         self.frozen.store(true, Ordering::SeqCst);
     }
 
-    /// The runtime has nothing to run: advance to the next deadline.
+    /// The runtime has nothing to run (its park hook): advance to the next
+    /// deadline, unless a transaction is in flight.
     pub fn on_idle(&self) {
+        self.idle.park();
+        self.advance_when_idle();
+    }
+
+    /// The runtime woke up (its unpark hook).
+    pub fn on_wake(&self) {
+        self.idle.unpark();
+    }
+
+    fn advance_when_idle(&self) {
         if self.frozen.load(Ordering::SeqCst) {
             return;
         }
@@ -140,6 +187,22 @@ impl Clock for VirtualClock {
     fn to_wall(&self, d: Duration) -> Duration {
         d.min(VIRTUAL_TIMEOUT_CAP)
     }
+
+    /// `d` (at most [`VIRTUAL_TIMEOUT_CAP`]) of wall time spent parked.
+    fn request_wait(&self, d: Duration) -> Option<SleepFuture> {
+        let budget = u64::try_from(d.min(VIRTUAL_TIMEOUT_CAP).as_nanos()).unwrap_or(u64::MAX);
+        let idle = self.idle.clone();
+        let start = idle.total();
+        Some(Box::pin(async move {
+            loop {
+                let used = idle.total().saturating_sub(start);
+                if used >= budget {
+                    return;
+                }
+                tokio::time::sleep(Duration::from_nanos(budget - used)).await;
+            }
+        }))
+    }
 }
 
 /// A scaled clock whose Modbus timeouts never shrink below what loopback
@@ -179,5 +242,58 @@ impl Pace {
             Pace::Max => "virtual (--max): plant time advances when the stack is idle".into(),
             Pace::Scaled(s) => format!("scaled ×{s}"),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The replay's runtime: one thread, the clock's park and unpark hooks.
+    fn runtime(clock: &Arc<VirtualClock>) -> tokio::runtime::Runtime {
+        let (park, wake) = (clock.clone(), clock.clone());
+        tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .on_thread_park(move || park.on_idle())
+            .on_thread_unpark(move || wake.on_wake())
+            .build()
+            .unwrap()
+    }
+
+    #[test]
+    fn a_request_is_not_timed_out_while_the_runtime_is_busy() {
+        let clock = VirtualClock::new(Timestamp::from_millis(0));
+        clock.start(|| 1); // a transaction in flight: plant time holds
+        let rt = runtime(&clock);
+        let answered = rt.block_on(async {
+            let wait = clock.request_wait(Duration::from_secs(1)).unwrap();
+            let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+            // A long solve holds the thread past the wait's 250 ms, then
+            // the device's answer comes.
+            tokio::spawn(async move {
+                std::thread::sleep(Duration::from_millis(400));
+                tokio::task::yield_now().await;
+                let _ = tx.send(());
+            });
+            tokio::select! {
+                biased;
+                _ = rx => true,
+                _ = wait => false,
+            }
+        });
+        assert!(answered, "the busy time counted as the device's silence");
+    }
+
+    #[test]
+    fn a_silent_device_times_out_after_the_idle_wait() {
+        let clock = VirtualClock::new(Timestamp::from_millis(0));
+        clock.start(|| 1);
+        let rt = runtime(&clock);
+        let started = std::time::Instant::now();
+        rt.block_on(clock.request_wait(Duration::from_secs(5)).unwrap());
+        let took = started.elapsed();
+        assert!(took >= VIRTUAL_TIMEOUT_CAP, "{took:?}");
+        assert!(took < Duration::from_secs(5), "{took:?}");
+        assert_eq!(clock.now(), Timestamp::from_millis(0), "plant time moved");
     }
 }

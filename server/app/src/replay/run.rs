@@ -67,10 +67,11 @@ pub(super) fn run_once(
     match pace {
         Pace::Max => {
             let clock = VirtualClock::new(clock_start(scn));
-            let hook = clock.clone();
+            let (hook, wake) = (clock.clone(), clock.clone());
             let rt = tokio::runtime::Builder::new_current_thread()
                 .enable_all()
                 .on_thread_park(move || hook.on_idle())
+                .on_thread_unpark(move || wake.on_wake())
                 .build()
                 .context("starting the replay runtime")?;
             rt.block_on(run_stack(
