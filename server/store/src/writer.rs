@@ -251,15 +251,18 @@ async fn run(
                     if n == 0 { break; } // every handle dropped
                 }
             }
+            // Linger for a fuller batch, but only until it is full: under a
+            // burst the batch fills in microseconds, and sleeping out the
+            // whole linger there cost a third of a 200,000-sample burst's
+            // time (docs/BENCHMARKS.md).
             if batch.len() < batch_max && !config.linger.is_zero() {
-                tokio::select! {
-                    _ = tokio::time::sleep(config.linger) => {}
-                    _ = stop.changed() => {}
-                }
+                let until = tokio::time::Instant::now() + config.linger;
                 while batch.len() < batch_max {
-                    match rx.try_recv() {
-                        Ok(s) => batch.push(s),
-                        Err(_) => break,
+                    let room = batch_max - batch.len();
+                    tokio::select! {
+                        _ = tokio::time::sleep_until(until) => break,
+                        _ = stop.changed() => break,
+                        n = rx.recv_many(&mut batch, room) => if n == 0 { break },
                     }
                 }
             }

@@ -1140,6 +1140,50 @@ async fn overflow_is_counted(db: TestDb) {
 }
 both_backends!(overflow, overflow_is_counted);
 
+/// The linger waits for a fuller batch only until the batch is full: a
+/// burst of full batches is written at once, while a lone sample still
+/// waits out the linger (fewer, bigger transactions at low rates).
+async fn a_full_batch_does_not_wait_out_the_linger(db: TestDb) {
+    let hist = Historian::spawn(
+        db.store.clone(),
+        HistorianConfig {
+            capacity: 1000,
+            batch_max: 100,
+            linger: Duration::from_secs(3600),
+            ..Default::default()
+        },
+    );
+    let h = hist.handle();
+    // One sample first: the writer takes it and lingers for more.
+    assert!(h.push(sample("L", 0, Some(0.0), QualityCode::Good)));
+    wait_for("the writer to take the first sample", || {
+        h.metrics().buffered == 0
+    })
+    .await;
+    tokio::time::sleep(Duration::from_millis(50)).await;
+    assert_eq!(h.metrics().samples_written, 0, "a lone sample lingers");
+    // The burst fills the lingering batch and two more: all written long
+    // before the hour's linger would end.
+    assert_eq!(
+        h.push_all((1..300).map(|i| sample("L", i, Some(i as f64), QualityCode::Good))),
+        299
+    );
+    wait_for("three full batches to be written", || {
+        h.metrics().samples_written == 300
+    })
+    .await;
+    assert_eq!(h.metrics().batches_written, 3);
+    hist.shutdown().await;
+    let rows = db
+        .store
+        .raw_samples(&["L"], ts(0), ts(1000), 1000)
+        .await
+        .unwrap();
+    assert_eq!(rows.len(), 300);
+    db.cleanup().await;
+}
+both_backends!(linger_until_full, a_full_batch_does_not_wait_out_the_linger);
+
 /// Pausing holds samples in the buffer; shutdown writes what is left.
 async fn pause_and_shutdown_flush(db: TestDb) {
     let hist = Historian::spawn(
