@@ -29,6 +29,9 @@ use crate::frame::{self, Answer, Mbap};
 /// that clock's wait, whichever ends first.
 pub struct Deadline {
     wall: Instant,
+    /// The end of the wall-clock timeout as given (bounds RTU draining);
+    /// `wall` itself is later under a clock's own wait.
+    given: Instant,
     wait: Option<SleepFuture>,
     expired: bool,
 }
@@ -41,14 +44,16 @@ struct Expired;
 
 impl Deadline {
     /// `wall` from now, or the clock's `wait` (with a long wall backstop).
-    pub fn new(wall: Duration, wait: Option<SleepFuture>) -> Self {
+    pub fn new(timeout: Duration, wait: Option<SleepFuture>) -> Self {
         let wall = if wait.is_some() {
-            wall.max(WAIT_BACKSTOP)
+            timeout.max(WAIT_BACKSTOP)
         } else {
-            wall
+            timeout
         };
+        let now = Instant::now();
         Deadline {
-            wall: Instant::now() + wall,
+            wall: now + wall,
+            given: now + timeout,
             wait,
             expired: false,
         }
@@ -76,8 +81,9 @@ impl Deadline {
         r
     }
 
+    /// What is left of the wall-clock timeout as given (not the backstop).
     fn remaining(&self) -> Duration {
-        self.wall.saturating_duration_since(Instant::now())
+        self.given.saturating_duration_since(Instant::now())
     }
 }
 
