@@ -7,7 +7,7 @@ mod common;
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
 use common::{gridscada, Client};
@@ -163,18 +163,7 @@ fn a_login_survives_a_serve_restart_postgres() {
         return;
     };
     let name = format!("gs_sessions_{}_{}", std::process::id(), rand_suffix());
-    let psql = |sql: &str| {
-        let out = Command::new("psql")
-            .arg(&base)
-            .args(["-q", "-v", "ON_ERROR_STOP=1", "-c", sql])
-            .output()
-            .expect("psql");
-        assert!(
-            out.status.success(),
-            "{sql}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-    };
+    let psql = |sql: &str| common::pair::psql(&base, sql);
     psql(&format!("CREATE DATABASE {name}"));
     let (root, _) = base.rsplit_once('/').expect("URL with a database");
     let result =

@@ -9,6 +9,7 @@
 use std::sync::Arc;
 use std::time::Duration;
 
+use gridscada_tagdb::Timestamp;
 use tokio_modbus::ExceptionCode;
 
 use crate::microgrid::Microgrid;
@@ -203,13 +204,21 @@ impl SimHandle {
         set: impl FnOnce(&mut Microgrid, Profile),
     ) -> Result<(), Error> {
         profile.check().map_err(Error::BadValue)?;
+        self.with_microgrid(|mg, _| set(mg, profile))
+    }
+
+    /// Runs `f` on the plant's microgrid at the plant's time.
+    fn with_microgrid<R>(
+        &self,
+        f: impl FnOnce(&mut Microgrid, Timestamp) -> R,
+    ) -> Result<R, Error> {
         self.shared.with_plant(|p| {
+            let now = p.now();
             let mg = p
                 .microgrid
                 .as_mut()
                 .ok_or_else(|| Error::NotFound("the plant has no microgrid".into()))?;
-            set(mg, profile);
-            Ok(())
+            Ok(f(mg, now))
         })
     }
 
@@ -218,15 +227,7 @@ impl SimHandle {
     /// inputs every step and must not call this: it would move them a step
     /// earlier than the scenarios' expectations were measured with.
     pub fn sample_inputs_now(&self) -> Result<(), Error> {
-        self.shared.with_plant(|p| {
-            let now = p.now();
-            let mg = p
-                .microgrid
-                .as_mut()
-                .ok_or_else(|| Error::NotFound("the plant has no microgrid".into()))?;
-            mg.sample_environment(now);
-            Ok(())
-        })
+        self.with_microgrid(|mg, now| mg.sample_environment(now))
     }
 
     /// Trips a unit (id such as `pv1` or prefix such as `MG.PV1`): State 2

@@ -61,10 +61,12 @@ impl Drop for Database {
     }
 }
 
-pub fn psql(url: &str, sql: &str) {
+/// Runs `sql` by psql with `flag` (`-q` or `-At`); fails the test on an
+/// error. Returns psql's output.
+fn run_psql(url: &str, flag: &str, sql: &str) -> String {
     let out = Command::new("psql")
         .arg(url)
-        .args(["-q", "-v", "ON_ERROR_STOP=1", "-c", sql])
+        .args([flag, "-v", "ON_ERROR_STOP=1", "-c", sql])
         .output()
         .expect("psql");
     assert!(
@@ -72,21 +74,16 @@ pub fn psql(url: &str, sql: &str) {
         "{sql}: {}",
         String::from_utf8_lossy(&out.stderr)
     );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+pub fn psql(url: &str, sql: &str) {
+    run_psql(url, "-q", sql);
 }
 
 /// One column of a query's rows, by psql.
 pub fn rows(url: &str, sql: &str) -> Vec<String> {
-    let out = Command::new("psql")
-        .arg(url)
-        .args(["-At", "-v", "ON_ERROR_STOP=1", "-c", sql])
-        .output()
-        .expect("psql");
-    assert!(
-        out.status.success(),
-        "{sql}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout)
+    run_psql(url, "-At", sql)
         .lines()
         .map(str::to_string)
         .collect()
