@@ -43,7 +43,9 @@ pid=$!
 # Waits up to 30 s for /healthz to carry $1.
 wait_health() {
     for _ in $(seq 1 150); do
-        curl -sS "$base/healthz" 2>/dev/null | grep -q "$1" && return 0
+        # Read the whole answer first: under pipefail, grep -q leaving at its
+        # first match fails curl's write (exit 23) and so the pipeline.
+        grep -q "$1" <<<"$(curl -sS "$base/healthz" 2>/dev/null)" && return 0
         kill -0 "$pid" 2>/dev/null || return 1
         sleep 0.2
     done
@@ -170,7 +172,7 @@ if wait_health "\"not_good\":\[\"$device\"\]"; then
 else
     bad "/healthz never named $device down: $(curl -sS "$base/healthz")"
 fi
-if curl -sS "$base/metrics" | grep -qx "gridscada_device_connected{device=\"$device\"} 0.0"; then
+if grep -qx "gridscada_device_connected{device=\"$device\"} 0.0" <<<"$(curl -sS "$base/metrics")"; then
     ok "/metrics: $device not connected"
 else
     bad "/metrics does not show $device down"

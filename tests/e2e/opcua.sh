@@ -50,7 +50,7 @@ phase() {
     pid=$!
     local up=""
     for _ in $(seq 1 150); do
-        if [ -s "$dir/data/credentials.txt" ] && curl -fsS "http://127.0.0.1:$http/healthz" 2>/dev/null | grep -q '"status":"ok"'; then
+        if [ -s "$dir/data/credentials.txt" ] && grep -q '"status":"ok"' <<<"$(curl -fsS "http://127.0.0.1:$http/healthz" 2>/dev/null)"; then
             up=1
             break
         fi
