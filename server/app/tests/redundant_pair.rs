@@ -4,12 +4,15 @@
 //!
 //! - kill -9 of the active server in the middle of fault-isolation
 //!   sequences on both panels, at random points, many times: the standby
-//!   takes over within the bound, and each panel ends isolated or locked
-//!   out (which an operator resets);
+//!   takes over within the bound and finishes each interrupted sequence:
+//!   the panel ends isolated on the right zone with every healthy zone on,
+//!   without an operator's reset (issue 35);
 //! - SIGSTOP of the active server longer than its lease, then SIGCONT: it
 //!   finds itself deposed and sends nothing;
 //! - its database connection cut through a relay the test controls: it
-//!   steps down before its lease expires and the standby takes over;
+//!   steps down before its lease expires and the standby takes over; an
+//!   operator's HMI on it keeps answering at once, and its `/api/pair`
+//!   says standby;
 //! - a command sent to the standby is refused, naming the active server;
 //!   one login works on both (sessions are in the store).
 //!
@@ -58,6 +61,9 @@ struct Relay {
     port: u16,
     up: Arc<AtomicBool>,
     open: Arc<Mutex<Vec<TcpStream>>>,
+    /// Connections accepted while cut, held unanswered (a database host
+    /// gone quiet: a pool would wait its whole acquire timeout).
+    held: Arc<Mutex<Vec<TcpStream>>>,
 }
 
 impl Relay {
@@ -66,12 +72,13 @@ impl Relay {
         let port = listener.local_addr().unwrap().port();
         let up = Arc::new(AtomicBool::new(true));
         let open: Arc<Mutex<Vec<TcpStream>>> = Arc::default();
-        let (u, o) = (up.clone(), open.clone());
+        let held: Arc<Mutex<Vec<TcpStream>>> = Arc::default();
+        let (u, o, h) = (up.clone(), open.clone(), held.clone());
         std::thread::spawn(move || {
             for client in listener.incoming() {
                 let Ok(client) = client else { continue };
                 if !u.load(Ordering::SeqCst) {
-                    drop(client);
+                    h.lock().unwrap().push(client);
                     continue;
                 }
                 let Ok(server) = TcpStream::connect(&upstream) else {
@@ -93,10 +100,15 @@ impl Relay {
                 }
             }
         });
-        Relay { port, up, open }
+        Relay {
+            port,
+            up,
+            open,
+            held,
+        }
     }
 
-    /// Refuses new connections and severs the open ones.
+    /// Severs the open connections; new ones are accepted, never answered.
     fn cut(&self) {
         self.up.store(false, Ordering::SeqCst);
         for s in self.open.lock().unwrap().drain(..) {
@@ -106,6 +118,9 @@ impl Relay {
 
     fn restore(&self) {
         self.up.store(true, Ordering::SeqCst);
+        for s in self.held.lock().unwrap().drain(..) {
+            let _ = s.shutdown(Shutdown::Both);
+        }
     }
 }
 
@@ -138,47 +153,6 @@ fn logged_at(log: &Path, what: &str) -> Vec<f64> {
         })
         .filter_map(|v| rfc3339(v["timestamp"].as_str()?))
         .collect()
-}
-
-/// Waits until `panel` on the server at `c` has finished with its fault:
-/// isolated (faulty zones known, not running) or locked out.
-fn settled(c: &mut Client, panel: &str, limit: Duration) -> Value {
-    wait_for(&format!("{panel} to isolate or lock out"), limit, || {
-        let (s, p) = c
-            .try_request("GET", &format!("/api/panels/{panel}"), None)
-            .ok()?;
-        (s == 200
-            && (p["lockout"] == true
-                || (p["step"] == "isolated" && !p["faulty_zones"].as_array()?.is_empty())))
-        .then_some(p)
-    })
-}
-
-/// Repairs the zones, resets the panels on the active server and waits
-/// until they are idle again.
-fn recover(c: &mut Client, sim: &mut Sim, faults: &[(&str, u64)]) {
-    for (panel, zone) in faults {
-        sim.cmd(&format!("repair {panel} {zone}"));
-    }
-    for (panel, _) in faults {
-        wait_for(&format!("{panel} reset"), Duration::from_secs(30), || {
-            let (s, _) = c
-                .try_request(
-                    "POST",
-                    &format!("/api/panels/{panel}/reset"),
-                    Some(json!({})),
-                )
-                .ok()?;
-            if s != 200 {
-                return None;
-            }
-            let (_, p) = c
-                .try_request("GET", &format!("/api/panels/{panel}"), None)
-                .ok()?;
-            (p["step"] == "idle" && p["lockout"] == false && p["faulty_zones"] == json!([]))
-                .then_some(())
-        });
-    }
 }
 
 #[test]
@@ -329,13 +303,24 @@ fn the_pair_keeps_isolating_faults_through_kills_freezes_and_a_cut_database() {
             } else {
                 format!("isolated {}", p["faulty_zones"])
             };
-            if p["lockout"] != true {
-                let zone = faults.iter().find(|f| f.0 == panel).unwrap().1;
-                assert_eq!(
-                    p["faulty_zones"],
-                    json!([zone]),
-                    "round {round}: {panel} isolated the wrong zone: {p}"
-                );
+            // The new active server finished the sequence: no lockout, the
+            // right zone isolated, every healthy zone back on, no reset.
+            assert_ne!(p["lockout"], true, "round {round}: {panel} locked out: {p}");
+            let zone = faults.iter().find(|f| f.0 == panel).unwrap().1;
+            assert_eq!(
+                p["faulty_zones"],
+                json!([zone]),
+                "round {round}: {panel} isolated the wrong zone: {p}"
+            );
+            let healthy_on = healthy_zones_on(
+                &mut op,
+                panel,
+                zone,
+                &format!("round {round}"),
+                Duration::from_secs(10),
+            );
+            if let Some(how) = healthy_on["resumed"].as_str() {
+                println!("round {round}: {panel}: {how}");
             }
             *outcomes.entry(format!("{panel} {outcome}")).or_default() += 1;
             // The standby (the restarted server) shows what the active
@@ -409,18 +394,45 @@ fn the_pair_keeps_isolating_faults_through_kills_freezes_and_a_cut_database() {
         servers[1].start();
         std::thread::sleep(Duration::from_secs(1));
     }
+    // An operator's HMI on a, logged in before the cut.
+    let mut hmi = Client::new(&servers[0].addr());
+    hmi.cookie = op_a.cookie.clone();
+    assert_eq!(hmi.get_ok("/api/pair")["role"], "active");
     let cut_at = wall();
     relay.cut();
     let cut = Instant::now();
-    while servers[1].active() != Some(true) {
+    // Through the cut, the HMI's requests answer at once (its session is
+    // not held waiting for the database), and a's own /api/pair stops
+    // saying "active" when a steps down, not a hung request later.
+    let mut a_says_standby: Option<Duration> = None;
+    while servers[1].active() != Some(true) || a_says_standby.is_none() {
         assert!(
             cut.elapsed() < Duration::from_secs(15),
-            "b did not take over from the cut-off a"
+            "b did not take over from the cut-off a, or a's /api/pair kept saying active"
         );
+        let asked = Instant::now();
+        let pair = hmi.get_ok("/api/pair");
+        let answered = asked.elapsed();
+        assert!(
+            answered < Duration::from_millis(1_500),
+            "a's /api/pair with a session cookie took {answered:?} in the cut"
+        );
+        if pair["role"] == "standby" && a_says_standby.is_none() {
+            a_says_standby = Some(cut.elapsed());
+        }
         std::thread::sleep(Duration::from_millis(25));
     }
     let took = cut.elapsed();
     assert_eq!(servers[0].active(), Some(false), "a stepped down");
+    let asked = Instant::now();
+    let (status, _) = hmi.get("/healthz");
+    assert_eq!(status, 503, "a's /healthz in the cut");
+    assert!(
+        asked.elapsed() < Duration::from_millis(2_500),
+        "a's /healthz with a session cookie took {:?} in the cut",
+        asked.elapsed()
+    );
+    println!("after the cut: a said standby at {a_says_standby:?}, b active at {took:?}");
     assert!(
         took <= TAKEOVER_BOUND,
         "takeover after the cut took {took:?}"

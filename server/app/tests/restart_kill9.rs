@@ -373,7 +373,7 @@ fn a_panels_faulty_zones_and_mode_survive_kill_9() {
             .any(|e| e["message"]
                 .as_str()
                 .unwrap_or("")
-                .contains("state restored after a server restart")),
+                .contains("state restored after a restart")),
         "no restore event"
     );
     // Reset (the restarted simulator's zone 2 is healthy): cleared, and

@@ -13,7 +13,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use serde_json::{json, Value};
 
-use super::{gridscada, Client};
+use super::{gridscada, wait_for, Client};
 
 pub const PASSWORD: &str = "a-long-enough-password";
 
@@ -427,4 +427,74 @@ pub fn assert_fenced(writes: &[FieldWrite]) -> usize {
         newest = w.epoch;
     }
     owner.len()
+}
+
+/// Waits until `panel` on the server at `c` has finished with its fault:
+/// isolated (faulty zones known, not running) or locked out.
+pub fn settled(c: &mut Client, panel: &str, limit: Duration) -> Value {
+    wait_for(&format!("{panel} to isolate or lock out"), limit, || {
+        let (s, p) = c
+            .try_request("GET", &format!("/api/panels/{panel}"), None)
+            .ok()?;
+        (s == 200
+            && (p["lockout"] == true
+                || (p["step"] == "isolated" && !p["faulty_zones"].as_array()?.is_empty())))
+        .then_some(p)
+    })
+}
+
+/// Repairs the zones, resets the panels on the active server and waits
+/// until they are idle again.
+pub fn recover(c: &mut Client, sim: &mut Sim, faults: &[(&str, u64)]) {
+    for (panel, zone) in faults {
+        sim.cmd(&format!("repair {panel} {zone}"));
+    }
+    for (panel, _) in faults {
+        wait_for(&format!("{panel} reset"), Duration::from_secs(30), || {
+            let (s, _) = c
+                .try_request(
+                    "POST",
+                    &format!("/api/panels/{panel}/reset"),
+                    Some(json!({})),
+                )
+                .ok()?;
+            if s != 200 {
+                return None;
+            }
+            let (_, p) = c
+                .try_request("GET", &format!("/api/panels/{panel}"), None)
+                .ok()?;
+            (p["step"] == "idle" && p["lockout"] == false && p["faulty_zones"] == json!([]))
+                .then_some(())
+        });
+    }
+}
+
+/// Waits until `panel` reads its ELCB, its MCCB and every zone but
+/// `faulty` closed (and `faulty` open), all Good; its status then. `what`
+/// names the run in the failure.
+pub fn healthy_zones_on(
+    c: &mut Client,
+    panel: &str,
+    faulty: u64,
+    what: &str,
+    limit: Duration,
+) -> Value {
+    wait_for(
+        &format!("{what}: {panel}'s healthy zones on"),
+        limit,
+        || {
+            let (s, q) = c
+                .try_request("GET", &format!("/api/panels/{panel}"), None)
+                .ok()?;
+            let b = &q["breakers"];
+            let on = |name: &str| b[name]["closed"] == true && b[name]["good"] == true;
+            let zones = q["zones"].as_u64()?;
+            (s == 200
+                && on("elcb")
+                && on("mccb")
+                && (1..=zones).all(|z| on(&format!("zone{z}")) == (z != faulty)))
+            .then_some(q)
+        },
+    )
 }

@@ -22,7 +22,7 @@ use tokio::sync::{mpsc, oneshot, watch};
 
 use super::machine::{
     Breaker, CommandError, Input, Metrics, Mode, OperatorCommand, Output, Reading, Retained,
-    Sequence, Settings, Snapshot, Timer,
+    Sequence, Settings, Snapshot, Takeover, Timer,
 };
 
 /// An operator command for one panel, with the user for the audit trail.
@@ -93,6 +93,9 @@ pub struct PanelStatus {
     /// Every signal of the panel has Good quality.
     pub comm_ok: bool,
     pub last_sequence: Metrics,
+    /// How the last sequence was resumed after a restart or a failover (at
+    /// which step, what was tested again); `null` if it was not.
+    pub resumed: Option<String>,
     /// What must survive a restart; the application saves it when it changes
     /// and hands it back to [`run_panel`] on the next start.
     #[serde(skip)]
@@ -128,6 +131,7 @@ impl PanelStatus {
             lockout: false,
             comm_ok: false,
             last_sequence: seq.metrics().clone(),
+            resumed: None,
             retained: seq.retained(),
         }
     }
@@ -224,9 +228,11 @@ impl Ids {
 /// communication failure. After a failed write the rest of that batch of
 /// commands is dropped: the machine decides again with the failure in hand.
 ///
-/// `retained` is what the previous run of the server left for this panel
-/// (`PanelStatus::retained`): with it the sequence takes over the mode, the
-/// faulty zones and the lockout ([`Sequence::restore`]).
+/// `retained` is what the previous run of the server (or the other server
+/// of a pair) left for this panel (`PanelStatus::retained`), with how it
+/// came here: with it the sequence takes over the mode, the faulty zones and
+/// the lockout, and finishes a sequence that was interrupted
+/// ([`Sequence::restore`]).
 #[allow(clippy::too_many_arguments)]
 pub async fn run_panel(
     panel: PanelConfig,
@@ -236,7 +242,7 @@ pub async fn run_panel(
     mut commands: mpsc::Receiver<PanelCommand>,
     status: watch::Sender<PanelStatus>,
     notices: mpsc::Sender<PanelNotice>,
-    retained: Option<Retained>,
+    retained: Option<(Retained, Takeover)>,
 ) -> Result<(), DriverError> {
     let ids = Ids::resolve(&db, &panel)?;
     let mut sub = db.subscribe(&ids.watched());
@@ -244,7 +250,7 @@ pub async fn run_panel(
     let t0 = clock.now();
     let mut restored = Vec::new();
     let seq = match &retained {
-        Some(r) => Sequence::restore(settings, r, &mut restored),
+        Some((r, how)) => Sequence::restore(settings, r, *how, &mut restored),
         None => Sequence::new(settings),
     };
     let mut d = Driver {
@@ -593,6 +599,7 @@ impl Driver {
             lockout: seq.lockout(),
             comm_ok: seq.comm_good(),
             last_sequence: seq.metrics().clone(),
+            resumed: seq.resumed().map(str::to_string),
             retained: seq.retained(),
             ..self.base.clone()
         };

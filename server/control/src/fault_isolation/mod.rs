@@ -28,5 +28,6 @@ pub use driver::{
 };
 pub use machine::{
     priority, Breaker, CommandError, Input, Metrics, Mode, OperatorCommand, Outcome, Output,
-    PanelState, Reading, Retained, Sequence, Settings, Snapshot, Step, Timer, ELCB_TRIP_ALARM,
+    PanelState, Progress, Reading, Retained, Sequence, Settings, Snapshot, Step, Takeover, Timer,
+    ELCB_TRIP_ALARM,
 };

@@ -91,6 +91,7 @@ impl Sequence {
         if self.dwell_due {
             // The settle dwell ran from the batch's last close command and
             // has run out already.
+            self.clear_doubts_of_energised();
             self.batch.clear();
             return false;
         }
@@ -208,6 +209,23 @@ impl Sequence {
                 ),
                 out,
             );
+        }
+    }
+
+    /// A dwell ran out with the ELCB holding: every load energised now has
+    /// been on for a full dwell without a trip, so it was healthy then, and
+    /// (faults being permanent) also when an earlier trip of this sequence
+    /// was pinned on another load while it was energised. It no longer casts
+    /// doubt on that blame (see "Revisiting a blame").
+    pub(super) fn clear_doubts_of_energised(&mut self) {
+        let Some(k) = self.known.as_ref().filter(|k| k.elcb && k.mccb) else {
+            return;
+        };
+        let held: Vec<u8> = (0..=self.settings.zones)
+            .filter(|l| k.closed(Breaker::load(*l)))
+            .collect();
+        for energised in self.marks.values_mut() {
+            energised.retain(|l| !held.contains(l));
         }
     }
 

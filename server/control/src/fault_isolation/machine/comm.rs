@@ -30,12 +30,17 @@ impl Sequence {
     }
 
     pub(super) fn resume(&mut self, state: PanelState, now_s: f64, out: &mut Vec<Output>) {
+        let takeover = self.takeover.take();
         let Some(from) = self.suspended_from.take() else {
             self.known = Some(state);
             self.set_rest_step("communication restored", out);
             return;
         };
         self.clear("comm", out);
+        if let Some(how) = takeover {
+            self.take_over(how, from, state, now_s, out);
+            return;
+        }
         if let Some(why) = self.unexplained_change(&state) {
             self.known = Some(state);
             self.lock_out(&format!("{why} while communication was lost"), out);

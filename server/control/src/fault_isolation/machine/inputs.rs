@@ -87,6 +87,7 @@ impl Sequence {
             (Timer::Dwell, Step::OlucDwell | Step::OldcDwell) if self.settling => {
                 // The batch held for a full dwell: carry on where the walk is.
                 self.settling = false;
+                self.clear_doubts_of_energised();
                 self.batch.clear();
                 self.continue_pass(now_s, out);
             }

@@ -89,7 +89,12 @@
 //! proven loads trips), every blame it may have caused is withdrawn: the
 //! load's faulty mark and alarm are cleared (event `blame_withdrawn`) and it
 //! is switched on again, with a full dwell, in the next pass. A load's blame
-//! is withdrawn at most once per sequence.
+//! is withdrawn at most once per sequence. Only where the evidence is
+//! ambiguous: a load held energised for a full dwell without a trip after
+//! the blame (re-closed while the blamed load was open) was healthy then,
+//! hence also at the blamed trip (faults are permanent), and no longer casts
+//! doubt on it; its own fault, found later, arose after that trip, and the
+//! blamed load is not switched back onto its fault.
 //!
 //! A trip read only after a **communication loss** (the ELCB found open on
 //! resume) came at an unknown moment, with unknown loads energised: it is
@@ -162,8 +167,44 @@
 //!   mode (so it also comes when automatic mode was chosen while the panel
 //!   was unreadable, or a breaker was opened by hand, and goes when the
 //!   loads read closed again), and it stays standing across a restart
-//!   (`Retained::loads_off`). A sequence interrupted by a restart locks out
-//!   instead (its standing `lockout` alarm).
+//!   (`Retained::loads_off`). A sequence interrupted by a restart or a
+//!   failover is finished by the server taking over (next section).
+//!
+//! ## Taking over a sequence
+//! The server that takes over (the same one after a restart, the other one
+//! of a pair after a failover) finishes an interrupted sequence from the
+//! retained state (mode, faulty loads, lockout, and the sequence's
+//! [`Progress`]: the step, the loads proven healthy, the trip count, the
+//! blames) and the panel as read now. Nothing is switched before a read
+//! with every signal Good (as after a communication loss; the sequence waits
+//! at `suspended`). Then, with event `resumed` ("sequence resumed after a
+//! restart|failover at step X: what was tested again") shown on the panel
+//! screen (`PanelStatus::resumed`):
+//! - a known-faulty load read on with the ELCB closed is contradictory (no
+//!   step does it): lockout, saying so;
+//! - interrupted while opening, waiting to reclose or resetting the ELCB:
+//!   every breaker is opened again, the reclose delay and the reset run
+//!   again in full;
+//! - interrupted in OLUC/OLDC with the ELCB read open: a trip while no
+//!   server watched, pinned on no load (event `takeover_trip`, counted
+//!   against the trip limit), as after a communication loss;
+//! - with the ELCB closed: proven loads found on stay on. One load on but
+//!   not proven, where the walk leaves it (every load the walk closes before
+//!   it is on), is tested again with a full dwell, then the walk goes on.
+//!   No unproven load on: the proven ones owe one settle dwell (when they
+//!   were closed is not known), then the walk goes on from load 0, skipping
+//!   what is on. Anything else (several unproven loads on, zones on with the
+//!   MCCB open): everything is opened and the walk starts again, proven
+//!   loads re-closed together, the others with a full dwell.
+//!
+//! The trip count goes on from the saved one, so the trip limit counts the
+//! trips before the interruption. The retained state is saved on every change
+//! (`PanelStatus::retained`); a save that had not landed when the server was
+//! lost leaves a state one step behind the panel, which the rules above
+//! handle the same way (the exhaustive test takes over at every step, with
+//! the last save landed and lagging). The restore time of a resumed sequence
+//! counts from the takeover. A sequence saved without its progress (an older
+//! version) locks out, as before.
 //!
 //! ## Asynchronous status inputs
 //! Over real I/O the panel's signals sit on different modules, each scanned on
@@ -195,7 +236,7 @@
 //! loads: `attribution.rs`; the communication loss rule: `comm.rs`;
 //! asynchronous status inputs: `confirm.rs`; operator commands:
 //! `operator.rs`; alarms and events: `alarms.rs`; what survives a restart:
-//! `retained.rs`.
+//! `retained.rs`; taking over an interrupted sequence: `takeover.rs`.
 
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -209,6 +250,7 @@ mod operator;
 mod retained;
 mod step;
 mod steps;
+mod takeover;
 
 pub use gridscada_config::PanelMode as Mode;
 
@@ -217,7 +259,7 @@ pub use io::{
     Breaker, CommandError, Input, OperatorCommand, Output, PanelState, Reading, Settings, Snapshot,
     Timer,
 };
-pub use retained::Retained;
+pub use retained::{Progress, Retained, Takeover};
 pub use step::{Metrics, Outcome, Step};
 
 use confirm::CommandLog;
@@ -291,6 +333,11 @@ pub struct Sequence {
     found_new: bool,
     /// Whether every healthy load has been on since the last trip.
     restored: bool,
+    /// The sequence was taken over from a previous run (a restart or a
+    /// failover): it finishes on the first good read of the panel.
+    takeover: Option<Takeover>,
+    /// How this sequence was resumed after a takeover, for the panel screen.
+    resumed: Option<String>,
     started_s: f64,
     metrics: Metrics,
 }
@@ -344,6 +391,8 @@ impl Sequence {
             cause: Cause::Trip,
             found_new: false,
             restored: false,
+            takeover: None,
+            resumed: None,
             started_s: 0.0,
             metrics,
         }
@@ -389,6 +438,11 @@ impl Sequence {
     }
     pub fn comm_good(&self) -> bool {
         self.comm_good
+    }
+    /// How the last sequence was resumed after a restart or a failover (at
+    /// which step, what was tested again), if it was.
+    pub fn resumed(&self) -> Option<&str> {
+        self.resumed.as_deref()
     }
 
     /// Feeds a plant input. `now_s` (plant seconds, any monotonic origin)

@@ -44,6 +44,26 @@ impl Step {
         }
     }
 
+    /// The step named `name` (as [`Step::name`] gives it).
+    pub fn from_name(name: &str) -> Option<Step> {
+        [
+            Step::Idle,
+            Step::Tripped,
+            Step::RecloseWait,
+            Step::ElcbReset,
+            Step::Oluc,
+            Step::OlucDwell,
+            Step::Oldc,
+            Step::OldcDwell,
+            Step::Isolated,
+            Step::Lockout,
+            Step::Suspended,
+            Step::Manual,
+        ]
+        .into_iter()
+        .find(|s| s.name() == name)
+    }
+
     /// Whether an automatic sequence is in progress.
     pub fn is_running(self) -> bool {
         matches!(

@@ -19,6 +19,8 @@ impl Sequence {
         self.clear(LOADS_OFF_ALARM, out);
         self.found_new = false;
         self.restored = false;
+        self.takeover = None;
+        self.resumed = None;
         self.started_s = now_s;
         self.metrics = Metrics {
             restore_s: None,
@@ -316,12 +318,14 @@ impl Sequence {
     /// A dwell ran out after load `count_c` was confirmed closed: it is
     /// proven; OLUC goes on.
     pub(super) fn oluc_dwell_done(&mut self, now_s: f64, out: &mut Vec<Output>) {
+        self.clear_doubts_of_energised();
         self.proven.insert(self.count_c);
         self.count_c = self.count_c.saturating_add(1);
         self.oluc_next(now_s, out);
     }
 
     pub(super) fn oldc_dwell_done(&mut self, now_s: f64, out: &mut Vec<Output>) {
+        self.clear_doubts_of_energised();
         self.proven.insert(self.oldc);
         self.oldc = self.oldc.saturating_sub(1);
         self.oldc_next(now_s, out);
