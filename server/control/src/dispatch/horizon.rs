@@ -92,6 +92,7 @@ mod model;
 #[cfg(test)]
 mod tests;
 mod validate;
+pub(crate) use validate::periods_within_limit;
 
 /// Longest horizon accepted (keeps untrusted input from exhausting memory).
 pub const MAX_PERIODS: usize = 10_000;

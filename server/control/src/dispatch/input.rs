@@ -44,7 +44,8 @@ impl InputError {
 
     /// Adds the line and column of the path, found in `text`.
     pub(crate) fn locate_in(mut self, text: &str) -> Self {
-        if self.line.is_none() {
+        // The whole document has no place worth naming.
+        if self.line.is_none() && !self.path.is_empty() {
             if let Some((l, c)) = locate(text, &self.path) {
                 self.line = Some(l);
                 self.column = Some(c);
@@ -91,30 +92,51 @@ impl Problems {
         }
     }
 
+    /// The first [`MAX_REPORTED`] problems, and how many more there are.
     pub(crate) fn finish(self) -> Result<(), InputError> {
+        let total = self.0.len();
         let mut it = self.0.into_iter();
         match it.next() {
             None => Ok(()),
             Some(mut first) => {
-                first.more = it.collect();
+                first.more = it.take(MAX_REPORTED - 1).collect();
+                if total > MAX_REPORTED {
+                    first.more.push(InputError::new(
+                        "",
+                        format!(
+                            "{} more problems not shown (at most {MAX_REPORTED} are reported)",
+                            total - MAX_REPORTED
+                        ),
+                    ));
+                }
                 Err(first)
             }
         }
     }
 }
 
+/// Most problems reported at once: each is located by a scan of the text,
+/// so 10,000 bad periods would take minutes, and a screenful is enough to
+/// start fixing.
+pub(crate) const MAX_REPORTED: usize = 20;
+
 impl std::error::Error for InputError {}
 
 /// Parses JSON text, turning a syntax error into a located [`InputError`].
 /// JSON has no NaN or infinity, so those are syntax errors here.
 pub(crate) fn parse(text: &str) -> Result<Value, InputError> {
-    serde_json::from_str(text).map_err(|e| InputError {
+    serde_json::from_str(text).map_err(|e| syntax_error(&e))
+}
+
+/// A JSON syntax error, at its line and column.
+pub(crate) fn syntax_error(e: &serde_json::Error) -> InputError {
+    InputError {
         path: String::new(),
         message: format!("invalid JSON: {e}"),
         line: Some(e.line()),
         column: Some(e.column()),
         more: Vec::new(),
-    })
+    }
 }
 
 pub(crate) fn join(path: &str, key: &str) -> String {

@@ -5,7 +5,8 @@
 //! dispatch period ([`single`]), the multi-period look-ahead LP/QP
 //! ([`horizon`]), both solved in-process with clarabel ([`lp`]); the live
 //! loop's receding horizon with its forecasts ([`lookahead`]); reading them
-//! from untrusted JSON with located errors ([`input`]); the rule-based
+//! from untrusted JSON with located errors ([`input`]), counted first
+//! against its limits ([`size`]); the rule-based
 //! fallback dispatch and the diesel commitment rule ([`rules`]); and the live
 //! driver that reads the tag database, solves, and writes setpoints ([`driver`]).
 //!
@@ -22,6 +23,7 @@ mod lp;
 mod mip;
 pub mod rules;
 pub mod single;
+mod size;
 pub mod tags;
 
 use serde::ser::{Serialize, SerializeMap, Serializer};
@@ -39,6 +41,7 @@ pub use rules::{
     commit_diesels, fallback_dispatch, CommitmentDecision, DieselState, FallbackDispatch,
 };
 pub use single::{DispatchProblem, DispatchSolution, OilUnit, RenewableUnit, StorageUnit};
+pub use size::{too_large, MAX_INPUT_BYTES};
 
 /// Setpoints (or any per-unit value) in unit order; serialises as a JSON
 /// object `{"pv1": 60.0, ...}` keeping that order.
@@ -144,6 +147,10 @@ pub struct CliOutput {
 ///   ones as `{"status": "malformed", "error": ...}`; the exit code is the
 ///   highest of the individual codes.
 pub fn solve_text(text: &str) -> CliOutput {
+    // Counted first: an oversized problem is never read into memory.
+    if let Err(e) = size::within_limits(text) {
+        return malformed(e);
+    }
     let doc = match input::parse(text) {
         Ok(v) => v,
         Err(e) => return malformed(e),
@@ -344,6 +351,98 @@ mod tests {
             out.stderr.contains("2100 on/off decisions; at most 2016"),
             "{}",
             out.stderr
+        );
+    }
+
+    #[test]
+    fn limits_are_counted_in_the_text_before_it_is_read() {
+        let periods = vec![r#"{"demand_kw": 1.0}"#; horizon::MAX_PERIODS + 1];
+        let text = format!(
+            r#"{{"dt_h": 0.25, "voll_per_kwh": 5.0, "periods": [{}]}}"#,
+            periods.join(",")
+        );
+        let out = solve_text(&text);
+        assert_eq!(out.exit_code, 1);
+        assert!(
+            out.stderr.starts_with(
+                "error: periods: 10001 periods; at most 10000 are accepted (line 1, column 48)"
+            ),
+            "{}",
+            out.stderr
+        );
+
+        // A forecast map names units: no more entries than a problem has units.
+        let forecast: Vec<String> = (0..=single::MAX_UNITS)
+            .map(|i| format!(r#""pv{i}": 1.0"#))
+            .collect();
+        let text = format!(
+            r#"{{"dt_h": 0.25, "voll_per_kwh": 5.0,
+ "periods": [{{"demand_kw": 1.0}}, {{"demand_kw": 1.0, "available_kw": {{{}}}}}]}}"#,
+            forecast.join(", ")
+        );
+        let out = solve_text(&text);
+        assert_eq!(out.exit_code, 1);
+        assert!(
+            out.stderr.contains(
+                "periods[1].available_kw: 1001 entries; at most 1000 (one per unit) are \
+                 accepted (line 2, column 69)"
+            ),
+            "{}",
+            out.stderr
+        );
+
+        // One oversized problem refuses its whole batch, naming it.
+        let units: Vec<String> = (0..=single::MAX_UNITS)
+            .map(|i| format!(r#"{{"id": "dg{i}", "running": false, "min_kw": 0.0, "max_kw": 1.0, "cost_per_kwh": 0.3}}"#))
+            .collect();
+        let big = format!(
+            r#"{{"dt_h": 0.25, "demand_kw": 10.0, "voll_per_kwh": 5.0, "oil": [{}]}}"#,
+            units.join(",")
+        );
+        let out = solve_text(&format!("[{EXAMPLE},\n{big}]"));
+        assert_eq!(out.exit_code, 1);
+        assert!(out.stdout.is_empty());
+        assert!(
+            out.stderr.starts_with("error: [1]: 1001 units; at most 1000 (PV, wind, oil and storage together) are accepted (line 6, column 1)"),
+            "{}",
+            out.stderr
+        );
+
+        // The text's size first, before any of it is scanned.
+        let out = solve_text(&" ".repeat(MAX_INPUT_BYTES + 1));
+        assert_eq!(
+            out.stderr,
+            "error: the input is 16777217 bytes; at most 16777216 bytes (16 MiB) are accepted\n"
+        );
+        // Syntax errors are still located, wherever the scan meets them.
+        let out = solve_text(&format!("[{EXAMPLE}, {{\"dt_h\": NaN}}]"));
+        assert_eq!(out.exit_code, 1);
+        assert!(
+            out.stderr
+                .starts_with("error: invalid JSON: expected value at line 5")
+                && out.stderr.contains("(line 5, column"),
+            "{}",
+            out.stderr
+        );
+    }
+
+    #[test]
+    fn many_problems_are_reported_up_to_a_screenful() {
+        let periods = vec![r#"{"demand_kw": -1.0, "available_kw": {"pv1": 1.0}}"#; 2_000];
+        let text = format!(
+            r#"{{"dt_h": 0.25, "voll_per_kwh": 5.0, "periods": [{}],
+ "pv": [{{"id": "pv1", "cost_per_kwh": 0.0}}]}}"#,
+            periods.join(",")
+        );
+        let out = solve_text(&text);
+        assert_eq!(out.exit_code, 1);
+        let lines: Vec<&str> = out.stderr.lines().collect();
+        assert_eq!(lines.len(), 21, "{}", out.stderr);
+        assert!(lines[0].starts_with("error: periods[0].demand_kw: -1 is negative (line 1, column"));
+        assert!(lines[19].starts_with("error: periods[19].demand_kw: -1 is negative"));
+        assert_eq!(
+            lines[20],
+            "error: 1980 more problems not shown (at most 20 are reported)"
         );
     }
 

@@ -22,6 +22,17 @@ pub const MAX_COMMITMENT_BINARIES: usize = 2_016;
 /// Most relaxations a problem may ask the commitment search for.
 pub const MAX_COMMITMENT_NODES: usize = 200_000;
 
+/// At most [`MAX_PERIODS`] periods.
+pub(crate) fn periods_within_limit(path: String, periods: usize) -> Result<(), InputError> {
+    if periods > MAX_PERIODS {
+        return Err(bad(
+            path,
+            format!("{periods} periods; at most {MAX_PERIODS} are accepted"),
+        ));
+    }
+    Ok(())
+}
+
 fn opt_nonneg(o: &mut Obj<'_>, key: &'static str) -> Result<f64, InputError> {
     Ok(o.opt_num(key)?.unwrap_or(0.0))
 }
@@ -199,15 +210,7 @@ impl HorizonProblem {
         let dt_h = o.num("dt_h")?;
         let voll_per_kwh = o.num("voll_per_kwh")?;
         let (ppath, items) = o.list("periods", false)?;
-        if items.len() > MAX_PERIODS {
-            return Err(bad(
-                ppath,
-                format!(
-                    "{} periods; at most {MAX_PERIODS} are accepted",
-                    items.len()
-                ),
-            ));
-        }
+        periods_within_limit(ppath.clone(), items.len())?;
         let periods = items
             .iter()
             .enumerate()
@@ -268,12 +271,7 @@ impl HorizonProblem {
         if self.periods.is_empty() {
             pr.check(Err(bad(at("periods"), "needs at least one period")));
         }
-        if self.periods.len() > MAX_PERIODS {
-            pr.check(Err(bad(
-                at("periods"),
-                format!("more than {MAX_PERIODS} periods"),
-            )));
-        }
+        pr.check(periods_within_limit(at("periods"), self.periods.len()));
         let units = self.pv.len() + self.wind.len() + self.oil.len() + self.storage.len();
         pr.check(units_within_limit(prefix.to_string(), units));
         let decided = self.oil.iter().filter(|o| o.optimize_commitment).count();
