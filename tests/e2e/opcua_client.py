@@ -12,8 +12,9 @@ Basic256Sha256 Sign and SignAndEncrypt work, and /metrics counts it all.
 
 PHASE "write" (tests/plants/three-panels, no dispatch loop writing
 setpoints): a setpoint written over OPC UA is confirmed by the device
-(/api/tags, the event log), a user without write rights (a guest made
-through the API) is refused.
+(/api/tags, the event log), an out-of-limits write is refused and on
+record as refused, a user without write rights (a guest made through the
+API) and an operator whose group's screens do not show the tag are refused.
 
 Prints "ok ..." / "FAIL ..." lines, then "N passed, M failed".
 """
@@ -463,6 +464,14 @@ async def phase_write(base, url, creds, tmp):
             check(f"{sp} = 1e6 (beyond its limits) is refused (BadOutOfRange)", e.code == ua.StatusCodes.BadOutOfRange, str(e))
         check(f"{sp} still {new} after the refused write", api.tags()[sp]["value"] == new)
     events = api.events(sp)
+    # Refused by the server before the device, so on record as refused
+    # (issue 36 #11), not as a failed write.
+    check(
+        "the out-of-limits write is on record as write_refused via OPC UA, not write_failed",
+        any(e["kind"] == "write_refused" and "via OPC UA" in e["message"] and "engineering limits" in e["message"] for e in events)
+        and not any(e["kind"] == "write_failed" for e in events),
+        [(e["kind"], e["message"]) for e in events[:4]],
+    )
     kinds = [(e["kind"], e["user"]) for e in events]
     check(
         "the event log has the request and the confirmed write, by the operator, via OPC UA",
@@ -496,6 +505,26 @@ async def phase_write(base, url, creds, tmp):
     check(f"{sp} unchanged by the guest", api.tags()[sp]["value"] == new)
     ev = [e for e in api.events(sp) if e["kind"] == "write_refused" and e["user"] == "opcua-guest"]
     check("the guest's refused write is in the event log", bool(ev), api.events(sp)[:3])
+
+    # Write access follows the areas of read access (issue 36 #5): an
+    # operator whose group's screens do not show the setpoint may not write
+    # it over OPC UA either.
+    status, _, body = api.call(
+        "POST", "/api/users", {"name": "opcua-west", "role": "operator", "group": "west", "password": "west-password-1"}
+    )
+    check("an operator of group west is made through the API", status in (200, 201), (status, body))
+    status, _, body = api.call("PUT", "/api/groups/west/screens", {"screens": ["alarms"]})
+    check("group west may open the alarms only", status == 200, (status, body))
+    async with client(url, "opcua-west", "west-password-1") as c:
+        ns = await c.get_namespace_index(NS_URI)
+        try:
+            await c.get_node(ua.NodeId(sp, ns)).write_value(ua.DataValue(ua.Variant(new + 2, ua.VariantType.Float)))
+            check(f"an operator outside the area of {sp} is refused", False, "Good")
+        except ua.UaStatusCodeError as e:
+            check(f"an operator outside the area of {sp} is refused (BadUserAccessDenied)", e.code == ua.StatusCodes.BadUserAccessDenied, str(e))
+    check(f"{sp} unchanged by the operator outside its area", api.tags()[sp]["value"] == new)
+    ev = [e for e in api.events(sp) if e["kind"] == "write_refused" and e["user"] == "opcua-west"]
+    check("the refusal is on record with its reason (the area)", ev and "area" in ev[0]["message"], api.events(sp)[:3])
 
     # A read-only tag cannot be written by anyone.
     ro = next(n for n, t in tags.items() if not t["writable"] and t["kind"] == "float")

@@ -12,8 +12,10 @@
 //! check), so an OPC UA write is checked and recorded exactly like an HMI
 //! write.
 
+mod gate;
 mod model;
 mod nodes;
+pub mod pki;
 mod users;
 
 use std::net::SocketAddr;
@@ -40,13 +42,27 @@ pub struct Metrics {
     pub reads: AtomicU64,
     /// Writes the device confirmed.
     pub writes: AtomicU64,
-    /// Writes refused (rights, read-only, bad value) or failed at the device.
+    /// Writes refused before the device (rights, area, read-only, bad
+    /// value, engineering limits, a standby server).
     pub writes_refused: AtomicU64,
+    /// Writes the device or the link failed (or did not confirm in time).
+    pub writes_failed: AtomicU64,
     /// Username logins refused.
     pub logins_refused: AtomicU64,
     /// Tag changes handed to monitored items.
     pub notifications: AtomicU64,
+    /// TCP connections open on the OPC UA port now.
+    pub connections: AtomicU64,
+    /// Connections closed at once: the global or the client's cap was
+    /// reached.
+    pub connections_refused: AtomicU64,
+    /// Accepts that failed (out of descriptors, typically).
+    pub accept_errors: AtomicU64,
 }
+
+/// How long a new connection has to say Hello, and then to open its secure
+/// channel, before it is closed (async-opcua's `hello_timeout`).
+pub const HELLO_TIMEOUT_S: u32 = 5;
 
 /// The running OPC UA server.
 pub struct OpcUaServer {
@@ -56,6 +72,7 @@ pub struct OpcUaServer {
     endpoint: String,
     task: tokio::task::JoinHandle<()>,
     feed: tokio::task::JoinHandle<()>,
+    gate: tokio::task::JoinHandle<()>,
 }
 
 impl OpcUaServer {
@@ -107,6 +124,7 @@ impl OpcUaServer {
             .certificate_path("own/cert.der")
             .private_key_path("private/private.pem")
             .trust_client_certs(cfg.trust_all_clients)
+            .hello_timeout(HELLO_TIMEOUT_S)
             .host(host.clone())
             .port(addr.port())
             .discovery_urls(vec!["/".to_string()])
@@ -152,11 +170,42 @@ impl OpcUaServer {
             .cloned()
             .ok_or("[opcua]: the tag node manager was not built")?;
         let endpoint = format!("opc.tcp://{host}:{}/", addr.port());
+        // async-opcua serves on a loopback port of its own; the gate relays
+        // what it admits from the public one (gate.rs).
+        let inner = tokio::net::TcpListener::bind((std::net::Ipv4Addr::LOCALHOST, 0))
+            .await
+            .map_err(|e| format!("[opcua]: cannot bind the server's loopback port: {e}"))?;
+        let inner_addr = inner.local_addr().map_err(|e| e.to_string())?;
         let task = tokio::spawn(async move {
-            if let Err(e) = server.run_with(listener).await {
+            if let Err(e) = server.run_with(inner).await {
                 tracing::error!(error = %e, "the OPC UA server stopped");
             }
         });
+        // `run_with` records the port it listens on, which the endpoints'
+        // URLs would then name: give them the public port back before the
+        // first client comes.
+        let info = handle.info().clone();
+        let announced = tokio::time::timeout(std::time::Duration::from_secs(10), async {
+            while info.port.load(Ordering::Relaxed) != inner_addr.port() {
+                tokio::time::sleep(std::time::Duration::from_millis(5)).await;
+            }
+            info.port.store(addr.port(), Ordering::Relaxed);
+        })
+        .await;
+        if announced.is_err() {
+            handle.cancel();
+            return Err("[opcua]: the OPC UA server did not start listening".into());
+        }
+        let gate = tokio::spawn(gate::run(
+            listener,
+            inner_addr,
+            gate::Limits {
+                max_connections: *cfg.max_connections.get_ref() as usize,
+                max_per_client: cfg.per_client_cap() as usize,
+            },
+            metrics.clone(),
+            pki::RejectedSweep::new(&pki),
+        ));
         let feed = tokio::spawn(nodes::feed(space, handle.subscriptions().clone()));
         tracing::info!(%addr, %endpoint, "OPC UA server listening");
         Ok(OpcUaServer {
@@ -166,6 +215,7 @@ impl OpcUaServer {
             endpoint,
             task,
             feed,
+            gate,
         })
     }
 
@@ -189,6 +239,7 @@ impl OpcUaServer {
 
     /// Stops accepting sessions and ends the server.
     pub async fn shutdown(self) {
+        self.gate.abort();
         self.handle.cancel();
         self.feed.abort();
         let _ = tokio::time::timeout(std::time::Duration::from_secs(5), self.task).await;
@@ -240,7 +291,23 @@ impl Figures {
             ),
         );
         let m = &self.metrics;
+        out.gauge(
+            "gridscada_opcua_connections",
+            "TCP connections open on the OPC UA port now.",
+            &[],
+            m.connections.load(Ordering::Relaxed) as f64,
+        );
         for (name, help, v) in [
+            (
+                "gridscada_opcua_connections_refused_total",
+                "OPC UA connections closed at once: the global or the client address's cap of open connections was reached.",
+                &m.connections_refused,
+            ),
+            (
+                "gridscada_opcua_accept_errors_total",
+                "Failed accepts on the OPC UA port (out of descriptors, typically); each one pauses accepting.",
+                &m.accept_errors,
+            ),
             (
                 "gridscada_opcua_reads_total",
                 "Tag values read over OPC UA.",
@@ -253,8 +320,13 @@ impl Figures {
             ),
             (
                 "gridscada_opcua_writes_refused_total",
-                "OPC UA writes refused (rights, read-only tag, bad value) or failed at the device.",
+                "OPC UA writes refused before the device (rights, area, read-only tag, bad value, engineering limits, standby).",
                 &m.writes_refused,
+            ),
+            (
+                "gridscada_opcua_writes_failed_total",
+                "OPC UA writes the device or the link failed, or did not confirm in time.",
+                &m.writes_failed,
             ),
             (
                 "gridscada_opcua_logins_refused_total",

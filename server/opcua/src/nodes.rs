@@ -310,15 +310,15 @@ impl InMemoryNodeManagerImpl for TagNodes {
         let who = self.space.users.principal(context.user_token()).await;
         for w in nodes_to_write.iter_mut() {
             let exists = address_space.read().find(&w.value().node_id).is_some();
-            let status = self.write_one(&who, w.value(), exists).await;
-            if status.is_good() {
-                self.space.metrics.writes.fetch_add(1, Ordering::Relaxed);
+            let (status, failed) = self.write_one(&who, w.value(), exists).await;
+            let counter = if status.is_good() {
+                &self.space.metrics.writes
+            } else if failed {
+                &self.space.metrics.writes_failed
             } else {
-                self.space
-                    .metrics
-                    .writes_refused
-                    .fetch_add(1, Ordering::Relaxed);
-            }
+                &self.space.metrics.writes_refused
+            };
+            counter.fetch_add(1, Ordering::Relaxed);
             w.set_status(status);
         }
         Ok(())
@@ -326,25 +326,40 @@ impl InMemoryNodeManagerImpl for TagNodes {
 }
 
 impl TagNodes {
+    /// The status of one write, and whether the device or the link failed it
+    /// (rather than the server refusing it before the device).
     async fn write_one(
         &self,
         who: &Result<gridscada_web::auth::Principal, StatusCode>,
         w: &opcua::server::node_manager::ParsedWriteValue,
         exists: bool,
-    ) -> StatusCode {
+    ) -> (StatusCode, bool) {
+        match self.write_status(who, w, exists).await {
+            Ok(status) => (status, false),
+            Err(failed) => (failed, true),
+        }
+    }
+
+    /// Ok: Good or a refusal; Err: what the device or the link failed with.
+    async fn write_status(
+        &self,
+        who: &Result<gridscada_web::auth::Principal, StatusCode>,
+        w: &opcua::server::node_manager::ParsedWriteValue,
+        exists: bool,
+    ) -> Result<StatusCode, StatusCode> {
         let Some(&id) = self.space.by_node.get(&w.node_id) else {
             // A folder or a property: nothing there may be written.
-            return if exists {
+            return Ok(if exists {
                 StatusCode::BadNotWritable
             } else {
                 StatusCode::BadNodeIdUnknown
-            };
+            });
         };
         if w.attribute_id != AttributeId::Value {
-            return StatusCode::BadNotWritable;
+            return Ok(StatusCode::BadNotWritable);
         }
         if w.index_range != NumericRange::None {
-            return StatusCode::BadWriteNotSupported;
+            return Ok(StatusCode::BadWriteNotSupported);
         }
         // The device stamps the value and its quality, not the client (a
         // Good status, which many clients send, says nothing).
@@ -352,20 +367,20 @@ impl TagNodes {
             || w.value.source_timestamp.is_some()
             || w.value.server_timestamp.is_some()
         {
-            return StatusCode::BadWriteNotSupported;
+            return Ok(StatusCode::BadWriteNotSupported);
         }
         let Some(value) = w.value.value.as_ref().and_then(value_of) else {
-            return StatusCode::BadTypeMismatch;
+            return Ok(StatusCode::BadTypeMismatch);
         };
         let who = match who {
             Ok(p) => p,
-            Err(status) => return *status,
+            Err(status) => return Ok(*status),
         };
         let Some(meta) = self.space.db.meta(id) else {
-            return StatusCode::BadNodeIdUnknown;
+            return Ok(StatusCode::BadNodeIdUnknown);
         };
         let name = meta.name.clone();
-        match write_tag(&self.space.web, who, &name, value, "OPC UA").await {
+        let refused = match write_tag(&self.space.web, who, &name, value, "OPC UA").await {
             Ok(_) => StatusCode::Good,
             Err(WriteRefused::UnknownTag(_)) => StatusCode::BadNodeIdUnknown,
             Err(WriteRefused::Forbidden(_)) if self.space.web.write_role(&name).is_none() => {
@@ -376,19 +391,24 @@ impl TagNodes {
             Err(WriteRefused::NoFieldIo | WriteRefused::Unaudited(_)) => {
                 StatusCode::BadResourceUnavailable
             }
-            Err(WriteRefused::Failed(e)) => match e {
+            Err(WriteRefused::Failed(e)) if e.is_refusal() => match e {
                 WriteError::UnknownTag(_) => StatusCode::BadNodeIdUnknown,
                 WriteError::ReadOnly(_) => StatusCode::BadNotWritable,
-                WriteError::BadValue { .. } => StatusCode::BadTypeMismatch,
                 WriteError::OutOfLimits { .. } => StatusCode::BadOutOfRange,
-                WriteError::Device { .. } | WriteError::Mismatch { .. } => {
-                    StatusCode::BadDeviceFailure
-                }
-                WriteError::Timeout(_) => StatusCode::BadTimeout,
-                WriteError::Closed => StatusCode::BadResourceUnavailable,
                 // A standby of a redundant pair commands nothing.
                 WriteError::NotActive(_) => StatusCode::BadServerNotConnected,
+                WriteError::BadValue { .. } => StatusCode::BadTypeMismatch,
+                // No other error is a refusal (WriteError::is_refusal).
+                _ => StatusCode::BadDeviceFailure,
             },
-        }
+            Err(WriteRefused::Failed(e)) => {
+                return Err(match e {
+                    WriteError::Timeout(_) => StatusCode::BadTimeout,
+                    WriteError::Closed => StatusCode::BadResourceUnavailable,
+                    _ => StatusCode::BadDeviceFailure,
+                })
+            }
+        };
+        Ok(refused)
     }
 }

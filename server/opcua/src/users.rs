@@ -3,8 +3,9 @@
 //! Argon2, a failed attempt on record); anonymous sessions exist only if the
 //! configuration allows them, as the read-only guest. A user reads the tags
 //! the HMI would show them (the screens of their group, docs/ACCESS.md, as of
-//! the login); write rights are looked up again at each write, so a blocked
-//! or demoted user loses them without reconnecting.
+//! the login); write rights (role and area) are looked up again at each
+//! write, so a blocked or demoted user, or a group given fewer screens, loses
+//! them without reconnecting.
 
 use std::net::{IpAddr, Ipv6Addr};
 use std::sync::atomic::Ordering;
@@ -37,13 +38,21 @@ const POLICY_ID_ANONYMOUS: &str = "anonymous";
 /// this one (the per-user limit still holds for each name).
 const OPCUA_PEER: IpAddr = IpAddr::V6(Ipv6Addr::UNSPECIFIED);
 
+/// A user's rights as of their login: role, group and the tags they read.
+#[derive(Clone)]
+struct LoginRights {
+    role: Role,
+    group: String,
+    reads: Arc<Readable>,
+}
+
 pub(crate) struct Users {
     pub web: WebState,
     pub anonymous: bool,
     pub metrics: Arc<Metrics>,
     /// Each logged-in user's role at login, for the access level a browse
     /// shows (writes look the user up again).
-    roles: parking_lot::Mutex<std::collections::HashMap<String, (Role, Arc<Readable>)>>,
+    roles: parking_lot::Mutex<std::collections::HashMap<String, LoginRights>>,
     /// What anonymous sessions read: a guest's default screens.
     anonymous_reads: Arc<Readable>,
 }
@@ -79,11 +88,13 @@ impl Users {
             return Ok(Principal::anonymous());
         }
         match self.web.store.user(&token.0).await {
+            // The screens as of now: a write's area is checked against them
+            // (gridscada_web::command::write_tag), as the HMI's is.
             Ok(Some(u)) if !u.blocked => Ok(Principal {
+                screens: self.web.screens_of(&u.group, u.role).await,
                 user: Some(u.name),
                 role: u.role,
                 group: Some(u.group),
-                screens: vec![],
             }),
             Ok(_) => Err(StatusCode::BadUserAccessDenied),
             Err(e) => {
@@ -155,9 +166,14 @@ impl AuthManager for Users {
         };
         // The tags the HMI would let this user read, as of this login.
         let reads = Arc::new(self.web.readable(&who));
-        self.roles
-            .lock()
-            .insert(user.name.clone(), (user.role, reads));
+        self.roles.lock().insert(
+            user.name.clone(),
+            LoginRights {
+                role: user.role,
+                group: user.group.clone(),
+                reads,
+            },
+        );
         gridscada_web::api::audit(
             &self.web,
             &who,
@@ -185,18 +201,28 @@ impl AuthManager for Users {
         if self.web.db.id(tag).is_none() {
             return level;
         }
-        let (role, reads) = if token.is_anonymous() {
-            (Role::Guest, self.anonymous_reads.clone())
+        let guest = |reads| LoginRights {
+            role: Role::Guest,
+            group: String::new(),
+            reads,
+        };
+        let LoginRights { role, group, reads } = if token.is_anonymous() {
+            guest(self.anonymous_reads.clone())
         } else {
-            match self.roles.lock().get(&token.0) {
-                Some((role, reads)) => (*role, reads.clone()),
-                None => (Role::Guest, Arc::new(Readable::default())),
-            }
+            self.roles
+                .lock()
+                .get(&token.0)
+                .cloned()
+                .unwrap_or_else(|| guest(Arc::new(Readable::default())))
         };
         let mut level = level;
         if !reads.may_read(tag) {
-            // As in the HMI: a tag outside the caller's screens is not read.
-            level -= AccessLevel::CURRENT_READ | AccessLevel::CURRENT_WRITE;
+            // As in the HMI: a tag outside the caller's screens is not read,
+            // nor written unless the configuration grants their group it.
+            level -= AccessLevel::CURRENT_READ;
+            if !self.web.plant.server.grants_write(&group, tag) {
+                level -= AccessLevel::CURRENT_WRITE;
+            }
         }
         if tag == id
             && level.contains(AccessLevel::CURRENT_WRITE)

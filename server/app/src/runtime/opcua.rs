@@ -31,6 +31,11 @@ pub fn demo_config(port: u16) -> OpcUaConfig {
         pki_dir: Spanned::new(0..0, "opcua-pki".into()),
         create_certificate: true,
         trust_all_clients: true,
+        max_connections: Spanned::new(0..0, gridscada_config::DEFAULT_OPCUA_MAX_CONNECTIONS),
+        max_connections_per_client: Spanned::new(
+            0..0,
+            gridscada_config::DEFAULT_OPCUA_MAX_CONNECTIONS_PER_CLIENT,
+        ),
     }
 }
 

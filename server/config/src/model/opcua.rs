@@ -34,10 +34,41 @@ pub struct OpcUaConfig {
     #[serde(default = "yes")]
     pub create_certificate: bool,
     /// Trust every client certificate on first sight. Off: a new client's
-    /// certificate lands in `PKI/rejected/certs` until an operator moves it
-    /// to `PKI/trusted/certs`. For commissioning only.
+    /// certificate lands in `PKI/rejected/` until an operator trusts it
+    /// (`gridscada opcua trust`, or a move to `PKI/trusted/`). For
+    /// commissioning only.
     #[serde(default)]
     pub trust_all_clients: bool,
+    /// Open connections on the OPC UA port at most; more are closed at
+    /// once. Each one holds descriptors while it lasts.
+    #[serde(default = "default_max_connections")]
+    pub max_connections: Spanned<u32>,
+    /// Open connections from one client address at most (a gateway or a
+    /// NAT may need more).
+    #[serde(default = "default_max_connections_per_client")]
+    pub max_connections_per_client: Spanned<u32>,
+}
+
+/// `[opcua] max_connections`' default: three times async-opcua's 20
+/// sessions, for clients that discover endpoints on a connection of
+/// their own.
+pub const DEFAULT_OPCUA_MAX_CONNECTIONS: u32 = 64;
+/// `[opcua] max_connections_per_client`'s default.
+pub const DEFAULT_OPCUA_MAX_CONNECTIONS_PER_CLIENT: u32 = 8;
+
+impl OpcUaConfig {
+    /// The per-client cap in effect: never above the global one.
+    pub fn per_client_cap(&self) -> u32 {
+        (*self.max_connections_per_client.get_ref()).min(*self.max_connections.get_ref())
+    }
+}
+
+fn default_max_connections() -> Spanned<u32> {
+    Spanned::new(0..0, DEFAULT_OPCUA_MAX_CONNECTIONS)
+}
+
+fn default_max_connections_per_client() -> Spanned<u32> {
+    Spanned::new(0..0, DEFAULT_OPCUA_MAX_CONNECTIONS_PER_CLIENT)
 }
 
 /// One endpoint's security policy and message security mode.

@@ -1,5 +1,5 @@
 //! `[opcua]`: the listen address, the announced host name, the endpoints
-//! offered and the certificate store's folder.
+//! offered, the certificate store's folder and the caps on connections.
 
 use std::collections::HashSet;
 use std::net::SocketAddr;
@@ -72,6 +72,30 @@ pub(super) fn check_opcua(cx: &mut Ctx<'_>, main: &MainFile, ua: &OpcUaConfig) {
             0,
             ua.pki_dir.span(),
             "[opcua] pki_dir: must name a folder (relative to the data folder)",
+        );
+    }
+    let max = &ua.max_connections;
+    let per = &ua.max_connections_per_client;
+    if !(1..=10_000).contains(max.get_ref()) {
+        cx.err(
+            0,
+            max.span(),
+            format!(
+                "[opcua] max_connections: {} is out of range; 1 to 10000 open connections",
+                max.get_ref()
+            ),
+        );
+    } else if *per.get_ref() == 0 || (per.get_ref() > max.get_ref() && !per.span().is_empty()) {
+        // The default per-client cap is lowered to a smaller max_connections
+        // (`OpcUaConfig::per_client_cap`); only a written one is wrong.
+        cx.err(
+            0,
+            per.span(),
+            format!(
+                "[opcua] max_connections_per_client: {} must be 1 to max_connections ({})",
+                per.get_ref(),
+                max.get_ref()
+            ),
         );
     }
 }
