@@ -82,6 +82,8 @@ class Host:
         self.history = {}  # tag name -> list of (ts, value, quality, historical)
         self.seq_errors = []
         self.last_seq = None
+        # DDATA of a session whose birth went out before this host subscribed.
+        self.before_first_birth = 0
         self.bd_seq = None
         self.ndeaths = []
         self.client = mqtt.Client(client_id="sparkplug-test-host", clean_session=True)
@@ -135,7 +137,14 @@ class Host:
             elif kind == "DDATA":
                 aliases = self.births.get(device)
                 if aliases is None:
-                    self.seq_errors.append(f"DDATA for {device} before its DBIRTH")
+                    # Before the first NBIRTH seen, the edge's session was
+                    # born before this host subscribed (it then asks for a
+                    # rebirth): its data cannot be read yet, and is no fault
+                    # of the edge's. After one, data before its birth is.
+                    if self.last_seq is not None:
+                        self.seq_errors.append(f"DDATA for {device} before its DBIRTH")
+                    else:
+                        self.before_first_birth += 1
                     return
                 for m in p.metrics:
                     if m.name:

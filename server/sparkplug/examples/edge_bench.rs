@@ -12,29 +12,12 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use gridscada_sparkplug::edge::{EdgeContext, EdgeNode};
-use gridscada_store::NewEvent;
-use gridscada_tagdb::{
-    Quality, Sample, SystemClock, TagDb, TagMeta, TagWriter, Timestamp, ValueKind, WriteError,
-    WriteFuture,
-};
+#[path = "../tests/common/mod.rs"]
+mod common;
 
-/// Commands are not part of this bench: every write is refused.
-struct NoWrites;
-impl TagWriter for NoWrites {
-    fn write<'a>(&'a self, _name: &'a str, _value: gridscada_tagdb::Value) -> WriteFuture<'a> {
-        Box::pin(async { Err(WriteError::Closed) })
-    }
-}
-struct NoAudit;
-impl gridscada_store::command::CommandAudit for NoAudit {
-    fn durable(
-        &self,
-        _event: NewEvent,
-    ) -> std::pin::Pin<Box<dyn std::future::Future<Output = Result<(), String>> + Send + '_>> {
-        Box::pin(async { Ok(()) })
-    }
-}
+use common::{NoAudit, NoWrites};
+use gridscada_sparkplug::edge::{EdgeContext, EdgeNode};
+use gridscada_tagdb::{Quality, Sample, SystemClock, TagDb, TagMeta, Timestamp, ValueKind};
 
 fn proc_figures() -> (f64, u64) {
     let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();

@@ -4,18 +4,15 @@
 //! they trust another. Skipped (with a note) where mosquitto is not
 //! installed; `scripts/test-all.sh` installs it.
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use std::path::Path;
 use std::time::Duration;
+
+use common::{free_port, mosquitto, Broker};
 
 use gridscada_sparkplug::connection;
 use rumqttc::{AsyncClient, ConnectionError, Event, Packet};
-
-fn mosquitto() -> Option<PathBuf> {
-    ["/usr/sbin/mosquitto", "/usr/bin/mosquitto"]
-        .into_iter()
-        .map(PathBuf::from)
-        .find(|p| p.exists())
-}
 
 /// A CA, and a certificate for localhost signed by it: (CA PEM, cert PEM, key PEM).
 fn ca_and_server() -> (String, String, String) {
@@ -30,14 +27,6 @@ fn ca_and_server() -> (String, String, String) {
     let key = rcgen::KeyPair::generate().unwrap();
     let cert = params.signed_by(&key, &ca, &ca_key).unwrap();
     (ca.pem(), cert.pem(), key.serialize_pem())
-}
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
 }
 
 fn plant(dir: &Path, port: u16, ca_file: &str) -> gridscada_config::Plant {
@@ -92,19 +81,7 @@ async fn mqtts_connects_trusting_the_ca_file_and_not_otherwise() {
         ),
     )
     .unwrap();
-    let mut broker = std::process::Command::new(bin)
-        .arg("-c")
-        .arg(&conf)
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
-    for _ in 0..100 {
-        if std::net::TcpStream::connect(("127.0.0.1", port)).is_ok() {
-            break;
-        }
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
+    let broker = Broker::start(&bin, &conf, port).await;
 
     let trusted = plant(dir.path(), port, "ca.pem");
     let opts = connection::options(trusted.mqtt.as_ref().unwrap(), "tls-test", dir.path()).unwrap();
@@ -115,8 +92,7 @@ async fn mqtts_connects_trusting_the_ca_file_and_not_otherwise() {
         connection::options(untrusted.mqtt.as_ref().unwrap(), "tls-test-2", dir.path()).unwrap();
     let refused = first_outcome(opts).await;
 
-    let _ = broker.kill();
-    let _ = broker.wait();
+    drop(broker);
     assert!(ok.is_ok(), "trusting the broker's CA: {ok:?}");
     match refused {
         Err(ConnectionError::Tls(e)) => {

@@ -16,11 +16,12 @@ pub const DEMO_GROUP: &str = "gridscada";
 /// The edge node id of `demo --mqtt` unless `--mqtt-node` names another.
 pub const DEMO_NODE: &str = "demo";
 
-/// `demo --mqtt URL [--mqtt-node ID]`.
+/// `demo --mqtt URL [--mqtt-node ID] [--mqtt-primary-host ID]`.
 #[derive(Debug, Clone)]
 pub struct DemoMqtt {
     pub broker: String,
     pub node: String,
+    pub primary_host: Option<String>,
 }
 
 /// Turns on the edge node for the demo: the default group, the given node
@@ -33,6 +34,13 @@ pub fn enable_demo(plant: &mut Plant, demo: &DemoMqtt) -> anyhow::Result<()> {
             "--mqtt-node '{}' must not be empty nor contain '/', '+' or '#'",
             demo.node
         );
+    }
+    if let Some(id) = demo
+        .primary_host
+        .as_deref()
+        .filter(|id| !gridscada_sparkplug::topic::valid_id(id))
+    {
+        anyhow::bail!("--mqtt-primary-host '{id}' must not be empty nor contain '/', '+' or '#'");
     }
     // What validation checks for a configured [mqtt.edge]: every device is a
     // Sparkplug device, named by a topic level, and none takes the name of
@@ -64,6 +72,7 @@ pub fn enable_demo(plant: &mut Plant, demo: &DemoMqtt) -> anyhow::Result<()> {
             buffer_samples: Spanned::new(0..0, gridscada_config::DEFAULT_MQTT_BUFFER_SAMPLES),
             commands: vec![s("*")],
             command_role: Spanned::new(0..0, Role::Operator),
+            primary_host_id: demo.primary_host.as_deref().map(s),
         }),
         host: None,
     });

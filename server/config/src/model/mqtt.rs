@@ -88,6 +88,12 @@ pub struct MqttEdgeConfig {
     /// it is refused.
     #[serde(default = "default_command_role")]
     pub command_role: Spanned<Role>,
+    /// The host application id of the primary host (Sparkplug 3.0): the
+    /// edge births only while its retained `spBv1.0/STATE/ID` says online,
+    /// and keeps samples in the buffer while it is offline. None: the edge
+    /// births as soon as it has a broker session.
+    #[serde(default)]
+    pub primary_host_id: Option<Spanned<String>>,
 }
 
 pub const DEFAULT_MQTT_BATCH_MS: u64 = 100;

@@ -3,9 +3,7 @@
 
 use std::collections::HashMap;
 
-use crate::model::{
-    pattern_matches, DeviceConfig, MqttConfig, MqttEdgeConfig, TagConfig, DERIVED_DEVICE,
-};
+use crate::model::{DeviceConfig, MqttConfig, MqttEdgeConfig, TagConfig, DERIVED_DEVICE};
 
 use super::Ctx;
 
@@ -118,6 +116,18 @@ fn check_edge(
             ),
         );
     }
+    if let Some(id) = &edge.primary_host_id {
+        if !topic_level(id.get_ref()) {
+            cx.err(
+                0,
+                id.span(),
+                format!(
+                    "[mqtt.edge] primary_host_id: '{}' must be a topic level: not empty, without '/', '+' or '#'",
+                    id.get_ref()
+                ),
+            );
+        }
+    }
     // Every device is a Sparkplug device: its name is a topic level.
     let mut sorted: Vec<_> = devices.iter().collect();
     sorted.sort_by_key(|(name, _)| **name);
@@ -159,42 +169,7 @@ fn check_edge(
             "[mqtt.edge] buffer_samples: at most 100000000",
         );
     }
-    for pattern in &edge.commands {
-        let p = pattern.get_ref();
-        if p.is_empty() || p.strip_suffix('*').is_some_and(|s| s.contains('*')) {
-            cx.err(
-                0,
-                pattern.span(),
-                format!("[mqtt.edge] commands: '{p}' must be a tag name or a prefix ending in '*'"),
-            );
-            continue;
-        }
-        let writable = |t: &TagConfig| *t.writable.get_ref();
-        let matched: Vec<&TagConfig> = tags
-            .iter()
-            .filter(|(name, _)| pattern_matches(p, name))
-            .map(|(_, (_, t))| *t)
-            .collect();
-        if matched.is_empty() {
-            cx.err(
-                0,
-                pattern.span(),
-                format!("[mqtt.edge] commands: '{p}' names no tag of the tag files"),
-            );
-        } else if !p.ends_with('*') && !matched.iter().copied().any(writable) {
-            cx.err(
-                0,
-                pattern.span(),
-                format!("[mqtt.edge] commands: tag '{p}' is not writable"),
-            );
-        } else if !matched.iter().copied().any(writable) {
-            cx.err(
-                0,
-                pattern.span(),
-                format!("[mqtt.edge] commands: '{p}' matches no writable tag"),
-            );
-        }
-    }
+    super::check_write_patterns(cx, "[mqtt.edge] commands", &edge.commands, tags, false);
 }
 
 #[cfg(test)]

@@ -7,15 +7,22 @@
 //! device's communication fails, and DBIRTH again when it recovers. NCMD
 //! `Node Control/Rebirth` births everything again. DCMD writes go through
 //! the shared audited write ([`gridscada_store::command::audited_write`]),
-//! for the tags `[mqtt.edge] commands` names only. While the broker is
+//! with the node's rights: its area (the tags `[mqtt.edge] commands` names)
+//! and its role (`command_role`). While the broker is
 //! unreachable, samples go to the on-disk [`buffer`] and are sent as
 //! historical data after the next birth.
+//!
+//! With `primary_host_id`, the edge follows that host's `STATE`
+//! ([`primary`]): it births only once the host is online, buffers while it
+//! is not, and on the host's offline STATE sends its NDEATH, disconnects and
+//! buffers until the host is back (Sparkplug 3.0).
 //!
 //! It is one more subscriber of the tag database: it never blocks the
 //! poller (a subscriber that falls behind gets a snapshot).
 
 pub mod buffer;
 pub mod model;
+pub mod primary;
 mod session;
 
 use std::collections::VecDeque;
@@ -25,7 +32,9 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use gridscada_config::{MqttConfig, MqttEdgeConfig, Plant};
-use gridscada_store::command::{audit_refused, audited_write, CommandAudit, Commander};
+use gridscada_store::command::{
+    audit_refused, audited_write, CommandAudit, CommandError, Commander,
+};
 use gridscada_store::NewEvent;
 use gridscada_tagdb::{Clock, Sample, TagDb, TagId, TagWriter, Update};
 use prost::Message;
@@ -37,6 +46,7 @@ use crate::proto::{Metric, MetricValue, Payload};
 use crate::topic::{MessageType, Topic};
 use buffer::SampleBuffer;
 use model::{EdgeModel, Seq};
+use primary::{PrimaryHost, Verdict};
 
 /// At most this many metrics go in one DDATA (a large device's changes
 /// are split), so that no message grows past what brokers take by default.
@@ -70,6 +80,9 @@ pub struct EdgeMetrics {
     pub commands_refused: AtomicU64,
     /// Messages that could not be read: not Sparkplug, oversized, unknown.
     pub malformed: AtomicU64,
+    /// With `primary_host_id`: 1 while that host's STATE says online and
+    /// the edge has a session (it births and publishes), else 0.
+    pub primary_host_online: AtomicU64,
 }
 
 impl EdgeMetrics {
@@ -152,6 +165,10 @@ impl EdgeNode {
         ));
         let model = EdgeModel::new(&ctx.plant, &ctx.db, &edge);
         let keep_alive = Duration::from_secs(*mqtt.keep_alive_s.get_ref());
+        let primary = edge
+            .primary_host_id
+            .as_ref()
+            .map(|id| PrimaryHost::new(id.get_ref()));
         let state = Edge {
             deadband: model::Deadband::new(ctx.db.len(), *edge.deadband.get_ref()),
             born: vec![false; model.devices.len()],
@@ -173,6 +190,7 @@ impl EdgeNode {
             sessions: 0,
             session_stop,
             refused_in_message: 0,
+            primary,
         };
         let task = tokio::spawn(state.run(session_rx, stop_rx));
         Ok(EdgeNode {
@@ -199,6 +217,23 @@ impl EdgeNode {
 struct Session {
     client: AsyncClient,
     bd_seq: u64,
+    /// Its NBIRTH went out (with a primary host, only once it is online):
+    /// until then, samples go to the buffer.
+    born: bool,
+}
+
+impl Session {
+    /// An orderly end (the will is not sent on DISCONNECT): NDEATH, then
+    /// DISCONNECT, as Sparkplug asks of an edge that leaves on purpose.
+    async fn end(&self, group: &str, node: &str) {
+        let topic = Topic::node(group, MessageType::NDeath, node).to_string();
+        let death = model::ndeath(self.bd_seq).encode_to_vec();
+        let _ = self
+            .client
+            .publish(topic, QoS::AtLeastOnce, false, death)
+            .await;
+        let _ = self.client.disconnect().await;
+    }
 }
 
 struct Edge {
@@ -228,6 +263,8 @@ struct Edge {
     session_stop: watch::Sender<bool>,
     /// Refusals of the DCMD being handled.
     refused_in_message: usize,
+    /// The primary host whose STATE gates births, if configured.
+    primary: Option<PrimaryHost>,
 }
 
 /// What a recent window of sent data may hold at most (metrics).
@@ -261,18 +298,7 @@ impl Edge {
         }
         self.flush().await;
         if let Some(s) = self.session.take() {
-            // An orderly stop: the will is not sent on DISCONNECT, so say it.
-            let topic = Topic::node(&self.group, MessageType::NDeath, &self.node).to_string();
-            let _ = s
-                .client
-                .publish(
-                    topic,
-                    QoS::AtLeastOnce,
-                    false,
-                    model::ndeath(s.bd_seq).encode_to_vec(),
-                )
-                .await;
-            let _ = s.client.disconnect().await;
+            s.end(&self.group, &self.node).await;
             // Let the session task send them before it stops.
             tokio::time::sleep(Duration::from_millis(200)).await;
         }
@@ -307,33 +333,115 @@ impl Edge {
             "{}/+",
             Topic::node(&self.group, MessageType::DCmd, &self.node)
         );
-        for t in [ncmd, dcmd] {
+        // With a primary host, its STATE too (retained: it comes at once).
+        let state = self.primary.as_mut().map(|p| {
+            p.new_session();
+            p.topic().to_owned()
+        });
+        for t in [ncmd, dcmd].into_iter().chain(state) {
             if let Err(e) = client.subscribe(t, QoS::AtLeastOnce).await {
-                tracing::warn!(error = %e, "could not subscribe to commands");
+                tracing::warn!(error = %e, "could not subscribe to commands and STATE");
             }
         }
-        self.session = Some(Session { client, bd_seq });
+        self.session = Some(Session {
+            client,
+            bd_seq,
+            born: false,
+        });
         // Changes gathered while away go to the buffer before the births.
         self.spill_pending();
+        match &self.primary {
+            Some(p) => {
+                tracing::info!(primary_host = %p.host_id, "waiting for the primary host's STATE online before the births")
+            }
+            None => self.go_live().await,
+        }
+    }
+
+    /// Births, then the buffer as historical data.
+    async fn go_live(&mut self) {
         self.birth_all().await;
         self.replay().await;
     }
 
     fn session_down(&mut self, reason: &str) {
-        if self.session.take().is_none() {
+        if self.lose_session().is_none() {
             return;
         }
+        let n = self.keep_recent();
+        self.event(format!(
+            "MQTT broker connection lost ({reason}); buffering samples ({n} recent ones kept again as historical)"
+        ));
+    }
+
+    /// Forgets the session (gone, or being ended): every device unborn.
+    fn lose_session(&mut self) -> Option<Session> {
+        let s = self.session.take()?;
         self.metrics.connected.store(0, Ordering::Relaxed);
+        self.metrics.primary_host_online.store(0, Ordering::Relaxed);
         self.born.iter_mut().for_each(|b| *b = false);
-        // What went out lately may not have reached anyone.
+        Some(s)
+    }
+
+    /// What went out lately may not have reached anyone: into the buffer
+    /// again, to be sent as historical data. Returns how many.
+    fn keep_recent(&mut self) -> usize {
         let recent: Vec<Metric> = self.recent.drain(..).flat_map(|(_, m)| m).collect();
         let n = recent.len();
         for m in recent {
             self.buffer_metric(m);
         }
         self.flush_buffer();
+        n
+    }
+
+    /// Whether samples are published now (else they go to the buffer).
+    fn publishing(&self) -> bool {
+        self.session.as_ref().is_some_and(|s| s.born)
+    }
+
+    /// A STATE of the primary host.
+    async fn on_state(&mut self, topic: &str, body: &[u8]) {
+        let Some(primary) = self.primary.as_mut().filter(|p| p.topic() == topic) else {
+            return self.malformed(topic, "not the STATE of this node's primary host");
+        };
+        let host = primary.host_id.clone();
+        match primary.observe(body) {
+            Verdict::Malformed(why) => self.malformed(topic, &why),
+            Verdict::Stale { timestamp, last } => {
+                tracing::info!(primary_host = %host, timestamp, last, "a STATE older than the last one ignored");
+            }
+            Verdict::Online => {
+                if self.session.as_ref().is_some_and(|s| !s.born) {
+                    tracing::info!(primary_host = %host, "primary host online: births");
+                    self.metrics.primary_host_online.store(1, Ordering::Relaxed);
+                    // What changed since the last tick is history too.
+                    self.spill_pending();
+                    self.go_live().await;
+                }
+            }
+            Verdict::Offline => {
+                if self.publishing() {
+                    self.primary_host_lost(&host).await;
+                }
+            }
+        }
+    }
+
+    /// The primary host went offline while the edge published: what was
+    /// not sent and what went out lately go to the buffer; NDEATH and
+    /// DISCONNECT (Sparkplug 3.0); the session task connects again and the
+    /// edge waits there for the host's STATE online.
+    async fn primary_host_lost(&mut self, host: &str) {
+        self.spill_pending();
+        let Some(s) = self.lose_session() else {
+            return;
+        };
+        let n = self.keep_recent();
+        s.end(&self.group, &self.node).await;
+        tracing::warn!(primary_host = %host, "primary host offline: NDEATH sent, buffering samples");
         self.event(format!(
-            "MQTT broker connection lost ({reason}); buffering samples ({n} recent ones kept again as historical)"
+            "MQTT primary host '{host}' offline: NDEATH sent, buffering samples until it is online ({n} recent ones kept again as historical)"
         ));
     }
 
@@ -352,7 +460,10 @@ impl Edge {
 
     /// NBIRTH, then DBIRTH for every device that communicates.
     async fn birth_all(&mut self) {
-        let Some(bd_seq) = self.session.as_ref().map(|s| s.bd_seq) else {
+        let Some(bd_seq) = self.session.as_mut().map(|s| {
+            s.born = true;
+            s.bd_seq
+        }) else {
             return;
         };
         self.born.iter_mut().for_each(|b| *b = false);
@@ -414,7 +525,7 @@ impl Edge {
     /// Sends the gathered changes: per device one DDATA (split when large);
     /// deaths and births of devices whose communication changed.
     async fn flush(&mut self) {
-        if self.session.is_none() {
+        if !self.publishing() {
             self.spill_pending();
             return;
         }
@@ -642,6 +753,7 @@ impl Edge {
         }
         let kind = match Topic::parse(topic) {
             Some(Topic::Message { kind, device, .. }) => (kind, device),
+            Some(Topic::State { .. }) => return self.on_state(topic, payload).await,
             _ => {
                 self.malformed(topic, "not a Sparkplug B command topic");
                 return;
@@ -675,7 +787,11 @@ impl Edge {
                 self.malformed(topic, &format!("unknown node command {:?}", m.name));
             }
         }
-        if rebirth {
+        if rebirth && !self.publishing() {
+            // Not born yet (waiting for the primary host): the births come
+            // when it is online.
+            tracing::info!("rebirth requested before the births: ignored");
+        } else if rebirth {
             tracing::info!("rebirth requested");
             self.flush().await;
             self.birth_all().await;
@@ -742,6 +858,12 @@ impl Edge {
                     .await;
                 match r {
                     Ok(_) => EdgeMetrics::add(&metrics.commands_written, 1),
+                    // Refused before the device (its engineering limits, a
+                    // standby server): counted and recorded as refused.
+                    Err(CommandError::Write(e)) if e.is_refusal() => {
+                        EdgeMetrics::add(&metrics.commands_refused, 1);
+                        tracing::warn!(tag = %name, error = %e, "Sparkplug DCMD refused");
+                    }
                     Err(e) => {
                         EdgeMetrics::add(&metrics.commands_failed, 1);
                         tracing::warn!(tag = %name, error = %e, "Sparkplug DCMD write failed");

@@ -51,15 +51,31 @@ pub struct Device {
     pub comm: Option<TagId>,
 }
 
+/// Whether a DCMD may write a tag, or which of the node's rights it lacks.
+/// A DCMD carries the rights of the node as configured: its area is
+/// `[mqtt.edge] commands` (the write grant of the node, as
+/// `[server.access.GROUP] write` is a group's), its role `command_role`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CommandRight {
+    Allowed,
+    ReadOnly,
+    /// `[mqtt.edge] commands` does not name it.
+    OutsideArea,
+    /// Its write role, above the node's `command_role`.
+    AboveRole(Role),
+}
+
 /// The node's devices, and per tag its device and whether a DCMD may write it.
 #[derive(Debug, Clone)]
 pub struct EdgeModel {
     pub devices: Vec<Device>,
     /// Per tag id: index into `devices`.
     device_of: Vec<usize>,
-    /// Per tag id: a DCMD may write it (named by `commands`, writable, and
-    /// its write role within `command_role`).
-    commandable: Vec<bool>,
+    /// Per tag id: whether a DCMD may write it (writable, in the node's
+    /// area `commands`, its write role within `command_role`), or why not.
+    commandable: Vec<CommandRight>,
+    /// The role DCMDs act with (`[mqtt.edge] command_role`).
+    pub command_role: Role,
     /// Per tag id: its data type on the wire.
     datatypes: Vec<DataType>,
     /// Per tag id: its alarm configuration as TOML ([`PROP_ALARMS`]).
@@ -85,7 +101,13 @@ impl EdgeModel {
             comm: None,
         });
         let mut device_of = vec![derived; n];
-        let mut commandable = vec![false; n];
+        // Tags of no tag file (derived ones) are in no `commands`.
+        let mut commandable = vec![CommandRight::ReadOnly; n];
+        for (id, meta) in db.all_meta() {
+            if meta.writable {
+                commandable[id.index()] = CommandRight::OutsideArea;
+            }
+        }
         let mut alarms = vec![None; n];
         let role: Role = *edge.command_role.get_ref();
         for t in &plant.tags {
@@ -104,8 +126,15 @@ impl EdgeModel {
                 .as_ref()
                 .map(|r| *r.get_ref())
                 .unwrap_or(Role::Operator);
-            commandable[id.index()] =
-                *t.writable.get_ref() && edge.allows_command(t.name.get_ref()) && required <= role;
+            commandable[id.index()] = if !*t.writable.get_ref() {
+                CommandRight::ReadOnly
+            } else if !edge.allows_command(t.name.get_ref()) {
+                CommandRight::OutsideArea
+            } else if required > role {
+                CommandRight::AboveRole(required)
+            } else {
+                CommandRight::Allowed
+            };
             alarms[id.index()] = t.alarm.as_ref().and_then(|a| match toml::to_string(a) {
                 Ok(text) => Some(text),
                 Err(e) => {
@@ -123,6 +152,7 @@ impl EdgeModel {
             devices,
             device_of,
             commandable,
+            command_role: role,
             datatypes,
             alarms,
         }
@@ -138,7 +168,14 @@ impl EdgeModel {
     }
 
     pub fn commandable(&self, id: TagId) -> bool {
-        self.commandable.get(id.index()).copied().unwrap_or(false)
+        self.command_right(id) == CommandRight::Allowed
+    }
+
+    pub fn command_right(&self, id: TagId) -> CommandRight {
+        self.commandable
+            .get(id.index())
+            .copied()
+            .unwrap_or(CommandRight::ReadOnly)
     }
 
     pub fn datatype(&self, id: TagId) -> DataType {
@@ -455,15 +492,25 @@ pub fn resolve_command(
             &format!("it is a metric of device '{owner}', not of the device addressed"),
         ));
     }
-    if !model.commandable(id) {
-        return Err(refuse(
-            &name,
-            if meta.writable {
-                "[mqtt.edge] commands does not allow it, or its write role is above the node's command role"
-            } else {
-                "it is read-only"
-            },
-        ));
+    match model.command_right(id) {
+        CommandRight::Allowed => {}
+        CommandRight::ReadOnly => return Err(refuse(&name, "it is read-only")),
+        CommandRight::OutsideArea => {
+            return Err(refuse(
+                &name,
+                "it is outside the node's area: [mqtt.edge] commands does not name it",
+            ))
+        }
+        CommandRight::AboveRole(required) => {
+            return Err(refuse(
+                &name,
+                &format!(
+                    "writing it needs the {} role or above; the node commands as {} ([mqtt.edge] command_role)",
+                    required.label(),
+                    model.command_role.label()
+                ),
+            ))
+        }
     }
     let value =
         command_value(metric, model.datatype(id), meta.kind).map_err(|why| refuse(&name, &why))?;
@@ -862,14 +909,20 @@ write_role = "operator"
             cmd(None, Some("RTU1.Trip"), 11, MetricValue::Boolean(true)),
             0,
         );
-        assert!(r.why.contains("does not allow it"), "{r:?}");
+        // Each refusal says which of the node's rights it lacks: the area
+        // (`commands`) or the role (`command_role`), not "one or the other".
+        assert_eq!(
+            r.why,
+            "it is outside the node's area: [mqtt.edge] commands does not name it"
+        );
         let r = why(
             cmd(None, Some("RTU1.Limit"), 10, MetricValue::Double(1.0)),
             0,
         );
-        assert!(
-            r.why.contains("write role"),
-            "a supervisor tag, operator node: {r:?}"
+        assert_eq!(
+            r.why,
+            "writing it needs the supervisor role or above; the node commands as operator ([mqtt.edge] command_role)",
+            "a supervisor tag, operator node"
         );
         let r = why(cmd(Some(123_456), None, 11, MetricValue::Boolean(true)), 0);
         assert_eq!(

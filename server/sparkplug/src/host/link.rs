@@ -38,7 +38,8 @@ pub struct HostOptions {
 }
 
 impl HostOptions {
-    fn mqtt_options(&self, will: Vec<u8>) -> Result<MqttOptions, String> {
+    /// The options of the first session, with its STATE will.
+    fn mqtt_options(&self, session: i64) -> Result<MqttOptions, String> {
         let client_id = self
             .mqtt
             .client_id
@@ -54,13 +55,19 @@ impl HostOptions {
             crate::connection::MQTT_MAX_PACKET,
             crate::connection::MQTT_MAX_PACKET,
         )
-        .set_last_will(LastWill::new(
+        .set_last_will(self.state_will(session));
+        Ok(o)
+    }
+
+    /// The death certificate of the host session stamped `session`: STATE
+    /// offline with that session's timestamp, retained, QoS 1.
+    fn state_will(&self, session: i64) -> LastWill {
+        LastWill::new(
             self.state_topic(),
-            will,
+            state_body(false, session),
             QoS::AtLeastOnce,
             true,
-        ));
-        Ok(o)
+        )
     }
 
     fn state_topic(&self) -> String {
@@ -130,6 +137,14 @@ pub struct Host {
     task: JoinHandle<()>,
 }
 
+/// The timestamp of a new host session: now, and always after the last
+/// one, so that edge nodes take the new birth and ignore a late will of the
+/// session before (Sparkplug 3.0 compares STATE timestamps).
+fn session_timestamp(last: Option<i64>) -> i64 {
+    let now = gridscada_tagdb::Timestamp::now_utc().as_millis();
+    last.map_or(now, |last| now.max(last + 1))
+}
+
 /// The Sparkplug 3.0 STATE body.
 fn state_body(online: bool, timestamp: i64) -> Vec<u8> {
     serde_json::json!({ "online": online, "timestamp": timestamp })
@@ -146,10 +161,11 @@ impl Host {
         clock: Arc<dyn Clock>,
         outputs: HostOutputs,
     ) -> Result<Host, String> {
-        // One timestamp for the will and every online STATE of this run,
-        // as Sparkplug 3.0 asks: a host's birth and death certificates match.
-        let born = gridscada_tagdb::Timestamp::now_utc().as_millis();
-        let mqtt = opts.mqtt_options(state_body(false, born))?;
+        // One timestamp per MQTT session, in its will and its online STATE,
+        // as Sparkplug 3.0 asks: a session's birth and death certificates
+        // match. `run` stamps every later session anew.
+        let born = session_timestamp(None);
+        let mqtt = opts.mqtt_options(born)?;
         let (client, events) = AsyncClient::new(mqtt, 256);
         let shared = Arc::new(Shared {
             db,
@@ -203,7 +219,7 @@ async fn run(
     opts: HostOptions,
     shared: Arc<Shared>,
     mut events: EventLoop,
-    born: i64,
+    mut born: i64,
     mut stop: watch::Receiver<bool>,
 ) {
     let state_topic = opts.state_topic();
@@ -281,6 +297,10 @@ async fn run(
                 } else {
                     tracing::debug!(broker = %opts.mqtt.broker.get_ref(), error = %e, "Sparkplug host cannot reach the broker");
                 }
+                // The next connection is a new session: its own timestamp,
+                // in the will it connects with and the STATE it publishes.
+                born = session_timestamp(Some(born));
+                events.mqtt_options.set_last_will(opts.state_will(born));
                 // rumqttc reconnects on the next poll; do not spin.
                 tokio::select! {
                     _ = stop.changed() => break,
@@ -506,6 +526,16 @@ mod tests {
         // The window over, the next warning says how many were held back.
         gate.0.get_mut("malformed").unwrap().0 -= Duration::from_secs(11);
         assert_eq!(gate.pass("malformed"), Some(2));
+    }
+
+    #[test]
+    fn every_session_is_stamped_after_the_last() {
+        let first = session_timestamp(None);
+        let now = gridscada_tagdb::Timestamp::now_utc().as_millis();
+        assert!((now - 1000..=now).contains(&first));
+        // Twice within one millisecond, or after the clock stepped back.
+        assert_eq!(session_timestamp(Some(now + 60_000)), now + 60_001);
+        assert!(session_timestamp(Some(first)) > first);
     }
 
     #[test]
