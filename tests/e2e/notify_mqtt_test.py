@@ -115,6 +115,7 @@ def run(tmp):
     sub = Subscriber(port)
     plant = os.path.join(tmp, "plant")
     shutil.copytree(os.path.join(ROOT, "tests", "plants", "three-panels"), plant)
+    nt.name_site(os.path.join(plant, "gridscada.toml"))
     with open(os.path.join(plant, "gridscada.toml"), "a") as f:
         f.write(ROUTE.format(port=port, hmi=HMI, topic=TOPIC))
     server = Server(plant, os.path.join(tmp, "data"), free_port(), os.path.join(tmp, "server.log"))
@@ -132,6 +133,7 @@ def run(tmp):
             nt.check(j["alarm"]["key"] == "RTU1:comm" and j["contact"] == "Control room" and j["address"] == "cr-desk-1"
                      and j["link"] == HMI + "/#/alarms" and j["route"] == "control-room",
                      "the JSON carries the alarm, the contact and the link into the HMI", j)
+            nt.check(j.get("site") == nt.SITE, "the JSON names the site", j)
             nt.check(all(t == f"{TOPIC}/urgent" for t, _ in sub.messages()), "nothing on the other bands",
                      [t for t, _ in sub.messages()])
         alarm = server.alarm("RTU1:comm")

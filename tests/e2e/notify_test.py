@@ -261,6 +261,17 @@ address = "flood@example.test"
 """
 
 
+SITE = "substation-7"
+
+
+def name_site(toml):
+    """Gives the plant a site: several sites may feed one mailbox."""
+    with open(toml) as f:
+        text = f.read()
+    with open(toml, "w") as f:
+        f.write(text.replace("[server]\n", f'[server]\nsite = "{SITE}"\n', 1))
+
+
 def main():
     tmp = tempfile.mkdtemp(prefix="gs-notify-")
     try:
@@ -291,6 +302,7 @@ def run(tmp):
 
     plant = os.path.join(tmp, "plant")
     shutil.copytree(os.path.join(ROOT, "tests", "plants", "three-panels"), plant)
+    name_site(os.path.join(plant, "gridscada.toml"))
     with open(os.path.join(plant, "gridscada.toml"), "a") as f:
         f.write(ROUTES.format(hmi=HMI, smtp=smtp_port, hook=hook_port, ca=os.path.join(tls, "cert.pem")))
     data = os.path.join(tmp, "data")
@@ -306,6 +318,8 @@ def run(tmp):
         check("Communication lost with RTU1" in m["subject"] and "[URGENT]" in m["subject"],
               "the subject names the priority and the alarm", m["subject"])
         check(LINK in m["body"], "the mail links into the HMI's alarm list", m["body"])
+        check(f"{SITE}:" in m["subject"] and f"Site: {SITE}" in m["body"],
+              "the mail's subject and text name the site", (m["subject"], m["body"]))
         check(m["tls"], "the mail went over STARTTLS")
     calls = wait_for(lambda: hooks.calls[:], 30)
     if check(calls, "the webhook is called"):
@@ -315,11 +329,14 @@ def run(tmp):
         check(c["path"] == "/alarms?site=test" and j["kind"] == "alarm" and j["alarm"]["key"] == "RTU1:comm"
               and j["link"] == LINK and j["contact"] == "Dispatcher" and j["address"] == "dispatch-desk",
               "the webhook's JSON carries the alarm, the contact and the link", j)
+        check(j.get("site") == SITE and "server" in j and j["server"] is None,
+              "the webhook's JSON names the site (and no pair server: this one runs alone)", j)
 
     # 2. Escalation: unacknowledged after 3 s, the second contact; then ack.
     second = wait_for(lambda: mailbox.to("second@example.test"), 20)
     if check(second, "unacknowledged, the alarm escalates to the second contact"):
-        check("UNACKNOWLEDGED" in second[0]["subject"] and LINK in second[0]["body"],
+        check("UNACKNOWLEDGED" in second[0]["subject"] and LINK in second[0]["body"]
+              and SITE in second[0]["subject"],
               "the escalation says so and links into the HMI", second[0]["subject"])
     alarm = server.alarm("RTU1:comm")
     server.call("POST", "/api/alarms/ack", {"ids": [alarm["id"]]})
@@ -336,6 +353,8 @@ def run(tmp):
     flood = mailbox.to("flood@example.test")
     if check(summary, f"a flood of {len(devices)} comm alarms gives one summary", [m["subject"] for m in flood]):
         check(len(flood) == 2, "and one mail before it: 2 mails, not one per alarm", [m["subject"] for m in flood])
+        check(SITE in summary[0]["subject"] and f"Site: {SITE}" in summary[0]["body"],
+              "the summary names the site", (summary[0]["subject"], summary[0]["body"]))
         check(f"{len(devices) - 1} more alarms" in summary[0]["body"] and LINK in summary[0]["body"],
               "the summary counts the held alarms and links into the HMI", summary[0]["body"])
     check(metric(server.metrics(), "gridscada_notifications_held_total", "flood") == len(devices) - 1,

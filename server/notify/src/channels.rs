@@ -325,3 +325,43 @@ mod tests {
         );
     }
 }
+
+#[cfg(test)]
+mod payload_tests {
+    use super::*;
+    use crate::message::{alarm_message, Origin};
+
+    /// The webhook's body and the MQTT payload are this one JSON.
+    #[test]
+    fn the_webhook_and_mqtt_json_names_the_site_and_server() {
+        let origin = Origin {
+            site: "substation-7".into(),
+            server: Some("scada-a".into()),
+        };
+        let a = crate::message::tests::alarm();
+        let m = alarm_message(&origin, "hook", &a, "https://h/#/alarms", None);
+        let j: serde_json::Value = serde_json::to_value(Payload {
+            id: 1,
+            contact: "Dispatcher",
+            address: "desk",
+            message: &m,
+        })
+        .unwrap();
+        assert_eq!(j["site"], "substation-7");
+        assert_eq!(j["server"], "scada-a");
+        let alone = Origin {
+            site: "main".into(),
+            server: None,
+        };
+        let m = alarm_message(&alone, "hook", &a, "https://h/#/alarms", None);
+        let j = serde_json::to_value(Payload {
+            id: 1,
+            contact: "Dispatcher",
+            address: "desk",
+            message: &m,
+        })
+        .unwrap();
+        assert_eq!(j["site"], "main");
+        assert!(j["server"].is_null(), "{j}");
+    }
+}

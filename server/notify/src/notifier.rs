@@ -19,7 +19,7 @@ use tokio::sync::{mpsc, Notify};
 
 use crate::channels::Channel;
 use crate::flood::{backoff_ms, FloodWindow, Offer};
-use crate::message::{self, AlarmInfo, Message};
+use crate::message::{self, AlarmInfo, Message, Origin};
 use crate::routing::{Route, SYSTEM_ALARM_PREFIX};
 
 /// Priority of a route's "cannot deliver" system alarm.
@@ -57,6 +57,7 @@ pub struct NotifyHandle {
 struct RouteRt {
     route: Route,
     channel: Channel,
+    origin: Origin,
     link: String,
     flood: FloodWindow,
     give_up_ms: i64,
@@ -107,6 +108,10 @@ impl Notifier {
         env: &dyn Fn(&str) -> Option<String>,
     ) -> Result<(Notifier, NotifyHandle), String> {
         let base = plant.main_path.parent().unwrap_or(Path::new(""));
+        let origin = Origin {
+            site: plant.server.site().to_string(),
+            server: plant.redundancy.as_ref().map(|r| r.name.get_ref().clone()),
+        };
         let mut routes = vec![];
         for n in &plant.notify {
             let name = n.name.get_ref();
@@ -118,6 +123,7 @@ impl Notifier {
             routes.push(RouteRt {
                 route: Route::from_config(n),
                 channel: Channel::build(n, base, env, plant.mqtt.as_ref())?,
+                origin: origin.clone(),
                 link,
                 flood: FloodWindow::new(
                     *n.flood_limit.get_ref(),
@@ -166,6 +172,7 @@ impl Notifier {
                 .iter()
                 .map(|r| PlanRoute {
                     route: r.route.clone(),
+                    origin: r.origin.clone(),
                     link: r.link.clone(),
                     flood: r.flood.clone(),
                     give_up_ms: r.give_up_ms,
@@ -201,6 +208,7 @@ impl Notifier {
 
 struct PlanRoute {
     route: Route,
+    origin: Origin,
     link: String,
     flood: FloodWindow,
     give_up_ms: i64,
@@ -310,7 +318,7 @@ impl Planner {
                 continue;
             };
             let r = &self.routes[ri];
-            let m = message::alarm_message(&r.route.name, &info, &r.link, None);
+            let m = message::alarm_message(&r.origin, &r.route.name, &info, &r.link, None);
             self.offer(ri, c, &info, m, now, || message::summary_line(t))
                 .await;
             if let Some(after) = self.routes[ri].route.escalate_after_ms {
@@ -390,7 +398,7 @@ impl Planner {
             let Some(c) = r.route.contact_after(None, Timestamp::from_millis(now)) else {
                 continue;
             };
-            let m = message::flood_message(&r.route.name, &s, &r.link);
+            let m = message::flood_message(&r.origin, &r.route.name, &s, &r.link);
             self.enqueue(ri, c, None, m, now).await;
         }
     }
@@ -425,7 +433,8 @@ impl Planner {
                 tracing::warn!(route = %r.route.name, alarm = %alarm_key, "escalation chain ended unacknowledged");
                 continue;
             };
-            let m = message::alarm_message(&r.route.name, &e.alarm, &r.link, r.escalate_min);
+            let m =
+                message::alarm_message(&r.origin, &r.route.name, &e.alarm, &r.link, r.escalate_min);
             let line = format!("UNACKNOWLEDGED {}", e.alarm.message);
             let after = r.route.escalate_after_ms;
             self.offer(ri, next, &e.alarm, m, now, || line).await;
