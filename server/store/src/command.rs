@@ -1,5 +1,5 @@
 //! The audited tag write, shared by every path a command comes in by (the
-//! HMI's HTTP API, a Sparkplug DCMD): the request is on record before it goes
+//! HMI's HTTP API, OPC UA, a Sparkplug DCMD): the request is on record before it goes
 //! to the device, and what came of it is recorded after.
 
 use std::future::Future;
@@ -52,9 +52,11 @@ pub enum CommandError {
 }
 
 /// Writes `value` to tag `name` through `writer`, recording the request
-/// (`write_request`, durable before the write) and its outcome (`write` with
-/// the confirmed value, or `write_failed`). `old` is the value before, as
-/// shown in the record.
+/// (`write_request`, durable before the write) and its outcome: `write` with
+/// the confirmed value, `write_refused` when the writer refused it before
+/// the device (engineering limits, a standby server:
+/// [`WriteError::is_refusal`]), or `write_failed` when the device or the link
+/// failed it. `old` is the value before, as shown in the record.
 pub async fn audited_write(
     audit: &dyn CommandAudit,
     writer: &dyn TagWriter,
@@ -93,6 +95,7 @@ pub async fn audited_write(
                 confirmed.value
             ),
         ),
+        Err(e) if e.is_refusal() => refused_event(now(), who, name, &e.to_string()),
         Err(e) => event(
             "write_failed",
             format!("{label} could not write {name} = {value}: {e}"),
@@ -113,14 +116,18 @@ pub async fn audit_refused(
     name: &str,
     why: &str,
 ) {
-    let event = NewEvent {
+    if let Err(e) = audit.durable(refused_event(ts, who, name, why)).await {
+        tracing::error!(error = %e, "could not record an audit event");
+    }
+}
+
+/// The record of a refused write, whichever door refused it.
+pub fn refused_event(ts: Timestamp, who: &Commander, name: &str, why: &str) -> NewEvent {
+    NewEvent {
         ts,
         user: who.user.clone(),
         source: name.to_string(),
         kind: "write_refused".into(),
         message: format!("{} may not write {name}: {why}", who.label),
-    };
-    if let Err(e) = audit.durable(event).await {
-        tracing::error!(error = %e, "could not record an audit event");
     }
 }

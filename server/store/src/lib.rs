@@ -80,7 +80,7 @@ pub use lease::{Fence, Lease, LeaseState};
 pub use notifications::{LastNotified, NewNotification, Notification, NotificationStatus};
 pub use recorder::{RecordPolicy, Recorder};
 pub use screens::{ScreenRecord, MAX_SCREEN_BYTES};
-pub use sessions::{SessionKey, SessionRecord};
+pub use sessions::{SessionKey, SessionRecord, TicketRecord};
 pub use spool::{
     read_spool, AuditConfig, AuditError, AuditHandle, AuditMetrics, AuditTrail, SpoolContents,
     SPOOL_FILE,

@@ -1,7 +1,8 @@
 //! Login sessions, kept so that they survive a restart and so that every
 //! server on one database sees the same ones.
 //!
-//! **Owns:** the `sessions` table. Only the SHA-256 of a session's token is
+//! **Owns:** the `sessions` table and the failover tickets
+//! (`handover_tickets`, a kind of their own: [`TicketRecord`]). Only the SHA-256 of a session's token is
 //! stored ([`SessionKey`]); the browser's cookie holds the token, so a copy
 //! of the table opens no session. The users' changes that end sessions
 //! (block, delete, password, role) delete their rows in the same
@@ -104,6 +105,48 @@ fn session(r: SessionRow) -> Result<SessionRecord> {
         expires_at: r.6.map(Timestamp::from_millis),
         client: r.7,
         user_agent: r.8,
+    })
+}
+
+/// A redundant pair's failover ticket (the `handover_tickets` table): a
+/// kind of its own, never a session. It carries a login from the session
+/// that asked for it to a new session on another server of the pair, once.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TicketRecord {
+    /// The SHA-256 of the ticket, as for a session token.
+    pub key: SessionKey,
+    /// The session it was issued from: the ticket dies with it.
+    pub session: SessionKey,
+    pub user: String,
+    pub role: Role,
+    pub created_at: Timestamp,
+    /// When it may no longer be claimed: never after `session_expires_at`.
+    pub expires_at: Timestamp,
+    /// The issuing session's absolute end, which the claimed session
+    /// inherits; `None`: never.
+    pub session_expires_at: Option<Timestamp>,
+}
+
+type TicketRow = (String, String, String, String, i64, i64, Option<i64>);
+
+const TICKET_COLS: &str =
+    "ticket_hash, session_hash, user_name, role, created_at, expires_at, session_expires_at";
+
+fn ticket(r: TicketRow) -> Result<TicketRecord> {
+    let role = Role::parse(&r.3).ok_or_else(|| {
+        StoreError::Corrupt(format!(
+            "failover ticket of '{}' has an unknown role '{}'",
+            r.2, r.3
+        ))
+    })?;
+    Ok(TicketRecord {
+        key: SessionKey(r.0),
+        session: SessionKey(r.1),
+        user: r.2,
+        role,
+        created_at: Timestamp::from_millis(r.4),
+        expires_at: Timestamp::from_millis(r.5),
+        session_expires_at: r.6.map(Timestamp::from_millis),
     })
 }
 
@@ -270,14 +313,99 @@ impl Store {
         Ok(())
     }
 
+    /// Records a failover ticket, ending `replaces` (an earlier ticket of
+    /// the same session; one of another session is left alone) in the same
+    /// transaction.
+    pub async fn create_ticket(
+        &self,
+        t: &TicketRecord,
+        replaces: Option<&SessionKey>,
+    ) -> Result<()> {
+        on_backend!(self, writer, |p| {
+            let mut tx = p.begin().await.map_err(db("issuing a failover ticket"))?;
+            if let Some(old) = replaces {
+                sqlx::query(
+                    "DELETE FROM handover_tickets WHERE ticket_hash = $1 AND session_hash = $2",
+                )
+                .bind(old.as_str())
+                .bind(t.session.as_str())
+                .execute(&mut *tx)
+                .await
+                .map_err(db("issuing a failover ticket"))?;
+            }
+            sqlx::query(&format!(
+                "INSERT INTO handover_tickets ({TICKET_COLS}) VALUES ($1, $2, $3, $4, $5, $6, $7)"
+            ))
+            .bind(t.key.as_str())
+            .bind(t.session.as_str())
+            .bind(&t.user)
+            .bind(t.role.label())
+            .bind(t.created_at.as_millis())
+            .bind(t.expires_at.as_millis())
+            .bind(t.session_expires_at.map(|e| e.as_millis()))
+            .execute(&mut *tx)
+            .await
+            .map_err(db("issuing a failover ticket"))?;
+            tx.commit().await.map_err(db("issuing a failover ticket"))?;
+        });
+        Ok(())
+    }
+
+    /// Claims the ticket of `key` at `now`: its row goes whatever the
+    /// outcome (good once), and it is returned only if it had not expired
+    /// and the session it was issued from is still stored, live and of the
+    /// same user and role (a logout, a revocation or the sweep ended it
+    /// otherwise).
+    pub async fn claim_ticket(
+        &self,
+        key: &SessionKey,
+        now: Timestamp,
+    ) -> Result<Option<TicketRecord>> {
+        let (row, origin): (Option<TicketRow>, Option<SessionRow>) =
+            on_backend!(self, writer, |p| {
+                let mut tx = p.begin().await.map_err(db("claiming a failover ticket"))?;
+                let row: Option<TicketRow> = sqlx::query_as(&format!(
+                    "DELETE FROM handover_tickets WHERE ticket_hash = $1 RETURNING {TICKET_COLS}"
+                ))
+                .bind(key.as_str())
+                .fetch_optional(&mut *tx)
+                .await
+                .map_err(db("claiming a failover ticket"))?;
+                let origin: Option<SessionRow> = match &row {
+                    Some(r) => sqlx::query_as(&format!(
+                        "SELECT {SESSION_COLS} FROM sessions WHERE token_hash = $1"
+                    ))
+                    .bind(&r.1)
+                    .fetch_optional(&mut *tx)
+                    .await
+                    .map_err(db("claiming a failover ticket"))?,
+                    None => None,
+                };
+                tx.commit()
+                    .await
+                    .map_err(db("claiming a failover ticket"))?;
+                (row, origin)
+            });
+        let (Some(row), Some(origin)) = (row, origin) else {
+            return Ok(None);
+        };
+        let (t, origin) = (ticket(row)?, session(origin)?);
+        let good = now <= t.expires_at
+            && !origin.expired(now)
+            && origin.user == t.user
+            && origin.role == t.role;
+        Ok(good.then_some(t))
+    }
+
     /// Deletes the sessions that ended by `now`: past their absolute end, or
     /// idle for longer than their timeout plus `grace` (how far the stored
     /// `last_seen` may trail the real last activity, so that a session
     /// still in use on a server that has not written its activity yet is
     /// not deleted). Returns how many went.
+    /// Failover tickets that expired or whose session is gone go too.
     pub async fn sweep_sessions(&self, now: Timestamp, grace: Duration) -> Result<u64> {
         Ok(on_backend!(self, writer, |p| {
-            sqlx::query(
+            let n = sqlx::query(
                 "DELETE FROM sessions WHERE (expires_at IS NOT NULL AND expires_at < $1) \
                  OR (idle_ms IS NOT NULL AND last_seen + idle_ms + $2 < $1)",
             )
@@ -286,7 +414,16 @@ impl Store {
             .execute(p)
             .await
             .map_err(db("sweeping expired sessions"))?
-            .rows_affected()
+            .rows_affected();
+            sqlx::query(
+                "DELETE FROM handover_tickets WHERE expires_at < $1 \
+                 OR session_hash NOT IN (SELECT token_hash FROM sessions)",
+            )
+            .bind(now.as_millis())
+            .execute(p)
+            .await
+            .map_err(db("sweeping failover tickets"))?;
+            n
         }))
     }
 }

@@ -181,6 +181,11 @@ const SQLITE_MIGRATIONS: &[(i64, &str, &str)] = &[
         "several sites on one database",
         include_str!("../migrations/sqlite/0011_sites.sql"),
     ),
+    (
+        12,
+        "failover tickets of their own",
+        include_str!("../migrations/sqlite/0012_handover_tickets.sql"),
+    ),
 ];
 const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
     (
@@ -237,6 +242,11 @@ const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
         11,
         "several sites on one database",
         include_str!("../migrations/postgres/0011_sites.sql"),
+    ),
+    (
+        12,
+        "failover tickets of their own",
+        include_str!("../migrations/postgres/0012_handover_tickets.sql"),
     ),
 ];
 

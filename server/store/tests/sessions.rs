@@ -206,3 +206,86 @@ async fn user_changes_revoke_sessions(db: TestDb) {
     db.cleanup().await;
 }
 both_backends!(revocation, user_changes_revoke_sessions);
+
+fn ticket(token: &str, origin: &SessionRecord, at: i64, lasts: i64) -> TicketRecord {
+    TicketRecord {
+        key: SessionKey::of_token(token),
+        session: origin.key.clone(),
+        user: origin.user.clone(),
+        role: origin.role,
+        created_at: ts(at),
+        expires_at: ts(at + lasts),
+        session_expires_at: origin.expires_at,
+    }
+}
+
+/// Failover tickets are their own kind: no session lookup finds one, a
+/// claim takes it once, only before it expires and while the session that
+/// issued it lives (not after its logout, a revocation or its expiry); the
+/// claim carries that session's absolute end; a renewal ends only the same
+/// session's earlier ticket; the sweep deletes spent ones.
+async fn failover_tickets(db: TestDb) {
+    let s = &db.store;
+    add_user(s, "ann", Role::Operator).await;
+    add_user(s, "bob", Role::Operator).await;
+    let origin = session("ann-1", "ann", Role::Operator, 1_000);
+    s.create_session(&origin, None).await.unwrap();
+    let t1 = ticket("ticket-1", &origin, 2_000, 180_000);
+    s.create_ticket(&t1, None).await.unwrap();
+    // Not a session, nor listed with them.
+    assert_eq!(s.session(&t1.key).await.unwrap(), None);
+    assert_eq!(s.sessions().await.unwrap().len(), 1);
+    // Claimed once, carrying the session's end.
+    let got = s.claim_ticket(&t1.key, ts(3_000)).await.unwrap();
+    assert_eq!(got.as_ref(), Some(&t1));
+    assert_eq!(got.unwrap().session_expires_at, Some(ts(3_601_000)));
+    assert_eq!(s.claim_ticket(&t1.key, ts(3_000)).await.unwrap(), None);
+    // Expired: refused (and gone).
+    let t2 = ticket("ticket-2", &origin, 2_000, 1_000);
+    s.create_ticket(&t2, None).await.unwrap();
+    assert_eq!(s.claim_ticket(&t2.key, ts(3_001)).await.unwrap(), None);
+    // The issuing session idled out (stored last_seen 1000, idle 60 s):
+    // refused even before the sweep.
+    let t3 = ticket("ticket-3", &origin, 2_000, 180_000);
+    s.create_ticket(&t3, None).await.unwrap();
+    assert_eq!(s.claim_ticket(&t3.key, ts(61_001)).await.unwrap(), None);
+    // A renewal ends the same session's earlier ticket, not another's.
+    let t4 = ticket("ticket-4", &origin, 2_000, 180_000);
+    s.create_ticket(&t4, None).await.unwrap();
+    let other = session("bob-1", "bob", Role::Operator, 1_000);
+    s.create_session(&other, None).await.unwrap();
+    let t5 = ticket("ticket-5", &other, 2_000, 180_000);
+    s.create_ticket(&t5, Some(&t4.key)).await.unwrap();
+    let t6 = ticket("ticket-6", &origin, 2_500, 180_000);
+    s.create_ticket(&t6, Some(&t4.key)).await.unwrap();
+    assert_eq!(s.claim_ticket(&t4.key, ts(3_000)).await.unwrap(), None);
+    assert_eq!(
+        s.claim_ticket(&t5.key, ts(3_000)).await.unwrap(),
+        Some(t5.clone())
+    );
+    // Logout of the issuing session: its ticket dies with it.
+    assert!(s.end_session(&origin.key).await.unwrap());
+    assert_eq!(s.claim_ticket(&t6.key, ts(3_000)).await.unwrap(), None);
+    // A revocation (block) ends the user's sessions and so their tickets.
+    let t7 = ticket("ticket-7", &other, 2_000, 180_000);
+    s.create_ticket(&t7, None).await.unwrap();
+    s.set_user_blocked("bob", true).await.unwrap();
+    assert_eq!(s.claim_ticket(&t7.key, ts(3_000)).await.unwrap(), None);
+    // The sweep deletes tickets that expired or lost their session.
+    let live = session("ann-2", "ann", Role::Operator, 10_000);
+    s.create_session(&live, None).await.unwrap();
+    let orphan = ticket("ticket-8", &other, 10_000, 180_000);
+    let stale = ticket("ticket-9", &live, 10_000, 1_000);
+    let kept = ticket("ticket-10", &live, 10_000, 180_000);
+    for t in [&orphan, &stale, &kept] {
+        s.create_ticket(t, None).await.unwrap();
+    }
+    s.sweep_sessions(ts(20_000), Duration::ZERO).await.unwrap();
+    assert_eq!(db.count("SELECT count(*) FROM handover_tickets").await, 1);
+    assert_eq!(
+        s.claim_ticket(&kept.key, ts(20_000)).await.unwrap(),
+        Some(kept)
+    );
+    db.cleanup().await;
+}
+both_backends!(tickets, failover_tickets);

@@ -98,6 +98,33 @@ impl TestDb {
         }
     }
 
+    /// A count (`SELECT count(*) ...`) read over a connection of its own,
+    /// for what the store's API does not list.
+    pub async fn count(&self, sql: &str) -> i64 {
+        use sqlx::Connection;
+        match self.engine {
+            Engine::Sqlite => {
+                let path = self.dir.path().join("store.db");
+                let mut c =
+                    sqlx::SqliteConnection::connect(&format!("sqlite://{}", path.display()))
+                        .await
+                        .expect("second SQLite connection");
+                sqlx::query_scalar(sql).fetch_one(&mut c).await.unwrap()
+            }
+            Engine::Postgres => {
+                let mut c = sqlx::PgConnection::connect(&self.url)
+                    .await
+                    .expect("second PG connection");
+                let schema = self.options.pg_schema.as_deref().unwrap();
+                sqlx::query(&format!("SET search_path TO {schema}"))
+                    .execute(&mut c)
+                    .await
+                    .unwrap();
+                sqlx::query_scalar(sql).fetch_one(&mut c).await.unwrap()
+            }
+        }
+    }
+
     /// Holds an exclusive lock on the samples table from another connection,
     /// as a slow or stuck database would. Released when the guard is dropped
     /// or `release`d.
