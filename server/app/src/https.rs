@@ -48,9 +48,10 @@ pub async fn listen(
     web: gridscada_web::WebState,
     https: Option<Https>,
 ) -> anyhow::Result<Listening> {
+    let connections = web.connections.clone();
     let router = gridscada_web::router(web);
     let Some(https) = https else {
-        let (local, server) = gridscada_web::bind(http, router)
+        let (local, server) = gridscada_web::bind(http, router, connections)
             .await
             .with_context(|| format!("cannot listen on {http}"))?;
         return Ok(Listening {
@@ -60,16 +61,19 @@ pub async fn listen(
             https: None,
         });
     };
-    let (local, server) = gridscada_web::tls::bind_tls(http, router, &https)
+    let (local, server) = gridscada_web::tls::bind_tls(http, router, &https, connections.clone())
         .await
         .with_context(|| format!("cannot listen on {http}"))?;
     let redirect_to = plant.tls.as_ref().and_then(|t| t.redirect_http);
     let (redirect, server): (Option<SocketAddr>, ServerFuture) = match redirect_to {
         None => (None, Box::pin(server)),
         Some(addr) => {
-            let (redirect, plain) = gridscada_web::tls::bind_redirect(addr, local.port())
-                .await
-                .with_context(|| format!("cannot listen on {addr} ([server.tls] redirect_http)"))?;
+            let (redirect, plain) =
+                gridscada_web::tls::bind_redirect(addr, local.port(), &plant.server, connections)
+                    .await
+                    .with_context(|| {
+                        format!("cannot listen on {addr} ([server.tls] redirect_http)")
+                    })?;
             let both = async move {
                 tokio::select! {
                     r = server => r,

@@ -311,7 +311,7 @@ async fn main() {
     }
 
     let any: SocketAddr = "127.0.0.1:0".parse().unwrap();
-    let (addr, server) = gridscada_web::bind(any, gridscada_web::router(state))
+    let (addr, server) = gridscada_web::bind(any, gridscada_web::router(state), Default::default())
         .await
         .expect("bind");
     tokio::spawn(server);
@@ -320,7 +320,9 @@ async fn main() {
     let peer = Router::new()
         .route("/peer", get(peer_upgrade))
         .with_state(tx.clone());
-    let (peer_addr, peer_server) = gridscada_web::bind(any, peer).await.expect("bind peer");
+    let (peer_addr, peer_server) = gridscada_web::bind(any, peer, Default::default())
+        .await
+        .expect("bind peer");
     tokio::spawn(peer_server);
 
     let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));

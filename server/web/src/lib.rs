@@ -14,6 +14,7 @@ pub mod auth;
 pub mod command;
 pub mod error;
 mod hmi;
+pub mod listener;
 pub mod metrics;
 pub mod openapi;
 pub mod proxy;
@@ -66,6 +67,10 @@ pub struct WebState {
     pub tls: bool,
     /// The live push's shared feeds (`/api/live`); start with the default.
     pub live: Arc<api::live::LiveFeeds>,
+    /// The listeners' open connections and their limits
+    /// (`[server.connections]`), for `/metrics`; hand the same one to
+    /// [`bind`].
+    pub connections: Arc<listener::Connections>,
 }
 
 /// The application's routes.
@@ -74,22 +79,18 @@ pub fn router(state: WebState) -> Router {
 }
 
 /// Binds `addr` now (so the caller can report a bind error before printing
-/// the URL) and returns the listener's actual address with a server future.
+/// the URL) and returns the listener's actual address with a server future
+/// that serves plain HTTP under `connections`' limits.
 pub async fn bind(
     addr: SocketAddr,
     router: Router,
+    connections: Arc<listener::Connections>,
 ) -> std::io::Result<(
     SocketAddr,
     impl std::future::Future<Output = std::io::Result<()>>,
 )> {
     let listener = tokio::net::TcpListener::bind(addr).await?;
     let local = listener.local_addr()?;
-    let fut = async move {
-        axum::serve(
-            listener,
-            router.into_make_service_with_connect_info::<SocketAddr>(),
-        )
-        .await
-    };
+    let fut = listener::serve(listener, router, connections, listener::Transport::Plain);
     Ok((local, fut))
 }

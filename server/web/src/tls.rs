@@ -13,11 +13,13 @@ use std::sync::Arc;
 use axum::http::{header, HeaderMap, StatusCode, Uri};
 use axum::response::{IntoResponse, Response};
 use axum::Router;
-use axum_server::tls_rustls::RustlsConfig;
 use gridscada_config::TlsFiles;
 use rustls::pki_types::pem::{PemObject, SectionKind};
 use rustls::pki_types::{CertificateDer, PrivateKeyDer};
 use rustls::sign::CertifiedKey;
+
+use crate::listener::{self, Connections, Transport};
+use crate::routes::HostPolicy;
 
 /// Why a certificate or key cannot be used, naming the file and the setting
 /// it came from.
@@ -176,7 +178,7 @@ fn read_key(path: &Path) -> Result<PrivateKeyDer<'static>, TlsError> {
 /// to read it again.
 #[derive(Clone)]
 pub struct Https {
-    config: RustlsConfig,
+    config: Arc<parking_lot::RwLock<Arc<rustls::ServerConfig>>>,
     files: TlsFiles,
 }
 
@@ -184,7 +186,7 @@ impl Https {
     /// Reads and checks the certificate and key.
     pub fn load(files: &TlsFiles) -> Result<Https, TlsError> {
         Ok(Https {
-            config: RustlsConfig::from_config(server_config(files)?),
+            config: Arc::new(parking_lot::RwLock::new(server_config(files)?)),
             files: files.clone(),
         })
     }
@@ -193,8 +195,13 @@ impl Https {
     /// does not load is refused and the one in use keeps serving.
     pub fn reload(&self) -> Result<(), TlsError> {
         let config = server_config(&self.files)?;
-        self.config.reload_from_config(config);
+        *self.config.write() = config;
         Ok(())
+    }
+
+    /// The configuration a new handshake uses.
+    pub fn current(&self) -> Arc<rustls::ServerConfig> {
+        self.config.read().clone()
     }
 
     pub fn files(&self) -> &TlsFiles {
@@ -207,52 +214,94 @@ pub async fn bind_tls(
     addr: SocketAddr,
     router: Router,
     https: &Https,
+    connections: Arc<Connections>,
 ) -> std::io::Result<(SocketAddr, impl Future<Output = std::io::Result<()>>)> {
     let listener = tokio::net::TcpListener::bind(addr).await?;
     let local = listener.local_addr()?;
-    let listener = listener.into_std()?;
-    let server = axum_server::from_tcp_rustls(listener, https.config.clone());
-    let fut = server.serve(router.into_make_service_with_connect_info::<SocketAddr>());
+    let fut = listener::serve(listener, router, connections, Transport::Tls(https.clone()));
     Ok((local, fut))
 }
 
 /// Binds `addr` now for plain HTTP that answers every request with a
-/// permanent redirect (308, which keeps the method) to the same host and
-/// path on HTTPS at `https_port`.
+/// permanent redirect (308, which keeps the method) to the same path on
+/// HTTPS at `https_port`, on the host `server`'s settings name (see
+/// [`RedirectTarget`]). Its connections count against the same limits as
+/// the HTTPS listener's.
 pub async fn bind_redirect(
     addr: SocketAddr,
     https_port: u16,
+    server: &gridscada_config::ServerConfig,
+    connections: Arc<Connections>,
 ) -> std::io::Result<(SocketAddr, impl Future<Output = std::io::Result<()>>)> {
     let listener = tokio::net::TcpListener::bind(addr).await?;
     let local = listener.local_addr()?;
+    let target = Arc::new(RedirectTarget::new(server, https_port));
     let router = Router::new().fallback(move |headers: HeaderMap, uri: Uri| async move {
-        redirect(&headers, &uri, https_port)
+        redirect(&headers, &uri, &target)
     });
-    let fut = async move { axum::serve(listener, router).await };
+    let fut = listener::serve(listener, router, connections, Transport::Plain);
     Ok((local, fut))
 }
 
-/// The redirect of one plain-HTTP request; 400 without a usable `Host`.
-fn redirect(headers: &HeaderMap, uri: &Uri, https_port: u16) -> Response {
-    let host = headers
-        .get(header::HOST)
-        .and_then(|h| h.to_str().ok())
-        .and_then(|h| h.parse::<axum::http::uri::Authority>().ok());
-    let Some(host) = host else {
-        return (
-            StatusCode::BAD_REQUEST,
-            "HTTPS only: send a Host header, or use https:// directly\n",
-        )
-            .into_response();
-    };
-    let name = host.host();
-    let authority = if https_port == 443 {
-        name.to_string()
-    } else {
-        format!("{name}:{https_port}")
-    };
+/// Where the redirect listener sends a browser. A 308 is cached, also by
+/// shared caches, so its `Location` must not be whatever host a request
+/// names: it is `[server] public_origin` when that is an HTTPS origin;
+/// otherwise the request's `Host` (with `https_port`) only when it is a
+/// host this server answers to anyway (an IP address, `localhost`,
+/// `allowed_hosts`, the public origin's host, as [`HostPolicy`] decides).
+pub struct RedirectTarget {
+    /// `https://host[:port]`, normal form.
+    public_origin: Option<String>,
+    hosts: HostPolicy,
+    https_port: u16,
+}
+
+impl RedirectTarget {
+    pub fn new(server: &gridscada_config::ServerConfig, https_port: u16) -> Self {
+        RedirectTarget {
+            // An http:// public origin is a proxy's plain side, not where
+            // this redirect should lead.
+            public_origin: server.public_origin().filter(|o| o.starts_with("https://")),
+            hosts: HostPolicy::of_server(server),
+            https_port,
+        }
+    }
+}
+
+/// The redirect of one plain-HTTP request: 400 without a usable `Host`
+/// (when it is needed), 421 for a host this server does not answer to.
+fn redirect(headers: &HeaderMap, uri: &Uri, target: &RedirectTarget) -> Response {
     let path = uri.path_and_query().map_or("/", |p| p.as_str());
-    let location = format!("https://{authority}{path}");
+    let origin = match &target.public_origin {
+        Some(origin) => origin.clone(),
+        None => {
+            let host = headers
+                .get(header::HOST)
+                .and_then(|h| h.to_str().ok())
+                .and_then(|h| h.parse::<axum::http::uri::Authority>().ok());
+            let Some(host) = host else {
+                return (
+                    StatusCode::BAD_REQUEST,
+                    "HTTPS only: send a Host header, or use https:// directly\n",
+                )
+                    .into_response();
+            };
+            if !target.hosts.allows(host.as_str()) {
+                return (
+                    StatusCode::MISDIRECTED_REQUEST,
+                    "this server does not answer to that host name; add it to [server] allowed_hosts\n",
+                )
+                    .into_response();
+            }
+            let name = host.host();
+            if target.https_port == 443 {
+                format!("https://{name}")
+            } else {
+                format!("https://{name}:{}", target.https_port)
+            }
+        }
+    };
+    let location = format!("{origin}{path}");
     match axum::http::HeaderValue::from_str(&location) {
         Ok(v) => (
             StatusCode::PERMANENT_REDIRECT,
@@ -345,21 +394,89 @@ mod tests {
         server_config(&files(&chain, &k2)).unwrap();
     }
 
+    fn target(
+        change: impl FnOnce(&mut gridscada_config::ServerConfig),
+        port: u16,
+    ) -> RedirectTarget {
+        let mut server = gridscada_config::ServerConfig::default();
+        change(&mut server);
+        RedirectTarget::new(&server, port)
+    }
+
+    fn with_origin(origin: &str, port: u16) -> RedirectTarget {
+        let origin = serde_spanned::Spanned::new(0..0, origin.to_string());
+        target(|s| s.public_origin = Some(origin), port)
+    }
+
+    fn host(h: &str) -> HeaderMap {
+        let mut m = HeaderMap::new();
+        m.insert(header::HOST, h.parse().unwrap());
+        m
+    }
+
     #[test]
     fn redirect_keeps_host_path_and_query() {
-        let mut h = HeaderMap::new();
-        h.insert(header::HOST, "scada.example:80".parse().unwrap());
+        let names = target(|s| s.allowed_hosts = vec!["scada.example".into()], 8443);
         let uri: Uri = "/api/tags?x=1".parse().unwrap();
-        let r = redirect(&h, &uri, 8443);
+        let r = redirect(&host("scada.example:80"), &uri, &names);
         assert_eq!(r.status(), StatusCode::PERMANENT_REDIRECT);
         assert_eq!(
             r.headers()[header::LOCATION],
             "https://scada.example:8443/api/tags?x=1"
         );
-        h.insert(header::HOST, "[::1]".parse().unwrap());
-        let r = redirect(&h, &"/".parse().unwrap(), 443);
+        let r = redirect(&host("[::1]"), &"/".parse().unwrap(), &target(|_| {}, 443));
         assert_eq!(r.headers()[header::LOCATION], "https://[::1]/");
-        h.insert(header::HOST, "a b".parse().unwrap());
-        assert_eq!(redirect(&h, &uri, 443).status(), StatusCode::BAD_REQUEST);
+        let r = redirect(&host("127.0.0.1:80"), &uri, &target(|_| {}, 443));
+        assert_eq!(
+            r.headers()[header::LOCATION],
+            "https://127.0.0.1/api/tags?x=1"
+        );
+        assert_eq!(
+            redirect(&host("a b"), &uri, &names).status(),
+            StatusCode::BAD_REQUEST
+        );
+        assert_eq!(
+            redirect(&HeaderMap::new(), &uri, &names).status(),
+            StatusCode::BAD_REQUEST
+        );
+    }
+
+    #[test]
+    fn a_forged_host_is_not_where_the_redirect_leads() {
+        let uri: Uri = "/scada/api/tags?x=1".parse().unwrap();
+        // With a public origin, Location is on it whatever the Host says.
+        let public = with_origin("https://SCADA.example.com:8443/", 9443);
+        for forged in ["evil.example", "evil.example:8443", "127.0.0.1"] {
+            let r = redirect(&host(forged), &uri, &public);
+            assert_eq!(r.status(), StatusCode::PERMANENT_REDIRECT, "{forged}");
+            assert_eq!(
+                r.headers()[header::LOCATION],
+                "https://scada.example.com:8443/scada/api/tags?x=1",
+                "{forged}"
+            );
+        }
+        let r = redirect(&HeaderMap::new(), &uri, &public);
+        assert_eq!(
+            r.headers()[header::LOCATION],
+            "https://scada.example.com:8443/scada/api/tags?x=1"
+        );
+        // Without one, a host this server does not answer to gets no redirect.
+        for t in [
+            target(|_| {}, 443),
+            target(|s| s.allowed_hosts = vec!["scada.example".into()], 443),
+            with_origin("http://scada.example", 443),
+        ] {
+            let r = redirect(&host("evil.example"), &uri, &t);
+            assert_eq!(r.status(), StatusCode::MISDIRECTED_REQUEST);
+            assert!(r.headers().get(header::LOCATION).is_none());
+        }
+        // An http:// public origin (a proxy's plain side) is not the target,
+        // but its host is one of ours.
+        let plain = with_origin("http://scada.example", 8443);
+        let r = redirect(&host("scada.example"), &uri, &plain);
+        assert_eq!(
+            r.headers()[header::LOCATION],
+            "https://scada.example:8443/scada/api/tags?x=1"
+        );
     }
 }

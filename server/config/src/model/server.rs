@@ -39,10 +39,15 @@ pub struct ServerConfig {
     /// `docs/REVERSE_PROXY.md`.
     #[serde(default)]
     pub public_origin: Option<Spanned<String>>,
-    /// Proxies (CIDRs) whose `Forwarded` / `X-Forwarded-*` headers are
-    /// believed; nobody else's are.
+    /// Proxies (CIDRs) whose forwarding header is believed; nobody else's
+    /// is.
     #[serde(default)]
     pub trusted_proxies: Vec<Spanned<String>>,
+    /// The header the trusted proxies name the client in:
+    /// `x-forwarded-for` (default, with `X-Forwarded-Proto`) or `forwarded`
+    /// (RFC 7239). The other one is never read.
+    #[serde(default)]
+    pub forwarded_header: Option<Spanned<String>>,
     /// The sub-path everything is served under (`/scada`); empty: the root.
     #[serde(default)]
     pub base_path: Option<Spanned<String>>,
@@ -56,6 +61,95 @@ pub struct ServerConfig {
     /// as it comes. Longer windows send fewer, larger messages.
     #[serde(default = "default_live_merge_ms")]
     pub live_merge_ms: Spanned<u32>,
+    /// Limits on the HTTP(S) listeners' connections
+    /// (`[server.connections]`).
+    #[serde(default)]
+    pub connections: ConnectionsConfig,
+    /// `[server.access.GROUP]`: what a user group may do beyond what its
+    /// screens give it, by group name (docs/ACCESS.md).
+    #[serde(default)]
+    pub access: std::collections::BTreeMap<Spanned<String>, GroupAccess>,
+}
+
+/// `[server.connections]`: what one client, or all together, may hold open
+/// on the HTTP, HTTPS and redirect listeners before a request is parsed.
+/// Slow or idle connections are what exhaust a server's descriptors; these
+/// bound them (the web crate's `listener.rs`).
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ConnectionsConfig {
+    /// Open connections on all listeners together. The server lowers it to
+    /// fit the process's open-file limit (`LimitNOFILE`), keeping room for
+    /// its database and field connections.
+    #[serde(default = "default_max_open")]
+    pub max_open: Spanned<u32>,
+    /// Open connections from one client address (a trusted proxy's own
+    /// address is exempt; its clients are counted per request instead).
+    /// A control room behind one NAT address shares this.
+    #[serde(default = "default_max_per_client")]
+    pub max_per_client: Spanned<u32>,
+    /// Seconds a connection may take to send a request's headers; a
+    /// keep-alive connection idle this long is closed too.
+    #[serde(default = "default_header_timeout_s")]
+    pub header_timeout_s: Spanned<f64>,
+    /// Seconds a client may take to finish the TLS handshake.
+    #[serde(default = "default_tls_handshake_timeout_s")]
+    pub tls_handshake_timeout_s: Spanned<f64>,
+}
+
+impl Default for ConnectionsConfig {
+    fn default() -> Self {
+        ConnectionsConfig {
+            max_open: default_max_open(),
+            max_per_client: default_max_per_client(),
+            header_timeout_s: default_header_timeout_s(),
+            tls_handshake_timeout_s: default_tls_handshake_timeout_s(),
+        }
+    }
+}
+
+fn default_max_open() -> Spanned<u32> {
+    Spanned::new(0..0, 4096)
+}
+fn default_max_per_client() -> Spanned<u32> {
+    Spanned::new(0..0, 256)
+}
+fn default_header_timeout_s() -> Spanned<f64> {
+    Spanned::new(0..0, 10.0)
+}
+fn default_tls_handshake_timeout_s() -> Spanned<f64> {
+    Spanned::new(0..0, 10.0)
+}
+
+/// `[server.access.GROUP]`: one user group's rights beyond its screens.
+#[derive(Debug, Clone, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct GroupAccess {
+    /// Tags the group may write although no screen of theirs shows them:
+    /// names, or a prefix ending in `*` (`SS2.*`). A user writes the tags
+    /// they may read and these, each within the tag's `write_role`.
+    #[serde(default)]
+    pub write: Vec<Spanned<String>>,
+}
+
+impl ServerConfig {
+    /// Whether `[server.access.GROUP] write` names `tag` for `group`.
+    pub fn grants_write(&self, group: &str, tag: &str) -> bool {
+        self.access.get(group).is_some_and(|a| {
+            a.write
+                .iter()
+                .any(|p| crate::pattern_matches(p.get_ref(), tag))
+        })
+    }
+}
+
+/// A user or group name: 1 to 64 printable characters, without spaces at
+/// either end.
+pub fn is_account_name(name: &str) -> bool {
+    name.trim() == name
+        && !name.is_empty()
+        && name.chars().count() <= 64
+        && !name.chars().any(char::is_control)
 }
 
 /// Each batch as it comes: a message is serialized once per feed, whatever
@@ -99,6 +193,12 @@ impl ServerConfig {
             .iter()
             .filter_map(|c| crate::Cidr::parse(c.get_ref()).ok())
             .collect()
+    }
+    pub fn forwarded_header(&self) -> crate::ForwardedHeader {
+        self.forwarded_header
+            .as_ref()
+            .and_then(|h| crate::ForwardedHeader::parse(h.get_ref()).ok())
+            .unwrap_or_default()
     }
 }
 
@@ -147,6 +247,11 @@ pub struct SessionsConfig {
     /// Seconds before an idle expiry when the HMI warns.
     #[serde(default = "default_warn_s")]
     pub warn_s: Spanned<u64>,
+    /// Milliseconds a request waits for the store to confirm its session's
+    /// user; then (a database outage) it goes on with the rights the store
+    /// last gave that user.
+    #[serde(default = "default_store_wait_ms")]
+    pub store_wait_ms: Spanned<u64>,
 }
 
 impl Default for SessionsConfig {
@@ -155,6 +260,7 @@ impl Default for SessionsConfig {
             idle_minutes: no_idle_overrides(),
             absolute_hours: default_absolute_hours(),
             warn_s: default_warn_s(),
+            store_wait_ms: default_store_wait_ms(),
         }
     }
 }
@@ -189,6 +295,9 @@ fn default_absolute_hours() -> Spanned<f64> {
 fn default_warn_s() -> Spanned<u64> {
     Spanned::new(0..0, 60)
 }
+fn default_store_wait_ms() -> Spanned<u64> {
+    Spanned::new(0..0, 500)
+}
 
 impl Default for ServerConfig {
     fn default() -> Self {
@@ -202,9 +311,12 @@ impl Default for ServerConfig {
             tls: None,
             public_origin: None,
             trusted_proxies: vec![],
+            forwarded_header: None,
             base_path: None,
             site: None,
             live_merge_ms: default_live_merge_ms(),
+            connections: ConnectionsConfig::default(),
+            access: Default::default(),
         }
     }
 }

@@ -76,6 +76,7 @@ pub async fn web_state(db: Arc<TagDb>, dir: &Path) -> (WebState, String) {
         devices: None,
         tls: false,
         live: Default::default(),
+        connections: Default::default(),
     };
     (state, format!("{}={token}", auth::COOKIE))
 }
