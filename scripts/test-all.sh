@@ -2,7 +2,8 @@
 # The whole gridscada test suite, on a fresh Debian machine.
 # It installs what the tests need first (Debian packages, Python test peers,
 # a throwaway PostgreSQL cluster when none runs on 127.0.0.1:5432), then runs
-# formatting and lint checks, every Rust test, and the end-to-end tests.
+# formatting, dependency and licence checks, lints, every Rust test, and the
+# end-to-end tests.
 #
 #     bash scripts/test-all.sh               # everything
 #     bash scripts/test-all.sh --setup-only  # stages 1-3 (packages, toolchain,
@@ -33,6 +34,13 @@ limit() {
     fi
     return "$rc"
 }
+
+# The tests talk only to servers of their own on loopback (127.0.0.1 to
+# 127.0.0.9), never through a proxy set for the package registries. curl
+# (>= 7.86) and Python's requests read the range 127.0.0.0/8; Python's
+# urllib and websockets match the addresses one by one.
+loopback="localhost,::1,127.0.0.0/8,$(seq -s, -f '127.0.0.%g' 1 9)"
+export no_proxy="${no_proxy:+$no_proxy,}$loopback" NO_PROXY="${NO_PROXY:+$NO_PROXY,}$loopback"
 
 # A command as root (sudo when not root), as an array so `limit` can run it.
 root_cmd=()
@@ -120,6 +128,11 @@ if ! command -v cargo-machete >/dev/null 2>&1; then
     limit 900 cargo install --locked --quiet cargo-machete
 fi
 limit 300 cargo machete
+# A short script over `cargo metadata` rather than cargo-deny or cargo-about,
+# which would take minutes to build on CI's two cores.
+step "licences of the product's dependencies (scripts/licenses.py)"
+limit 60 python3 scripts/licenses.py self-test
+limit 300 python3 scripts/licenses.py check
 step "cargo clippy"
 limit 1800 cargo clippy --workspace --all-targets -- -D warnings
 step "cargo test"

@@ -31,7 +31,8 @@ import { noteActivity } from './session.js';
 
 /**
  * One request. `opts.user`: the user asked for it (a click), so it is
- * activity even if the page reports itself hidden.
+ * activity even if the page reports itself hidden. `opts.timeoutMs`: give
+ * up (as a network error) when no answer came by then.
  */
 export async function api(method, path, body, opts = {}) {
   const init = { method, credentials: 'same-origin', headers: { Accept: 'application/json' } };
@@ -39,6 +40,7 @@ export async function api(method, path, body, opts = {}) {
   // an unwatched session alive (docs/ACCESS.md).
   const hidden = !opts.user && document.visibilityState !== 'visible';
   if (hidden) init.headers['X-Gridscada-Background'] = '1';
+  if (opts.timeoutMs) init.signal = AbortSignal.timeout(opts.timeoutMs);
   if (body !== undefined) {
     init.headers['Content-Type'] = 'application/json';
     init.body = JSON.stringify(body);

@@ -135,7 +135,7 @@ function renderFrame() {
     state.footer = new AlarmFooter(footer, s);
     startCommLight();
     watchPanelModes();
-    state.offPair = watchPair($('pair-light'));
+    if (s.pair) state.offPair = watchPair($('pair-light'));
   } else {
     live.stop();
     beeper.setUser(null); // a log out ends the horn's mute: it belonged to the session

@@ -2,11 +2,15 @@
 // HMI talks to, whether it is the active one, and whether the pair is whole;
 // and the HMI moves to the active server on a failover.
 //
-// It follows `/api/pair` (404 on a server alone: nothing is shown). When the
-// server it was on stops being active, or stops answering for longer than a
-// takeover, it goes to the active server's configured address (or, with no
-// answer, to the next server of the pair). An HMI opened on a standby stays
-// there, read-only, with a link to the active server.
+// It follows `/api/pair`, on a server of a pair only (`/api/session` says
+// `pair`; a server alone shows nothing). The server's answer follows its own
+// leadership, so the header stops saying "active" as soon as the server
+// steps down; an answer that does not come within a poll counts as no
+// answer. When the server it was on stops being active, or stops answering
+// for longer than a takeover, it goes to the active server's configured
+// address (or, with no answer, to the next server of the pair). An HMI
+// opened on a standby stays there, read-only, with a link to the active
+// server.
 //
 // The session cookie belongs to this server's host, and the other server
 // may be another host: so the HMI keeps a failover ticket of this server
@@ -77,7 +81,7 @@ export function watchPair(light) {
   const check = async () => {
     if (stopped) return;
     try {
-      const v = await api('GET', '/api/pair');
+      const v = await api('GET', '/api/pair', undefined, { timeoutMs: EVERY_MS });
       silentSince = null;
       last = v;
       draw(v);

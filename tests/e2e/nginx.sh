@@ -3,11 +3,14 @@
 # style from a temp dir, proxying /scada/ to `gridscada demo` served with
 # base_path, trusted_proxies and public_origin. Log in, live push over the
 # WebSocket, a confirmed tag write and login throttling per real client, all
-# through nginx; a forged X-Forwarded-For straight to gridscada is ignored.
+# through nginx; a forged X-Forwarded-For straight to gridscada is ignored;
+# forged Forwarded and X-Forwarded-For through nginx neither escape the
+# lockout, reach the event log nor open /metrics (of a second server,
+# `serve`). nginx runs the location block of docs/REVERSE_PROXY.md.
 # The checks are in nginx_proxy.py.
 #
 # Needs: GRIDSCADA_BIN (default target/debug/gridscada), nginx, curl, python3
-# with websockets (tests/requirements.txt), loopback addresses 127.0.0.2-9
+# with websockets (tests/requirements.txt), loopback addresses 127.0.0.2-12
 # (Linux answers the whole of 127.0.0.0/8 on lo).
 # Prints "N passed, M failed" last; exits non-zero on any failure.
 set -uo pipefail

@@ -2,12 +2,20 @@
 
 The demo plant is served with base_path = "/scada", trusted_proxies =
 ["127.0.0.1/32"] and public_origin = nginx's origin; nginx (started from a
-temp dir) proxies /scada/ to it, rewriting Host and adding X-Forwarded-For,
-X-Forwarded-Proto and the WebSocket upgrade headers. Through nginx: the HMI
+temp dir) proxies /scada/ to it, rewriting Host, setting X-Forwarded-For
+and X-Forwarded-Proto, clearing Forwarded and passing the WebSocket upgrade
+headers. Through nginx: the HMI
 loads under /scada/, a login with the browser's Origin works, live pushes
 arrive over the WebSocket, a tag write is confirmed, and failed logins lock
 out only the real client (curl --interface 127.0.0.2 vs 127.0.0.3). Straight
 to gridscada from an untrusted address, a forged X-Forwarded-For is ignored.
+Forged Forwarded and X-Forwarded-For headers sent through nginx (a new
+address on every try, also from 127.0.0.1, the proxy's own address) neither
+escape the login lockout nor reach the event log, and do not open
+/metrics: a second server (`serve`, where /metrics is not open as in
+`demo`) with metrics_token and a metrics_allow address the client forges.
+nginx's `location /scada/` block is the one docs/REVERSE_PROXY.md shows,
+read from it.
 nginx also terminates HTTPS, with a certificate from `gridscada cert
 self-signed`, on the public origin: over it, a login gets a Secure cookie,
 the live socket (wss) pushes, and a write is confirmed.
@@ -26,6 +34,7 @@ import ssl
 import subprocess
 import sys
 import tempfile
+import textwrap
 import time
 
 import websockets
@@ -105,19 +114,7 @@ http {{
     }}
     server {{
         listen 127.0.0.1:{nginx_port};
-        location /scada/ {{
-            proxy_pass http://127.0.0.1:{gs_port};
-            proxy_http_version 1.1;
-            # A Host gridscada cannot compare an Origin with.
-            proxy_set_header Host backend.internal;
-            proxy_set_header X-Forwarded-For $proxy_add_x_forwarded_for;
-            proxy_set_header X-Forwarded-Proto $scheme;
-            proxy_set_header Upgrade $http_upgrade;
-            proxy_set_header Connection $connection_upgrade;
-            proxy_read_timeout 1h;
-            # Started as root, the workers run as nobody: no temp files.
-            proxy_max_temp_file_size 0;
-        }}
+{demo_location}
     }}
     # The public origin: nginx terminates HTTPS and tells gridscada so
     # (X-Forwarded-Proto https).
@@ -125,22 +122,37 @@ http {{
         listen 127.0.0.1:{tls_port} ssl;
         ssl_certificate {cert};
         ssl_certificate_key {key};
-        location /scada/ {{
-            proxy_pass http://127.0.0.1:{gs_port};
-            proxy_http_version 1.1;
-            # A Host gridscada cannot compare an Origin with.
-            proxy_set_header Host backend.internal;
-            proxy_set_header X-Forwarded-For $proxy_add_x_forwarded_for;
-            proxy_set_header X-Forwarded-Proto $scheme;
-            proxy_set_header Upgrade $http_upgrade;
-            proxy_set_header Connection $connection_upgrade;
-            proxy_read_timeout 1h;
-            # Started as root, the workers run as nobody: no temp files.
-            proxy_max_temp_file_size 0;
-        }}
+{demo_location}
+    }}
+    # The server whose /metrics is closed.
+    server {{
+        listen 127.0.0.1:{metrics_nginx_port};
+{metrics_location}
     }}
 }}
 """
+
+
+def documented_location(gs_port):
+    """The `location /scada/ {...}` block of docs/REVERSE_PROXY.md's nginx
+    example, proxying to `gs_port`, with the test's own Host (one gridscada
+    cannot compare an Origin with) and no temp files (started as root, the
+    workers run as nobody). None if the doc no longer has the lines."""
+    with open(os.path.join(ROOT, "docs", "REVERSE_PROXY.md")) as f:
+        doc = f.read()
+    try:
+        example = doc.split("```nginx\n", 1)[1].split("```", 1)[0]
+        start = example.index("    location /scada/ {")
+        end = example.index("\n    }\n", start) + len("\n    }")
+    except (IndexError, ValueError):
+        return None
+    block = example[start:end]
+    for line, ours in (("proxy_pass http://127.0.0.1:8080;", f"proxy_pass http://127.0.0.1:{gs_port};"),
+                       ("proxy_set_header Host $host;", "proxy_set_header Host backend.internal;")):
+        if block.count(line) != 1:
+            return None
+        block = block.replace(line, ours)
+    return textwrap.indent(block[: -len("}")] + "    proxy_max_temp_file_size 0;\n    }", "    ")
 
 
 def main():
@@ -158,7 +170,7 @@ def main():
                 except subprocess.TimeoutExpired:
                     p.kill()
         if not all(results) or not results:
-            for log in ("server.log", "nginx-error.log"):
+            for log in ("server.log", "metrics-server.log", "nginx-error.log"):
                 path = os.path.join(tmp, log)
                 if os.path.exists(path):
                     print(f"--- {log} (last lines)")
@@ -216,9 +228,23 @@ def run(tmp, procs):
     direct = f"http://127.0.0.1:{gs_port}/scada"
     if not check("setup: gridscada demo answers under /scada", wait_http(f"{direct}/healthz", gs, "gridscada")):
         return
+    # A second server, `serve`: its /metrics wants the token, except from
+    # an address in metrics_allow (one the clients below forge).
+    ms_port, metrics_nginx_port = free_port(), free_port()
+    ms = start_metrics_server(tmp, ms_port)
+    procs.append(ms)
+    if not check("setup: gridscada serve answers under /scada",
+                 wait_http(f"http://127.0.0.1:{ms_port}/scada/healthz", ms, "gridscada serve")):
+        return
+    demo_location = documented_location(gs_port)
+    metrics_location = documented_location(ms_port)
+    if not check("setup: docs/REVERSE_PROXY.md shows the nginx location block",
+                 demo_location and metrics_location, "no `location /scada/` with proxy_pass and Host lines"):
+        return
     with open(os.path.join(tmp, "nginx.conf"), "w") as f:
-        f.write(NGINX_CONF.format(tmp=tmp, nginx_port=nginx_port, gs_port=gs_port,
-                                  tls_port=tls_port, cert=cert, key=key))
+        f.write(NGINX_CONF.format(tmp=tmp, nginx_port=nginx_port, tls_port=tls_port, cert=cert, key=key,
+                                  metrics_nginx_port=metrics_nginx_port, demo_location=demo_location,
+                                  metrics_location=metrics_location))
     ng = subprocess.Popen(
         [nginx, "-p", tmp, "-c", os.path.join(tmp, "nginx.conf")],
         stdout=subprocess.DEVNULL, stderr=open(os.path.join(tmp, "nginx-stderr.log"), "w"),
@@ -279,7 +305,7 @@ def run(tmp, procs):
     check("127.0.0.3 behind the same proxy still logs in", st == 200, st)
 
     # A client cannot pose as another by sending its own X-Forwarded-For:
-    # through nginx, the hop nginx appends is the one believed ...
+    # through nginx, nginx's own word on the client replaces it ...
     forged = iter(f"X-Forwarded-For: 10.66.0.{i}" for i in range(1, 250))
     locked = fail_logins(url, admin_user, iface="127.0.0.7", headers=[origin], forged=forged)
     check("a forged X-Forwarded-For through nginx does not escape the lockout", locked, "never throttled")
@@ -299,6 +325,23 @@ def run(tmp, procs):
     sc = h.get("set-cookie", [""])[0]
     check("proto=https from the trusted proxy gives a Secure cookie", st == 200 and "; Secure" in sc, (st, sc))
 
+    # Forged headers through nginx, a new address on every try: the
+    # client's own Forwarded (nginx passes it through) ...
+    forged = iter(f"Forwarded: for=10.88.0.{i}" for i in range(1, 250))
+    locked = fail_logins(url, "forger-fwd", iface="127.0.0.10", headers=[origin], forged=forged)
+    check("a forged Forwarded through nginx does not escape the lockout (127.0.0.10)", locked, "never throttled")
+    # ... and X-Forwarded-For from a client on the proxy's own address, which
+    # is a trusted proxy: nginx must replace the header, not append to it.
+    forged = iter(f"X-Forwarded-For: 10.99.0.{i}" for i in range(1, 250))
+    locked = fail_logins(url, "forger-xff", iface="127.0.0.1", headers=[origin], forged=forged)
+    check("a forged X-Forwarded-For from the proxy's own address does not escape the lockout", locked,
+          "never throttled")
+    sup_user, sup_pass = accounts["supervisor"]
+    st, _, body = curl(url, method="POST", body={"username": sup_user, "password": sup_pass},
+                       iface="127.0.0.11", headers=[origin, "Forwarded: for=8.8.8.8", "X-Forwarded-For: 8.8.4.4"])
+    check("a login with forged headers through nginx works (127.0.0.11)", st == 200, (st, body[:200]))
+    metrics_checks(f"http://127.0.0.1:{metrics_nginx_port}/scada/metrics")
+
     # The audit trail names the real clients, never the proxy.
     st, h, body = curl(f"{via}/api/session", method="POST", body={"username": admin_user, "password": admin_pass},
                        iface="127.0.0.9", headers=[origin])
@@ -311,10 +354,61 @@ def run(tmp, procs):
           logins[:5] or (st, body[:200]))
     check("events record the untrusted peer, not its forged address",
           any("from 127.0.0.5" in t for t in logins) and not any("10.66.0." in t for t in logins), logins[:8])
-    check("no login is recorded as from the proxy", not any("from 127.0.0.1:" in t or t.endswith("from 127.0.0.1") for t in logins), logins[:8])
+    # forger-xff really is on 127.0.0.1 (nginx's own address).
+    others = [t for t in logins if "'forger-xff'" not in t]
+    check("no login is recorded as from the proxy",
+          not any("from 127.0.0.1:" in t or t.endswith("from 127.0.0.1") for t in others), others[:8])
+    forgers = [t for t in logins if "'forger-" in t]
+    check("forged Forwarded through nginx: failed logins recorded from the real client",
+          forgers and any("'forger-fwd' from 127.0.0.10:" in t for t in forgers), forgers[:4])
+    check("forged X-Forwarded-For through nginx: failed logins recorded from the real client",
+          any("'forger-xff' from 127.0.0.1:" in t for t in forgers), forgers[:4])
+    check("a login with forged headers is recorded from its real client",
+          any(t.endswith(f"{sup_user} logged in from 127.0.0.11") for t in logins), logins[:8])
+    check("no forged address reaches the event log",
+          not any(a in t for t in logins for a in ("10.88.0.", "10.99.0.", "8.8.8.8", "8.8.4.4")),
+          [t for t in logins if "10.88.0." in t or "10.99.0." in t or "8.8." in t][:4])
 
     # HTTPS at nginx, as a site runs it: the public origin.
     https_checks(f"{public}/scada", public, cert, op_user, op_pass)
+
+
+def start_metrics_server(tmp, port):
+    """`gridscada serve` on a one-device plant under /scada behind the same
+    kind of proxy, /metrics closed but to its token and 10.77.0.1."""
+    plant = os.path.join(tmp, "metrics-plant")
+    os.makedirs(plant)
+    with open(os.path.join(plant, "gridscada.toml"), "w") as f:
+        f.write('tag_files = ["tags.toml"]\n'
+                "[server]\n"
+                'trusted_proxies = ["127.0.0.1/32"]\n'
+                'base_path = "/scada"\n'
+                'allowed_hosts = ["backend.internal"]\n'
+                'metrics_token = "scrape-secret"\n'
+                'metrics_allow = ["10.77.0.1"]\n')
+    with open(os.path.join(plant, "tags.toml"), "w") as f:
+        # Nothing listens there: the device is simply down.
+        f.write('[[device]]\nname = "D1"\nprotocol = "tcp"\naddress = "127.0.0.1:9"\n')
+    log = open(os.path.join(tmp, "metrics-server.log"), "w")
+    return subprocess.Popen(
+        [BIN, "serve", "--config", plant, "--http", f"127.0.0.1:{port}", "--data", os.path.join(tmp, "metrics-data")],
+        stdout=log, stderr=subprocess.STDOUT,
+    )
+
+
+def metrics_checks(url):
+    """/metrics through nginx: a forged header naming the metrics_allow
+    address opens nothing; the token does."""
+    st, _, body = curl(url, iface="127.0.0.12")
+    check("/metrics through nginx wants the token", st == 401, (st, body[:200]))
+    for iface, forged in (("127.0.0.12", "Forwarded: for=10.77.0.1"),
+                          ("127.0.0.12", "X-Forwarded-For: 10.77.0.1"),
+                          ("127.0.0.1", "X-Forwarded-For: 10.77.0.1"),
+                          ("127.0.0.1", "Forwarded: for=10.77.0.1")):
+        st, _, body = curl(url, iface=iface, headers=[forged])
+        check(f"/metrics through nginx: '{forged}' from {iface} does not open it", st == 401, (st, body[:200]))
+    st, _, body = curl(url, iface="127.0.0.12", headers=["Authorization: Bearer scrape-secret"])
+    check("/metrics through nginx with the token", st == 200 and b"gridscada_build_info" in body, (st, body[:200]))
 
 
 def https_checks(via, public, cert, user, password):

@@ -117,6 +117,9 @@ check "plain HTTP is redirected with 308" grep -q '^HTTP/1.1 308' "$tmp/redir.h"
 check "the redirect keeps host, path and query" grep -qi "^location: https://127.0.0.1:$port/api/tags?x=1" <(tr -d '\r' <"$tmp/redir.h")
 check "the redirect serves nothing else (a POST is redirected too)" sh -c \
     "curl -sS -o /dev/null -w '%{http_code}' -X POST -d x http://127.0.0.1:$rport/api/session | grep -qx 308"
+curl -sS -o /dev/null -D "$tmp/forged.h" -H 'Host: evil.example' "http://127.0.0.1:$rport/"
+check "a Host the server does not answer to gets 421, no redirect" sh -c \
+    "grep -q '^HTTP/1.1 421' '$tmp/forged.h' && ! grep -qi '^location:' '$tmp/forged.h'"
 check "following the redirect reaches the HMI over HTTPS" \
     curl -fsSL --cacert "$conf/cert.pem" -o /dev/null "http://localhost:$rport/healthz"
 

@@ -6,7 +6,7 @@ import { h, replace, field } from '../dom.js';
 import { fmtTime, pad } from '../format.js';
 import { siteChoice } from '../sites.js';
 
-const KNOWN_TYPES = ['login', 'logout', 'login_failed', 'command', 'command_refused', 'mode', 'reset', 'write', 'write_failed',
+const KNOWN_TYPES = ['login', 'logout', 'login_failed', 'command', 'command_refused', 'mode', 'reset', 'write', 'write_refused', 'write_failed',
   'ack', 'shelve', 'unshelve', 'sequence', 'dispatch', 'simulation', 'training', 'user', 'system'];
 
 const dateValue = (d) => `${d.getFullYear()}-${pad(d.getMonth() + 1)}-${pad(d.getDate())}`;

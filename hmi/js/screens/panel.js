@@ -70,6 +70,11 @@ export function lastSequence(status) {
   return parts.join(', ');
 }
 
+/** How the last sequence was resumed after a restart or a failover ("" if it was not). */
+export function resumedSequence(status) {
+  return (status && typeof status.resumed === 'string') ? status.resumed : '';
+}
+
 const breakerLabel = (name) => (name === 'elcb' ? 'ELCB' : name === 'mccb' ? 'MCCB' : name.replace(/^zone(\d+)$/, 'Zone $1'));
 
 export function panelScreen(id) {
@@ -112,7 +117,8 @@ export function panelScreen(id) {
           h('dt', { text: 'Isolated zones' }), dd('faulty'),
           h('dt', { text: 'Lockout' }), dd('lockout'),
           h('dt', { text: 'Communication' }), dd('comm'),
-          h('dt', { text: 'Last sequence' }), dd('last')),
+          h('dt', { text: 'Last sequence' }), dd('last'),
+          h('dt', { text: 'Resumed' }), dd('resumed')),
         modeBtns, resetBtn);
 
       // Breakers: state and commands.
@@ -152,6 +158,7 @@ export function panelScreen(id) {
         f.comm.textContent = status.comm_ok ? 'all signals Good' : 'signals with Bad quality';
         f.comm.className = status.comm_ok ? '' : 'badge badge-bad';
         f.last.textContent = lastSequence(status);
+        f.resumed.textContent = resumedSequence(status) || 'no';
         if (diagram) diagram.panelStatus(status);
         if (modeBtns) {
           modeBtns.children[0].setAttribute('aria-pressed', String(!manual));

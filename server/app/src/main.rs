@@ -10,6 +10,7 @@ mod demo_plant;
 mod dispatch_cmd;
 mod https;
 mod logging;
+mod opcua_cmd;
 mod pair;
 mod replay;
 mod reports_cmd;
@@ -68,6 +69,10 @@ enum Command {
         /// The edge node id with --mqtt.
         #[arg(long, value_name = "ID", default_value = runtime::northbound::DEMO_NODE, requires = "mqtt")]
         mqtt_node: String,
+        /// With --mqtt: birth only while this primary host application's
+        /// STATE says online, and buffer while it is offline (Sparkplug 3.0).
+        #[arg(long, value_name = "ID", requires = "mqtt")]
+        mqtt_primary_host: Option<String>,
         /// Serve OPC UA on this loopback port (every endpoint, the demo's
         /// accounts; see docs/NORTHBOUND.md).
         #[arg(long, value_name = "PORT")]
@@ -155,6 +160,31 @@ enum Command {
     Cert {
         #[command(subcommand)]
         command: CertCommand,
+    },
+    /// The OPC UA server's client certificates ([opcua], docs/NORTHBOUND.md).
+    Opcua {
+        #[command(subcommand)]
+        command: OpcuaCommand,
+    },
+}
+
+#[derive(Subcommand)]
+enum OpcuaCommand {
+    /// Trust a client certificate (DER or PEM; a file from the store's
+    /// rejected/ folder or one the client's maker gave): copy it into
+    /// trusted/ under the name the server looks for, remove it from
+    /// rejected/, and print its subject and thumbprint. A running server
+    /// accepts the client at its next connection.
+    Trust {
+        file: PathBuf,
+        #[command(flatten)]
+        at: UserTable,
+    },
+    /// List the trusted and rejected client certificates: subject,
+    /// thumbprint, validity, file.
+    List {
+        #[command(flatten)]
+        at: UserTable,
     },
 }
 
@@ -246,10 +276,11 @@ enum UserCommand {
     },
 }
 
-/// Which user table a `user` command works on.
+/// Which plant a `user`, `report` or `opcua` command works on.
 #[derive(clap::Args)]
 struct UserTable {
-    /// The plant whose database holds the users (the file `serve` runs).
+    /// The plant (the file `serve` runs): its database, data folder and
+    /// [opcua] store.
     #[arg(long, conflicts_with = "data")]
     config: Option<PathBuf>,
     /// The demo's data folder (when not using --config).
@@ -298,6 +329,7 @@ fn main() -> ExitCode {
             speed,
             mqtt,
             mqtt_node,
+            mqtt_primary_host,
             opcua,
         } => {
             let live = match scenario {
@@ -313,6 +345,7 @@ fn main() -> ExitCode {
             let mqtt = mqtt.map(|broker| runtime::northbound::DemoMqtt {
                 broker,
                 node: mqtt_node,
+                primary_host: mqtt_primary_host,
             });
             runtime::block_on(runtime::demo(http, data, config, live, mqtt, opcua))
         }
@@ -381,6 +414,19 @@ fn main() -> ExitCode {
         Command::Report { period, at } => runtime::block_on(async move {
             runtime::report(reports_cmd::run(period, at.target()).await)
         }),
+        Command::Opcua { command } => {
+            let done = match command {
+                OpcuaCommand::Trust { file, at } => opcua_cmd::trust(&file, at.target()),
+                OpcuaCommand::List { at } => opcua_cmd::list(at.target()),
+            };
+            match done {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(e) => {
+                    eprintln!("error: {e:#}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
         Command::Cert {
             command:
                 CertCommand::SelfSigned {

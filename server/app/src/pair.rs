@@ -425,7 +425,7 @@ pub async fn panel_host(
             inner_rx,
             status.clone(),
             h.notices.clone(),
-            retained,
+            retained.map(|r| (r, fault_isolation::Takeover::Failover)),
         );
         let saver = sinks::panel_retained(
             h.store.clone(),

@@ -27,7 +27,7 @@ use crate::{demo_plant, settings, sinks, users};
 #[cfg(test)]
 mod audit_tests;
 pub mod northbound;
-mod opcua;
+pub(crate) mod opcua;
 #[cfg(test)]
 mod shutdown_tests;
 mod sources;
@@ -601,7 +601,9 @@ impl Stack {
                 cmd_rx,
                 status_tx,
                 panel_notices_tx.clone(),
-                retained.remove(&id),
+                retained
+                    .remove(&id)
+                    .map(|r| (r, fault_isolation::Takeover::Restart)),
             );
             tasks.spawn(sinks::panel_retained(
                 store.clone(),
@@ -976,7 +978,32 @@ pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
         })),
         tls: stack.plant.tls.is_some(),
         live: Default::default(),
+        connections: Arc::new(connections(&stack.plant)),
     }
+}
+
+/// The listeners' connection limits (`[server.connections]`), fitted to
+/// the open-file limit (raised to its hard limit first), so that the
+/// server refuses or makes room before the process runs out of
+/// descriptors.
+fn connections(plant: &gridscada_config::Plant) -> gridscada_web::listener::Connections {
+    use gridscada_web::listener::{raise_open_file_limit, ConnectionLimits, Connections};
+    let configured = ConnectionLimits::from_config(&plant.server.connections);
+    let limits = match raise_open_file_limit() {
+        Some(descriptors) => configured.fitted_to(descriptors),
+        None => configured,
+    };
+    if limits.max_open < configured.max_open {
+        tracing::info!(
+            max_open = limits.max_open,
+            configured = configured.max_open,
+            "[server.connections] max_open lowered to fit the open-file limit (LimitNOFILE)"
+        );
+    }
+    Connections::new(
+        limits,
+        gridscada_web::proxy::TrustedProxies::of_server(&plant.server),
+    )
 }
 
 /// Ctrl-C or SIGTERM (a service manager stopping us).

@@ -185,7 +185,7 @@ fn another_plant_is_usable_whole() {
         assert_eq!(body["error"], "out_of_limits", "{body}");
     }
     assert_eq!(op.get_ok("/api/tags/RTU1.Setpoint")["value"], 31.5);
-    let refused = events(&mut admin, "kind=write_failed");
+    let refused = events(&mut admin, "kind=write_refused");
     assert!(
         refused.iter().any(|e| e["message"]
             .as_str()

@@ -490,10 +490,10 @@ fn comm_alarm_delays_are_checked() {
 
 #[test]
 fn session_policy_is_checked() {
-    let main = "tag_files = [\"tags.toml\"]\n[server.sessions]\nidle_minutes = { operator = -1.0, display = 0.0 }\nabsolute_hours = 1000.0\nwarn_s = 7200\n";
+    let main = "tag_files = [\"tags.toml\"]\n[server.sessions]\nidle_minutes = { operator = -1.0, display = 0.0 }\nabsolute_hours = 1000.0\nwarn_s = 7200\nstore_wait_ms = 0\n";
     let tags = format!("{DEVICE}\n[[tag]]\nname = \"A.V\"\ndevice = \"D1\"\nkind = \"input_register\"\naddress = 0\n");
     let got = problems(main, &tags);
-    assert_eq!(got.len(), 3, "{got:?}");
+    assert_eq!(got.len(), 4, "{got:?}");
     assert!(
         got[0].contains("idle_minutes.operator: -1 must be 0 (never) to 10080"),
         "{got:?}"
@@ -504,6 +504,10 @@ fn session_policy_is_checked() {
     );
     assert!(got[2].contains("warn_s: at most 3600 seconds"), "{got:?}");
     assert!(
+        got[3].contains("gridscada.toml:6:17: error: [server.sessions] store_wait_ms: 0 must be 10 to 10000 milliseconds"),
+        "{got:?}"
+    );
+    assert!(
         got.iter().all(|g| g.starts_with("DIR/gridscada.toml:")),
         "{got:?}"
     );
@@ -512,7 +516,7 @@ fn session_policy_is_checked() {
 #[test]
 fn reverse_proxy_settings_are_checked_where_they_stand() {
     let main = format!(
-        "{MAIN}[server]\npublic_origin = \"https://scada.example.com/scada\"\ntrusted_proxies = [\"127.0.0.1/32\", \"10.0.0.1/8\", \"proxy.lan\"]\nbase_path = \"scada/\"\n"
+        "{MAIN}[server]\npublic_origin = \"https://scada.example.com/scada\"\ntrusted_proxies = [\"127.0.0.1/32\", \"10.0.0.1/8\", \"proxy.lan\"]\nbase_path = \"scada/\"\nforwarded_header = \"x-real-ip\"\n"
     );
     assert_problems(
         &main,
@@ -522,6 +526,7 @@ fn reverse_proxy_settings_are_checked_where_they_stand() {
             "DIR/gridscada.toml:4:36: error: [server] trusted_proxies: '10.0.0.1/8' has address bits set past the /8 (did you mean 10.0.0.0/8?) (write a block like 10.0.0.0/8 or ::1/128)",
             "DIR/gridscada.toml:4:50: error: [server] trusted_proxies: 'proxy.lan' is not an IP address (write a block like 10.0.0.0/8 or ::1/128)",
             "DIR/gridscada.toml:5:13: error: [server] base_path: 'scada/' must start with / (like /scada)",
+            "DIR/gridscada.toml:6:20: error: [server] forwarded_header: 'x-real-ip' is not a forwarding header; write \"x-forwarded-for\" or \"forwarded\", the one your proxy sets",
         ],
     );
 }
@@ -531,11 +536,15 @@ fn good_reverse_proxy_settings_load_in_normal_form() {
     let dir = tempfile::tempdir().unwrap();
     fs::write(
         dir.path().join("gridscada.toml"),
-        format!("{MAIN}[server]\npublic_origin = \"https://SCADA.example.com:443\"\ntrusted_proxies = [\"127.0.0.1/32\", \"::1/128\", \"10.0.0.0/8\"]\nbase_path = \"/scada/\"\n"),
+        format!("{MAIN}[server]\npublic_origin = \"https://SCADA.example.com:443\"\ntrusted_proxies = [\"127.0.0.1/32\", \"::1/128\", \"10.0.0.0/8\"]\nbase_path = \"/scada/\"\nforwarded_header = \"Forwarded\"\n"),
     )
     .unwrap();
     fs::write(dir.path().join("tags.toml"), DEVICE).unwrap();
     let plant = load_path(dir.path()).unwrap();
+    assert_eq!(
+        plant.server.forwarded_header(),
+        gridscada_config::ForwardedHeader::Forwarded
+    );
     assert_eq!(
         plant.server.public_origin().as_deref(),
         Some("https://scada.example.com")
@@ -569,7 +578,7 @@ fn mqtt_edge_settings_are_checked_where_they_are() {
         "{DEVICE}\n[[tag]]\nname = \"A.Volts\"\ndevice = \"D1\"\nkind = \"input_register\"\naddress = 0\ntype = \"f32\"\n\n[[tag]]\nname = \"A.Cmd\"\ndevice = \"D1\"\nkind = \"coil\"\naddress = 0\nwritable = true\nwrite_role = \"operator\"\n"
     );
     let main = format!(
-        "{MAIN}[mqtt]\nbroker = \"tcp://broker:1883\"\ngroup = \"a/b\"\npassword = \"x\"\nkeep_alive_s = 0\n\n[mqtt.edge]\nnode = \"n#1\"\ndeadband = -1.0\nbatch_ms = 5\ncommands = [\"A.Volts\", \"Nope.*\", \"A.Cmd\", \"A.*\"]\n"
+        "{MAIN}[mqtt]\nbroker = \"tcp://broker:1883\"\ngroup = \"a/b\"\npassword = \"x\"\nkeep_alive_s = 0\n\n[mqtt.edge]\nnode = \"n#1\"\ndeadband = -1.0\nbatch_ms = 5\ncommands = [\"A.Volts\", \"Nope.*\", \"A.Cmd\", \"A.*\"]\nprimary_host_id = \"scada/1\"\n"
     );
     assert_problems(
         &main,
@@ -584,8 +593,45 @@ fn mqtt_edge_settings_are_checked_where_they_are() {
             "DIR/gridscada.toml:11:12: error: [mqtt.edge] batch_ms: 5 must be 10 to 60000",
             "DIR/gridscada.toml:12:13: error: [mqtt.edge] commands: tag 'A.Volts' is not writable",
             "DIR/gridscada.toml:12:24: error: [mqtt.edge] commands: 'Nope.*' names no tag of the tag files",
+            "DIR/gridscada.toml:13:19: error: [mqtt.edge] primary_host_id: 'scada/1' must be a topic level: not empty, without '/', '+' or '#'",
         ],
     );
+}
+
+/// `[server.access.GROUP] write` (issue 36 #5): checked like `[mqtt.edge]
+/// commands`, each problem where it is written; a group that may write
+/// reads back its grants.
+#[test]
+fn group_write_grants_are_checked_where_they_are() {
+    let tags = format!(
+        "{DEVICE}\n[[tag]]\nname = \"A.Volts\"\ndevice = \"D1\"\nkind = \"input_register\"\naddress = 0\ntype = \"f32\"\n\n[[tag]]\nname = \"A.Cmd\"\ndevice = \"D1\"\nkind = \"coil\"\naddress = 0\nwritable = true\nwrite_role = \"operator\"\n"
+    );
+    let main = format!(
+        "{MAIN}[server.access.east]\nwrite = [\"A.Volts\", \"Nope.*\", \"A.*\", \"A*.*\"]\n[server.access.\" west\"]\nwrite = [\"A.Cmd\"]\n"
+    );
+    assert_problems(
+        &main,
+        &tags,
+        &[
+            "DIR/gridscada.toml:3:10: error: [server.access.east] write: tag 'A.Volts' is not writable",
+            "DIR/gridscada.toml:3:21: error: [server.access.east] write: 'Nope.*' names no tag of the tag files",
+            "DIR/gridscada.toml:3:38: error: [server.access.east] write: 'A*.*' must be a tag name or a prefix ending in '*'",
+            "DIR/gridscada.toml:4:16: error: [server.access] ' west': a group name needs 1 to 64 printable characters, without spaces at either end",
+        ],
+    );
+    let main = format!(
+        "{MAIN}[server.access.east]\nwrite = [\"A.*\"]\n[server.access.unknown]\nwritten = []\n"
+    );
+    let got = problems(&main, &tags);
+    assert!(got[0].contains("written"), "{got:?}");
+    let main = format!("{MAIN}[server.access.east]\nwrite = [\"A.*\"]\n");
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("gridscada.toml"), &main).unwrap();
+    std::fs::write(dir.path().join("tags.toml"), &tags).unwrap();
+    let plant = gridscada_config::load_path(dir.path()).unwrap_or_else(|d| panic!("{d:?}"));
+    assert!(plant.server.grants_write("east", "A.Cmd"));
+    assert!(!plant.server.grants_write("west", "A.Cmd"));
+    assert!(!plant.server.grants_write("east", "B.Cmd"));
 }
 
 #[test]
@@ -633,5 +679,24 @@ fn opcua_section_is_checked_and_located() {
     assert!(
         got[0].starts_with("DIR/gridscada.toml:4:13: error: [opcua]: unknown variant `basic128`, expected one of `none`, `basic256sha256-sign`, `basic256sha256-sign-encrypt`"),
         "{got:?}"
+    );
+}
+
+#[test]
+fn opcua_connection_caps_are_checked_and_located() {
+    let main =
+        "tag_files = [\"tags.toml\"]\n[opcua]\nlisten = \"0.0.0.0:4840\"\nmax_connections = 0\n";
+    assert_problems(
+        main,
+        DEVICE,
+        &[
+            "DIR/gridscada.toml:4:19: error: [opcua] max_connections: 0 is out of range; 1 to 10000 open connections",
+        ],
+    );
+    let main = "tag_files = [\"tags.toml\"]\n[opcua]\nlisten = \"0.0.0.0:4840\"\nmax_connections = 16\nmax_connections_per_client = 17\n";
+    assert_problems(
+        main,
+        DEVICE,
+        &["DIR/gridscada.toml:5:30: error: [opcua] max_connections_per_client: 17 must be 1 to max_connections (16)"],
     );
 }

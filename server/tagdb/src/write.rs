@@ -56,3 +56,24 @@ pub enum WriteError {
     #[error("{0}")]
     NotActive(crate::NotActive),
 }
+
+impl WriteError {
+    /// Whether the server refused the write before it reached the device
+    /// (unknown or read-only tag, a value that does not fit, outside the
+    /// engineering limits, a standby server), as opposed to a write the
+    /// device or the link failed. The audit trail and the counters tell the
+    /// two apart (`write_refused`, `write_failed`).
+    pub fn is_refusal(&self) -> bool {
+        match self {
+            WriteError::UnknownTag(_)
+            | WriteError::ReadOnly(_)
+            | WriteError::BadValue { .. }
+            | WriteError::OutOfLimits { .. }
+            | WriteError::NotActive(_) => true,
+            WriteError::Device { .. }
+            | WriteError::Mismatch { .. }
+            | WriteError::Timeout(_)
+            | WriteError::Closed => false,
+        }
+    }
+}

@@ -1,6 +1,6 @@
 //! The operator's two gates that do not depend on HTTP: a confirmed tag
-//! write (role check, audit record durable before the device is asked, the
-//! device's read-back, the outcome on record) and the credential check of a
+//! write (role and area checks, audit record durable before the device is
+//! asked, the device's read-back, the outcome on record) and the credential check of a
 //! login (throttling, Argon2, a failed attempt audited). The HTTP API and
 //! every other northbound door (OPC UA) go through these, so a command is
 //! checked and recorded the same way whichever door it came in by.
@@ -20,10 +20,11 @@ use crate::WebState;
 #[derive(Debug)]
 pub enum WriteRefused {
     UnknownTag(String),
-    /// The tag is read-only, or the caller's role is below the tag's write
-    /// role. The refusal is on record (`write_refused`).
+    /// The tag is read-only, the caller's role is below the tag's write
+    /// role, or the tag is outside the caller's area. The refusal is on
+    /// record (`write_refused`).
     Forbidden(String),
-    /// The value does not fit the tag's kind.
+    /// The value does not fit the tag's kind (on record as refused too).
     BadValue(String),
     /// No field I/O runs (`check`-like stacks).
     NoFieldIo,
@@ -56,35 +57,53 @@ pub async fn write_tag(
         s.db.meta(id)
             .cloned()
             .ok_or_else(|| WriteRefused::UnknownTag(format!("no tag named '{name}'")))?;
-    // A refusal is audited too: who tried to command what.
+    let commander = gridscada_store::command::Commander {
+        user: who.user.clone(),
+        label: format!("{}{via}", who.audit_name()),
+    };
+    // A refusal is audited too, in the words of every door's refusals: who
+    // tried to command what, and why not.
     let refuse = |why: String| async {
-        audit(
-            s,
-            who,
-            "write_refused",
-            name,
-            format!("{} may not write {name}{via}: {why}", who.audit_name()),
-        )
-        .await;
-        Err(WriteRefused::Forbidden(why))
+        let record = gridscada_store::command::refused_event(s.clock.now(), &commander, name, &why);
+        audit(s, who, &record.kind, name, record.message).await;
+        why
     };
     let Some(required) = s.write_role(name) else {
-        return refuse(format!("tag '{name}' is read-only")).await;
+        return Err(WriteRefused::Forbidden(
+            refuse(format!("tag '{name}' is read-only")).await,
+        ));
     };
     if who.role < required {
-        return refuse(format!(
-            "writing '{name}' needs the {} role or above; you are {}",
-            required.label(),
-            who.role.label()
-        ))
-        .await;
+        return Err(WriteRefused::Forbidden(
+            refuse(format!(
+                "writing '{name}' needs the {} role or above; you are {}",
+                required.label(),
+                who.role.label()
+            ))
+            .await,
+        ));
     }
-    let value = value.coerce(meta.kind).ok_or_else(|| {
-        WriteRefused::BadValue(format!(
-            "{value} is not a valid {:?} value for '{name}'",
-            meta.kind
-        ))
-    })?;
+    // Areas of responsibility: a user writes what their screens show, and
+    // what the configuration grants their group besides (docs/ACCESS.md).
+    if !s.in_write_area(who, name) {
+        let group = who.group.as_deref().unwrap_or_default();
+        return Err(WriteRefused::Forbidden(
+            refuse(format!(
+                "'{name}' is outside your area: no screen of group '{group}' shows it, \
+                 and [server.access.{group}] write does not name it"
+            ))
+            .await,
+        ));
+    }
+    let Some(value) = value.coerce(meta.kind) else {
+        return Err(WriteRefused::BadValue(
+            refuse(format!(
+                "{value} is not a valid {:?} value for '{name}'",
+                meta.kind
+            ))
+            .await,
+        ));
+    };
     let writer = s.writer.clone().ok_or(WriteRefused::NoFieldIo)?;
     let old =
         s.db.get(id)
@@ -92,10 +111,6 @@ pub async fn write_tag(
             .unwrap_or_default();
     // The request is on record before it goes to the device, and its outcome
     // after: the one audited write of every door (a Sparkplug DCMD too).
-    let commander = gridscada_store::command::Commander {
-        user: who.user.clone(),
-        label: format!("{}{via}", who.audit_name()),
-    };
     gridscada_store::command::audited_write(
         &crate::api::WebAudit(s),
         writer.as_ref(),

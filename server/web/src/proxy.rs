@@ -1,8 +1,12 @@
 //! Who the client really is, behind a reverse proxy.
 //!
 //! The TCP peer of a proxied request is the proxy. When, and only when, that
-//! peer is one of `[server] trusted_proxies`, its `Forwarded` (RFC 7239) or
-//! `X-Forwarded-For` / `X-Forwarded-Proto` headers are believed: the chain of
+//! peer is one of `[server] trusted_proxies`, the one header named by
+//! `[server] forwarded_header` is believed: `X-Forwarded-For` with
+//! `X-Forwarded-Proto` (the default), or RFC 7239 `Forwarded` with its
+//! `proto=`. The other header is never read, whoever sends it: a proxy that
+//! sets one passes the other through from the client, so guessing which
+//! one to believe let a client choose its own address. The chain of
 //! addresses is walked from the right (the hop nearest to us), skipping
 //! trusted proxies, and the first address that is not one is the client.
 //! Anything to the left of it was written by the client itself and may be
@@ -20,7 +24,7 @@ use axum::extract::{ConnectInfo, Request, State};
 use axum::http::{HeaderMap, HeaderName};
 use axum::middleware::Next;
 use axum::response::Response;
-use gridscada_config::Cidr;
+use gridscada_config::{Cidr, ForwardedHeader};
 
 /// The real client of a request.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -37,15 +41,22 @@ pub struct ClientInfo {
 /// ones); a longer chain is someone's attempt to make us work.
 const MAX_HOPS: usize = 32;
 
-/// The proxies whose forwarding headers are believed.
+/// The proxies whose forwarding header is believed, and which header that
+/// is.
 #[derive(Debug, Clone, Default)]
 pub struct TrustedProxies {
     blocks: Vec<Cidr>,
+    header: ForwardedHeader,
 }
 
 impl TrustedProxies {
-    pub fn new(blocks: Vec<Cidr>) -> Self {
-        TrustedProxies { blocks }
+    pub fn new(blocks: Vec<Cidr>, header: ForwardedHeader) -> Self {
+        TrustedProxies { blocks, header }
+    }
+
+    /// The proxies and header of `[server]`.
+    pub fn of_server(server: &gridscada_config::ServerConfig) -> Self {
+        TrustedProxies::new(server.trusted_proxies(), server.forwarded_header())
     }
 
     pub fn trusts(&self, ip: IpAddr) -> bool {
@@ -62,22 +73,27 @@ impl TrustedProxies {
         if !self.trusts(peer) {
             return direct;
         }
-        let hops = if headers.contains_key(&FORWARDED) {
-            joined(headers, &FORWARDED).and_then(|v| parse_forwarded(&v))
-        } else if headers.contains_key(&X_FORWARDED_FOR) {
-            joined(headers, &X_FORWARDED_FOR).and_then(|v| {
+        let hops = match self.header {
+            ForwardedHeader::Forwarded => {
+                if !headers.contains_key(&FORWARDED) {
+                    return direct;
+                }
+                joined(headers, &FORWARDED).and_then(|v| parse_forwarded(&v))
+            }
+            ForwardedHeader::XForwardedFor => {
                 let protos = joined(headers, &X_FORWARDED_PROTO);
-                parse_x_forwarded(&v, protos.as_deref())
-            })
-        } else {
-            // A proxy that reports only the scheme (the client is the proxy
-            // itself, or it hides the client).
-            let proto = joined(headers, &X_FORWARDED_PROTO)
-                .and_then(|p| p.rsplit(',').next().map(|p| p.trim().to_string()));
-            return ClientInfo {
-                ip: peer,
-                https: proto.is_some_and(|p| p.eq_ignore_ascii_case("https")),
-            };
+                if !headers.contains_key(&X_FORWARDED_FOR) {
+                    // A proxy that reports only the scheme (the client is
+                    // the proxy itself, or it hides the client).
+                    let proto = protos.as_deref().and_then(|p| p.rsplit(',').next());
+                    return ClientInfo {
+                        ip: peer,
+                        https: proto.is_some_and(|p| p.trim().eq_ignore_ascii_case("https")),
+                    };
+                }
+                joined(headers, &X_FORWARDED_FOR)
+                    .and_then(|v| parse_x_forwarded(&v, protos.as_deref()))
+            }
         };
         let Some(hops) = hops else {
             tracing::debug!(%peer, "unreadable forwarding header from a trusted proxy; using the peer");
@@ -311,8 +327,16 @@ mod tests {
     use super::*;
     use axum::http::HeaderValue;
 
+    /// Proxies that name the client in `X-Forwarded-For` (the default).
     fn trusted(blocks: &[&str]) -> TrustedProxies {
-        TrustedProxies::new(blocks.iter().map(|b| Cidr::parse(b).unwrap()).collect())
+        trusted_with(blocks, ForwardedHeader::XForwardedFor)
+    }
+
+    fn trusted_with(blocks: &[&str], header: ForwardedHeader) -> TrustedProxies {
+        TrustedProxies::new(
+            blocks.iter().map(|b| Cidr::parse(b).unwrap()).collect(),
+            header,
+        )
     }
 
     fn headers(pairs: &[(&str, &[u8])]) -> HeaderMap {
@@ -409,7 +433,10 @@ mod tests {
 
     #[test]
     fn forwarded_rfc_7239() {
-        let t = trusted(&["127.0.0.1/32", "::1/128", "10.0.0.0/8"]);
+        let t = trusted_with(
+            &["127.0.0.1/32", "::1/128", "10.0.0.0/8"],
+            ForwardedHeader::Forwarded,
+        );
         let f = |v: &[u8]| client(&t, "127.0.0.1", &[("forwarded", v)]);
         assert_eq!(
             f(b"for=192.0.2.60;proto=https;by=203.0.113.43"),
@@ -437,20 +464,70 @@ mod tests {
             f(br#"for=198.51.100.17;ext="a,b;c", for=10.1.1.1"#),
             at("198.51.100.17", false)
         );
-        // Forwarded wins over X-Forwarded-For.
-        let h = [
-            ("forwarded", b"for=192.0.2.60".as_slice()),
-            ("x-forwarded-for", b"6.6.6.6"),
-        ];
-        assert_eq!(client(&t, "::1", &h), at("192.0.2.60", false));
         // A dual-stack socket's IPv4 peer is the IPv4 address.
         let h = [("forwarded", b"for=192.0.2.60".as_slice())];
         assert_eq!(client(&t, "::ffff:127.0.0.1", &h), at("192.0.2.60", false));
     }
 
     #[test]
+    fn only_the_named_header_is_read() {
+        let blocks = ["127.0.0.1/32", "10.0.0.0/8"];
+        let xff = trusted(&blocks);
+        let fwd = trusted_with(&blocks, ForwardedHeader::Forwarded);
+        // nginx behind the documented configuration: it sets X-Forwarded-For
+        // and the client's own Forwarded passes through.
+        let through_nginx = [
+            ("x-forwarded-for", b"203.0.113.7".as_slice()),
+            ("x-forwarded-proto", b"http"),
+            ("forwarded", b"for=8.8.8.8;proto=https"),
+        ];
+        assert_eq!(
+            client(&xff, "127.0.0.1", &through_nginx),
+            at("203.0.113.7", false)
+        );
+        // The same request to a server told to read Forwarded.
+        assert_eq!(
+            client(&fwd, "127.0.0.1", &through_nginx),
+            at("8.8.8.8", true)
+        );
+        // The other header alone says nothing, neither address nor scheme.
+        let only_forwarded = [("forwarded", b"for=8.8.8.8;proto=https".as_slice())];
+        assert_eq!(
+            client(&xff, "127.0.0.1", &only_forwarded),
+            at("127.0.0.1", false)
+        );
+        let only_x = [
+            ("x-forwarded-for", b"8.8.8.8".as_slice()),
+            ("x-forwarded-proto", b"https"),
+        ];
+        assert_eq!(client(&fwd, "127.0.0.1", &only_x), at("127.0.0.1", false));
+        assert_eq!(
+            client(&fwd, "127.0.0.1", &[("x-forwarded-proto", b"https")]),
+            at("127.0.0.1", false)
+        );
+        // With Forwarded, the scheme is its proto= only.
+        let h = [
+            ("forwarded", b"for=203.0.113.7".as_slice()),
+            ("x-forwarded-proto", b"https"),
+        ];
+        assert_eq!(client(&fwd, "127.0.0.1", &h), at("203.0.113.7", false));
+        // An unreadable header of the other kind changes nothing.
+        let h = [
+            ("x-forwarded-for", b"203.0.113.7".as_slice()),
+            ("forwarded", b"for=\"\\"),
+        ];
+        assert_eq!(client(&xff, "127.0.0.1", &h), at("203.0.113.7", false));
+        let h = [
+            ("forwarded", b"for=203.0.113.7".as_slice()),
+            ("x-forwarded-for", b"garbage"),
+        ];
+        assert_eq!(client(&fwd, "127.0.0.1", &h), at("203.0.113.7", false));
+    }
+
+    #[test]
     fn unidentifiable_hops_and_malformed_headers_fall_back_to_the_peer() {
         let t = trusted(&["127.0.0.1/32", "10.0.0.0/8"]);
+        let fwd = trusted_with(&["127.0.0.1/32", "10.0.0.0/8"], ForwardedHeader::Forwarded);
         let peer = at("127.0.0.1", false);
         for bad in [
             b"for=unknown".as_slice(),
@@ -468,7 +545,7 @@ mod tests {
             b"for=192.0.2.60:99999",
             b"for=\"\\",
         ] {
-            let got = client(&t, "127.0.0.1", &[("forwarded", bad)]);
+            let got = client(&fwd, "127.0.0.1", &[("forwarded", bad)]);
             assert_eq!(got, peer, "Forwarded: {}", String::from_utf8_lossy(bad));
         }
         for bad in [

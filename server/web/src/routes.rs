@@ -90,6 +90,10 @@ pub struct Route {
     pub perm: Perm,
     /// Only present when the server runs simulators (`demo`, `replay`).
     pub sim_only: bool,
+    /// A health probe: public, and answered without resolving the caller
+    /// (its session cookie is not even read), so it never waits on the
+    /// session store.
+    pub probe: bool,
     handler: fn() -> MethodRouter<WebState>,
     /// Its OpenAPI operation: `doc::<api::module::__path_handler>`, from the
     /// handler's `#[utoipa::path]` annotation.
@@ -108,6 +112,24 @@ const fn r(
         path,
         perm,
         sim_only: false,
+        probe: false,
+        handler,
+        doc,
+    }
+}
+
+/// A health probe ([`Route::probe`]).
+const fn probe(
+    path: &'static str,
+    handler: fn() -> MethodRouter<WebState>,
+    doc: fn() -> Doc,
+) -> Route {
+    Route {
+        method: Method::GET,
+        path,
+        perm: Perm::Public,
+        sim_only: false,
+        probe: true,
         handler,
         doc,
     }
@@ -126,6 +148,7 @@ const fn sim(
         path,
         perm: Perm::RoleScreen(Role::Operator, crate::access::SIMULATION),
         sim_only: true,
+        probe: false,
         handler,
         doc,
     }
@@ -137,17 +160,13 @@ use Role::{Administrator as Admin, Operator, Supervisor};
 pub fn table() -> Vec<Route> {
     use axum::routing::{delete, get, patch, post, put};
     vec![
-        r(
-            Method::GET,
+        probe(
             "/healthz",
-            Perm::Public,
             || get(api::misc::healthz),
             doc::<api::misc::__path_healthz>,
         ),
-        r(
-            Method::GET,
+        probe(
             "/readyz",
-            Perm::Public,
             || get(api::misc::readyz),
             doc::<api::misc::__path_readyz>,
         ),
@@ -595,21 +614,23 @@ pub fn build(state: WebState) -> Router {
         }
         let perm = route.perm;
         let template = route.path;
-        let handler = (route.handler)()
-            .route_layer(middleware::from_fn_with_state(
+        let mut handler = (route.handler)();
+        if !route.probe {
+            handler = handler.route_layer(middleware::from_fn_with_state(
                 state.clone(),
                 move |s: State<WebState>, req: Request, next: Next| authorize(s, perm, req, next),
-            ))
-            // Outside the check, so refused requests are timed by route too.
-            .route_layer(middleware::from_fn(move |req: Request, next: Next| {
-                crate::metrics::mark_route(template, req, next)
-            }));
+            ));
+        }
+        // Outside the check, so refused requests are timed by route too.
+        let handler = handler.route_layer(middleware::from_fn(move |req: Request, next: Next| {
+            crate::metrics::mark_route(template, req, next)
+        }));
         router = router.route(route.path, handler);
     }
     let http_metrics = state.http_metrics.clone();
     let server = &state.plant.server;
     let origins = Arc::new(OriginPolicy::new(server));
-    let proxies = Arc::new(crate::proxy::TrustedProxies::new(server.trusted_proxies()));
+    let proxies = Arc::new(crate::proxy::TrustedProxies::of_server(server));
     let base = server.base_path();
     let hsts = hsts_header(&state);
     let app = router
@@ -681,14 +702,9 @@ pub struct OriginPolicy {
 
 impl OriginPolicy {
     pub fn new(server: &gridscada_config::ServerConfig) -> Self {
-        let public_origin = server.public_origin();
-        let mut names = server.allowed_hosts.clone();
-        if let Some(o) = &public_origin {
-            names.push(gridscada_config::origin_host(o).to_string());
-        }
         OriginPolicy {
-            hosts: HostPolicy::new(&names),
-            public_origin,
+            hosts: HostPolicy::of_server(server),
+            public_origin: server.public_origin(),
         }
     }
 
@@ -714,6 +730,15 @@ impl HostPolicy {
         HostPolicy {
             names: allowed.iter().map(|h| h.to_ascii_lowercase()).collect(),
         }
+    }
+
+    /// `[server] allowed_hosts` and the host of `public_origin`.
+    pub fn of_server(server: &gridscada_config::ServerConfig) -> Self {
+        let mut names = server.allowed_hosts.clone();
+        if let Some(o) = &server.public_origin() {
+            names.push(gridscada_config::origin_host(o).to_string());
+        }
+        HostPolicy::new(&names)
     }
 
     /// Whether a `Host` header value (with or without port) is ours.
@@ -961,12 +986,25 @@ impl WebState {
         let Some(session) = session else {
             return Principal::anonymous();
         };
-        match self.store.user(&session.user).await {
+        // The user and their group's screens, as the store says now; in an
+        // outage not waited for longer than `store_wait_ms`.
+        let sessions = &self.auth.sessions;
+        let (store, name) = (self.store.clone(), session.user.clone());
+        let now = sessions
+            .within_store_wait(async move {
+                let Some(u) = store.user(&name).await? else {
+                    return Ok(None);
+                };
+                let screens = store.group_screens(&u.group).await?;
+                Ok(Some((u, screens)))
+            })
+            .await;
+        match now {
             // The role is checked too: a change made by another process
             // (`gridscada user`, another server) ends the session here at
             // once, before the store's revocation reaches the cache.
-            Ok(Some(u)) if !u.blocked && u.role == session.role => {
-                let screens = self.screens_of(&u.group, u.role).await;
+            Ok(Some((u, screens))) if !u.blocked && u.role == session.role => {
+                let screens = self.group_screens_or_defaults(screens, u.role);
                 let who = Principal {
                     user: Some(u.name),
                     role: u.role,
@@ -1002,9 +1040,16 @@ impl WebState {
 
     /// The screens of a group; a group never configured gets its role's defaults.
     pub async fn screens_of(&self, group: &str, role: Role) -> Vec<String> {
-        match self.store.group_screens(group).await {
-            Ok(s) if !s.is_empty() => s,
-            _ => crate::access::default_screens(&self.plant, &self.screens, role),
+        let stored = self.store.group_screens(group).await.unwrap_or_default();
+        self.group_screens_or_defaults(stored, role)
+    }
+
+    /// A group's stored screens, or its role's defaults if none are stored.
+    fn group_screens_or_defaults(&self, stored: Vec<String>, role: Role) -> Vec<String> {
+        if stored.is_empty() {
+            crate::access::default_screens(&self.plant, &self.screens, role)
+        } else {
+            stored
         }
     }
 
@@ -1016,6 +1061,17 @@ impl WebState {
     /// The tags `who` may read.
     pub fn readable(&self, who: &Principal) -> crate::access::Readable {
         crate::access::Readable::of(who, &self.plant, &self.screens)
+    }
+
+    /// Whether tag `name` is in `who`'s area for writes: one they may read,
+    /// or one `[server.access.GROUP] write` grants their group. (The tag's
+    /// write role is checked on its own.)
+    pub fn in_write_area(&self, who: &Principal, name: &str) -> bool {
+        self.readable(who).may_read(name)
+            || who
+                .group
+                .as_deref()
+                .is_some_and(|g| self.plant.server.grants_write(g, name))
     }
 }
 

@@ -17,9 +17,13 @@ use tokio_tungstenite::tungstenite::Message;
 #[tokio::test]
 async fn live_push_follows_the_session() {
     let h = Harness::new(Options::default()).await;
-    let (addr, server) = gridscada_web::bind("127.0.0.1:0".parse().unwrap(), h.app.clone())
-        .await
-        .unwrap();
+    let (addr, server) = gridscada_web::bind(
+        "127.0.0.1:0".parse().unwrap(),
+        h.app.clone(),
+        h.state.connections.clone(),
+    )
+    .await
+    .unwrap();
     tokio::spawn(server);
     // An operator's screens include the tag browser: every tag is readable
     // (what a Guest may read is tested in plant_screens.rs).
@@ -203,9 +207,10 @@ async fn sockets_with_the_same_tags_share_one_feed() {
 async fn a_slow_socket_gets_a_snapshot_instead_of_a_backlog() {
     let h = Harness::new(Options::default()).await;
     let app = h.app_with_plant(|p| p.server.live_merge_ms = serde_spanned::Spanned::new(0..0, 0));
-    let (addr, server) = gridscada_web::bind("127.0.0.1:0".parse().unwrap(), app)
-        .await
-        .unwrap();
+    let (addr, server) =
+        gridscada_web::bind("127.0.0.1:0".parse().unwrap(), app, Default::default())
+            .await
+            .unwrap();
     tokio::spawn(server);
     let cookie = h.login("operator", PASSWORD).await;
     let mut ws = live_socket(addr, &cookie).await.unwrap();

@@ -183,7 +183,10 @@ async fn throttling_and_cookies_follow_the_real_client() {
     assert_eq!(r.status, StatusCode::TOO_MANY_REQUESTS, "{}", r.text());
 
     // HTTPS at the proxy: a Secure cookie; the same claim from anyone else: none.
-    let https = [("forwarded", "for=\"[2001:db8::5]:4711\";proto=https")];
+    let https = [
+        ("x-forwarded-for", "2001:db8::5"),
+        ("x-forwarded-proto", "https"),
+    ];
     let r = send_to(&app, login("administrator", PASSWORD, &https), proxy).await;
     assert_eq!(r.status, StatusCode::OK, "{}", r.text());
     let set = r.headers[header::SET_COOKIE].to_str().unwrap();
@@ -197,4 +200,130 @@ async fn throttling_and_cookies_follow_the_real_client() {
     assert_eq!(r.status, StatusCode::OK, "{}", r.text());
     let set = r.headers[header::SET_COOKIE].to_str().unwrap();
     assert!(!set.contains("Secure"), "{set}");
+}
+
+/// Six failed logins from `peer`, each with its own `forged` header; then
+/// the right password: throttled (429) or not.
+async fn forging(
+    app: &Router,
+    peer: &str,
+    user: &str,
+    forged: &dyn Fn(u32) -> Vec<(String, String)>,
+) -> StatusCode {
+    let peer = peer.parse().unwrap();
+    for i in 0..6 {
+        let h = forged(i);
+        let h: Vec<(&str, &str)> = h.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
+        send_to(app, login(user, "wrong password!", &h), peer).await;
+    }
+    let h = forged(99);
+    let h: Vec<(&str, &str)> = h.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
+    send_to(app, login(user, PASSWORD, &h), peer).await.status
+}
+
+#[tokio::test]
+async fn only_the_configured_forwarding_header_is_believed() {
+    let h = Harness::new(Options::default()).await;
+    // The default, x-forwarded-for: a proxy that sets it (as nginx does)
+    // passes the client's own Forwarded through, and that is never read.
+    let app = proxied(&h);
+    let nginx = |i: u32| {
+        vec![
+            ("x-forwarded-for".to_string(), "198.51.100.20".to_string()),
+            ("forwarded".to_string(), format!("for=192.0.2.{i}")),
+        ]
+    };
+    assert_eq!(
+        forging(&app, PROXY, "operator", &nginx).await,
+        StatusCode::TOO_MANY_REQUESTS,
+        "a new Forwarded on every try escaped the lockout"
+    );
+    // Nor does it open /metrics to an address in metrics_allow.
+    let metrics_app = h.app_with_plant(|p| {
+        p.server.trusted_proxies = vec![Spanned::new(0..0, "10.0.0.0/24".into())];
+        p.server.metrics_token = Some("scrape-secret".into());
+        p.server.metrics_allow = vec!["192.0.2.50".parse().unwrap()];
+    });
+    let scrape = |headers: &[(&str, &str)]| {
+        let mut b = Request::builder()
+            .uri("/metrics")
+            .header(header::HOST, "10.0.0.1");
+        for (k, v) in headers {
+            b = b.header(*k, *v);
+        }
+        b.body(Body::empty()).unwrap()
+    };
+    let peer = PROXY.parse().unwrap();
+    let r = send_to(
+        &metrics_app,
+        scrape(&[
+            ("x-forwarded-for", "198.51.100.20"),
+            ("forwarded", "for=192.0.2.50"),
+        ]),
+        peer,
+    )
+    .await;
+    assert_eq!(r.status, StatusCode::UNAUTHORIZED, "{}", r.text());
+    let r = send_to(
+        &metrics_app,
+        scrape(&[("x-forwarded-for", "192.0.2.50")]),
+        peer,
+    )
+    .await;
+    assert_eq!(r.status, StatusCode::OK, "the proxy's own word is believed");
+
+    // forwarded_header = "forwarded": the other way round.
+    let app = h.app_with_plant(|p| {
+        p.server.public_origin = Some(Spanned::new(0..0, "https://scada.example.com".into()));
+        p.server.trusted_proxies = vec![Spanned::new(0..0, "10.0.0.0/24".into())];
+        p.server.forwarded_header = Some(Spanned::new(0..0, "forwarded".into()));
+        p.server.base_path = Some(Spanned::new(0..0, "/scada/".into()));
+        p.server.allowed_hosts = vec!["backend.internal".into()];
+    });
+    let rfc_proxy = |i: u32| {
+        vec![
+            ("forwarded".to_string(), "for=198.51.100.21".to_string()),
+            ("x-forwarded-for".to_string(), format!("192.0.2.{i}")),
+        ]
+    };
+    assert_eq!(
+        forging(&app, PROXY, "supervisor", &rfc_proxy).await,
+        StatusCode::TOO_MANY_REQUESTS,
+        "a new X-Forwarded-For on every try escaped the lockout"
+    );
+    let https = [
+        ("forwarded", "for=198.51.100.22;proto=https"),
+        ("x-forwarded-proto", "http"),
+    ];
+    let r = send_to(
+        &app,
+        login("administrator", PASSWORD, &https),
+        PROXY.parse().unwrap(),
+    )
+    .await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text());
+    let set = r.headers[header::SET_COOKIE].to_str().unwrap();
+    assert!(
+        set.ends_with("; Secure"),
+        "proto=https of Forwarded counts: {set}"
+    );
+    let r = send_to(
+        &app,
+        login(
+            "administrator",
+            PASSWORD,
+            &[
+                ("x-forwarded-for", "198.51.100.23"),
+                ("x-forwarded-proto", "https"),
+            ],
+        ),
+        PROXY.parse().unwrap(),
+    )
+    .await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text());
+    let set = r.headers[header::SET_COOKIE].to_str().unwrap();
+    assert!(
+        !set.contains("Secure"),
+        "X-Forwarded-Proto is not read: {set}"
+    );
 }

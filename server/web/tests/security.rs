@@ -633,12 +633,13 @@ async fn a_write_outside_the_engineering_limits_is_refused_and_audited() {
         .await
         .json();
     assert_eq!(tag["value"], 1.5, "{tag}");
-    // Every refusal is audited, naming the user, the tag and the reason.
+    // Every refusal is audited as refused (issue 36 #11: the server refused
+    // it, the device never saw it), naming the user, the tag and the reason.
     let admin = h.login("administrator", PASSWORD).await;
     let ev = h
         .call(
             Method::GET,
-            &format!("/api/events?type=write_failed&source={TAG_SUP}"),
+            &format!("/api/events?type=write_refused&source={TAG_SUP}"),
             Some(&admin),
             None,
         )
@@ -650,11 +651,47 @@ async fn a_write_outside_the_engineering_limits_is_refused_and_audited() {
         assert_eq!(e["user"], "supervisor", "{e}");
         let m = e["message"].as_str().unwrap();
         assert!(
-            m.starts_with("supervisor could not write T.BESS.Setpoint_kW = "),
+            m.starts_with("supervisor may not write T.BESS.Setpoint_kW: "),
             "{m}"
         );
         assert!(m.contains("outside the engineering limits"), "{m}");
     }
+    // None of them is counted as a failure of the device.
+    let failed = h
+        .call(
+            Method::GET,
+            &format!("/api/events?type=write_failed&source={TAG_SUP}"),
+            Some(&admin),
+            None,
+        )
+        .await
+        .json();
+    assert_eq!(failed["events"].as_array().unwrap().len(), 0, "{failed}");
+    // A value of the wrong kind is refused before the device too, and on
+    // record the same way.
+    let r = h
+        .call(
+            Method::POST,
+            &path,
+            Some(&sup),
+            Some(json!({"value": "full power"})),
+        )
+        .await;
+    assert_eq!(r.status, StatusCode::BAD_REQUEST, "{}", r.text());
+    let ev = h
+        .call(
+            Method::GET,
+            &format!("/api/events?type=write_refused&source={TAG_SUP}"),
+            Some(&admin),
+            None,
+        )
+        .await
+        .json();
+    assert_eq!(
+        ev["events"].as_array().unwrap().len(),
+        bad.len() + 1,
+        "{ev}"
+    );
     // On the limit is inside.
     let r = h
         .call(
@@ -668,6 +705,131 @@ async fn a_write_outside_the_engineering_limits_is_refused_and_audited() {
     assert_eq!(
         *h.writer.writes.lock(),
         [(TAG_SUP.to_string(), gridscada_tagdb::Value::Float(-50.0))]
+    );
+}
+
+/// Issue 36 #5: write access follows the areas of read access. An operator
+/// whose group's screens show a tag neither reads nor writes it: the write
+/// answers 403 naming the area, nothing reaches the device, and the refusal
+/// is on record (`write_refused`, with the reason). Once the group's screens
+/// show the tag, the same operator writes it.
+#[tokio::test]
+async fn a_write_outside_the_users_area_is_refused_and_audited() {
+    let h = Harness::new(Options::default()).await;
+    h.add_user("west", Role::Operator, "west").await;
+    h.state
+        .store
+        .set_group_screens("west", &["alarms".to_string()])
+        .await
+        .unwrap();
+    let west = h.login("west", PASSWORD).await;
+    let tag = format!("/api/tags/{TAG_OP}");
+    let r = h.call(Method::GET, &tag, Some(&west), None).await;
+    assert_eq!(
+        r.status,
+        StatusCode::FORBIDDEN,
+        "not readable: {}",
+        r.text()
+    );
+    let write = format!("{tag}/write");
+    let r = h
+        .call(
+            Method::POST,
+            &write,
+            Some(&west),
+            Some(json!({"value": true})),
+        )
+        .await;
+    assert_eq!(r.status, StatusCode::FORBIDDEN, "{}", r.text());
+    let detail = r.json()["detail"].as_str().unwrap_or_default().to_string();
+    assert!(detail.contains("area"), "{detail}");
+    assert!(
+        h.writer.writes.lock().is_empty(),
+        "{:?}",
+        h.writer.writes.lock()
+    );
+    let admin = h.login("administrator", PASSWORD).await;
+    let refused = |kind: &'static str| {
+        let (h, admin) = (&h, &admin);
+        async move {
+            h.call(
+                Method::GET,
+                &format!("/api/events?type={kind}&source={TAG_OP}"),
+                Some(admin),
+                None,
+            )
+            .await
+            .json()["events"]
+                .as_array()
+                .unwrap()
+                .clone()
+        }
+    };
+    let ev = refused("write_refused").await;
+    assert_eq!(ev.len(), 1, "{ev:?}");
+    assert_eq!(ev[0]["user"], "west");
+    let m = ev[0]["message"].as_str().unwrap();
+    assert!(
+        m.starts_with("west may not write T.Zone1.Reset: ") && m.contains("group 'west'"),
+        "{m}"
+    );
+    assert!(refused("write_request").await.is_empty());
+
+    // The tag on a screen of the group: written.
+    h.state
+        .store
+        .set_group_screens("west", &["alarms".to_string(), "tags".to_string()])
+        .await
+        .unwrap();
+    let r = h
+        .call(
+            Method::POST,
+            &write,
+            Some(&west),
+            Some(json!({"value": true})),
+        )
+        .await;
+    assert_eq!(r.status, StatusCode::OK, "{}", r.text());
+    assert_eq!(h.writer.writes.lock().len(), 1);
+}
+
+/// Issue 36 #5: `[server.access.GROUP] write` grants a group writes beyond
+/// its screens (the test plant grants group `east` `T.Zone1.*`), and only
+/// those: the group's supervisor still may not write the battery setpoint,
+/// which no screen of theirs shows.
+#[tokio::test]
+async fn a_configured_write_grant_reaches_beyond_the_groups_screens() {
+    let h = Harness::new(Options::default()).await;
+    h.add_user("east", Role::Operator, "east").await;
+    h.add_user("east-sup", Role::Supervisor, "east").await;
+    h.state
+        .store
+        .set_group_screens("east", &["alarms".to_string()])
+        .await
+        .unwrap();
+    let east = h.login("east", PASSWORD).await;
+    let r = h
+        .call(
+            Method::POST,
+            &format!("/api/tags/{TAG_OP}/write"),
+            Some(&east),
+            Some(json!({"value": true})),
+        )
+        .await;
+    assert_eq!(r.status, StatusCode::OK, "granted: {}", r.text());
+    let sup = h.login("east-sup", PASSWORD).await;
+    let r = h
+        .call(
+            Method::POST,
+            &format!("/api/tags/{TAG_SUP}/write"),
+            Some(&sup),
+            Some(json!({"value": 5.0})),
+        )
+        .await;
+    assert_eq!(r.status, StatusCode::FORBIDDEN, "not granted: {}", r.text());
+    assert_eq!(
+        *h.writer.writes.lock(),
+        [(TAG_OP.to_string(), gridscada_tagdb::Value::Bool(true))]
     );
 }
 

@@ -380,9 +380,11 @@ both_backends!(write_through, activity_is_written_through_not_per_request);
 
 /// A redundant pair's failover ticket: issued to a logged-in user on A,
 /// claimed once on B (another host, which A's cookie does not reach) for an
-/// ordinary session of the same user; a second claim, a made-up ticket and
-/// an anonymous request for a ticket are refused; a renewed ticket ends the
-/// one before it.
+/// ordinary session of the same user that ends when A's session would have
+/// (never a fresh lifetime); a second claim, a made-up ticket, a session
+/// token offered as a ticket and an anonymous request for a ticket are
+/// refused; a ticket is never taken as a session cookie; a renewed ticket
+/// ends the one before it; a logout on A ends its tickets.
 async fn failover_ticket_carries_the_login(opts: Options) {
     let a = Harness::new(opts).await;
     let b = a.another_server().await;
@@ -408,6 +410,16 @@ async fn failover_ticket_carries_the_login(opts: Options) {
         }
     };
     let first = ticket(None).await;
+    // Not a session: as a cookie it is anonymous, on either server.
+    let as_cookie = format!("{}={first}", gridscada_web::auth::COOKIE);
+    assert_eq!(whoami(&a, &as_cookie).await, None);
+    let r = send_to(
+        &b,
+        request(Method::GET, "/api/session", Some(&as_cookie), None),
+        peer,
+    )
+    .await;
+    assert_eq!(r.json()["user"], serde_json::Value::Null);
     let second = ticket(Some(first.clone())).await;
     let claim = |t: String| {
         let b = b.clone();
@@ -427,6 +439,10 @@ async fn failover_ticket_carries_the_login(opts: Options) {
     };
     // The renewed ticket ended the first one.
     assert_eq!(claim(first).await.status, StatusCode::UNAUTHORIZED);
+    // A live session's token is no ticket.
+    let op_token = op.split_once('=').unwrap().1.to_string();
+    assert_eq!(claim(op_token).await.status, StatusCode::UNAUTHORIZED);
+    assert_eq!(whoami(&a, &op).await.as_deref(), Some("operator"));
     assert_eq!(
         claim("not-a-ticket".into()).await.status,
         StatusCode::UNAUTHORIZED
@@ -443,10 +459,26 @@ async fn failover_ticket_carries_the_login(opts: Options) {
     .await;
     assert_eq!(r.json()["user"], "operator");
     assert_eq!(r.json()["role"], "operator");
+    // It ends when A's session would have, not 12 hours from the claim.
+    let stored = |k: SessionKey| {
+        let a = &a;
+        async move { a.state.store.session(&k).await.unwrap().expect("stored") }
+    };
+    let (origin, claimed) = (stored(key(&op)).await, stored(key(&cookie)).await);
+    assert!(origin.expires_at.is_some());
+    assert_eq!(claimed.expires_at, origin.expires_at);
+    assert_eq!(claimed.idle, origin.idle);
     // Good once.
     assert_eq!(claim(second).await.status, StatusCode::UNAUTHORIZED);
     // A's own session goes on.
     assert_eq!(whoami(&a, &op).await.as_deref(), Some("operator"));
+    // A ticket of a session that logged out is void.
+    let third = ticket(None).await;
+    let r = a
+        .call(Method::DELETE, "/api/session", Some(&op), None)
+        .await;
+    assert_eq!(r.status, StatusCode::NO_CONTENT);
+    assert_eq!(claim(third).await.status, StatusCode::UNAUTHORIZED);
     a.cleanup().await;
 }
 both_backends!(failover_ticket, failover_ticket_carries_the_login);

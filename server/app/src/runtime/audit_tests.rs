@@ -158,10 +158,13 @@ async fn postgres_down_during_fault_isolation_and_an_alarm_flood_loses_nothing()
     .unwrap();
     let audit = stack.audit.handle();
     let web = web_state(&stack).await;
-    let (http, server) =
-        gridscada_web::bind("127.0.0.1:0".parse().unwrap(), gridscada_web::router(web))
-            .await
-            .unwrap();
+    let (http, server) = gridscada_web::bind(
+        "127.0.0.1:0".parse().unwrap(),
+        gridscada_web::router(web.clone()),
+        web.connections.clone(),
+    )
+    .await
+    .unwrap();
     tokio::spawn(server);
     // An administrator logged in over HTTP before the outage.
     let password = "a-long-enough-password";

@@ -263,6 +263,12 @@ impl StackMetrics {
             M::get(&m.connected) as f64,
         );
         out.gauge(
+            "gridscada_mqtt_primary_host_online",
+            "With primary_host_id: 1 while the primary host's STATE is online and the edge publishes.",
+            &[],
+            M::get(&m.primary_host_online) as f64,
+        );
+        out.gauge(
             "gridscada_mqtt_buffered_samples",
             "Samples in the store-and-forward buffer, waiting for the broker.",
             &[],

@@ -1,7 +1,8 @@
 //! Serving behind a reverse proxy: the `[server]` settings `public_origin`,
-//! `trusted_proxies` and `base_path`, their parsing and normal forms. The
-//! web layer uses them to find the real client and to check origins; the
-//! validation reports a bad value at its place in the file.
+//! `trusted_proxies`, `forwarded_header` and `base_path`, their parsing and
+//! normal forms. The web layer uses them to find the real client and to
+//! check origins; the validation reports a bad value at its place in the
+//! file.
 
 use std::net::IpAddr;
 
@@ -74,6 +75,44 @@ impl Cidr {
 impl std::fmt::Display for Cidr {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "{}/{}", self.network, self.prefix)
+    }
+}
+
+/// Which header a trusted proxy names the client (and its scheme) in
+/// (`[server] forwarded_header`). Only that one is read: a proxy passes the
+/// other one through from the client untouched, so believing it would let
+/// the client choose its own address.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ForwardedHeader {
+    /// `X-Forwarded-For`, with `X-Forwarded-Proto` for the scheme (what
+    /// nginx, HAProxy and most load balancers set).
+    #[default]
+    XForwardedFor,
+    /// RFC 7239 `Forwarded`, its `for=` and `proto=`.
+    Forwarded,
+}
+
+impl ForwardedHeader {
+    /// `x-forwarded-for` or `forwarded`, in any case (header names are).
+    pub fn parse(text: &str) -> Result<ForwardedHeader, String> {
+        let t = text.trim();
+        if t.eq_ignore_ascii_case("x-forwarded-for") {
+            Ok(ForwardedHeader::XForwardedFor)
+        } else if t.eq_ignore_ascii_case("forwarded") {
+            Ok(ForwardedHeader::Forwarded)
+        } else {
+            Err(format!(
+                "'{t}' is not a forwarding header; write \"x-forwarded-for\" or \"forwarded\", the one your proxy sets"
+            ))
+        }
+    }
+
+    /// The setting's value as written in the file.
+    pub fn name(self) -> &'static str {
+        match self {
+            ForwardedHeader::XForwardedFor => "x-forwarded-for",
+            ForwardedHeader::Forwarded => "forwarded",
+        }
     }
 }
 
@@ -224,6 +263,26 @@ mod tests {
         ] {
             let e = Cidr::parse(bad).unwrap_err();
             assert!(e.contains(why), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn forwarded_headers_parse() {
+        assert_eq!(
+            ForwardedHeader::parse("x-forwarded-for"),
+            Ok(ForwardedHeader::XForwardedFor)
+        );
+        assert_eq!(
+            ForwardedHeader::parse(" Forwarded "),
+            Ok(ForwardedHeader::Forwarded)
+        );
+        assert_eq!(ForwardedHeader::default().name(), "x-forwarded-for");
+        for bad in ["", "x-forwarded-proto", "x-real-ip", "forwarded-for"] {
+            let e = ForwardedHeader::parse(bad).unwrap_err();
+            assert!(
+                e.contains("\"x-forwarded-for\" or \"forwarded\""),
+                "{bad}: {e}"
+            );
         }
     }
 

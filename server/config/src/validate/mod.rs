@@ -146,9 +146,83 @@ pub(crate) fn check(
     if let Some(m) = &main.mqtt {
         mqtt::check_mqtt(&mut cx, m, &device_by_name, &tag_by_name);
     }
+    check_access(&mut cx, main, &tag_by_name);
 }
 
-/// `public_origin`, `trusted_proxies` and `base_path` (`model/proxy.rs`).
+/// `[server.access.GROUP]`: the group's name, and its write grants. On a
+/// central host a grant may name remote tags, which no tag file holds.
+fn check_access(cx: &mut Ctx<'_>, main: &MainFile, tags: &HashMap<&str, (usize, &TagConfig)>) {
+    let remote = main.mqtt.as_ref().is_some_and(|m| m.host.is_some());
+    for (group, access) in &main.server.access {
+        if !crate::is_account_name(group.get_ref()) {
+            cx.err(
+                0,
+                group.span(),
+                format!(
+                    "[server.access] '{}': a group name needs 1 to 64 printable characters, without spaces at either end",
+                    group.get_ref().escape_debug()
+                ),
+            );
+            continue;
+        }
+        let what = format!("[server.access.{}] write", group.get_ref());
+        check_write_patterns(cx, &what, &access.write, tags, remote);
+    }
+}
+
+/// Tag patterns that allow writes (`[mqtt.edge] commands`,
+/// `[server.access.GROUP] write`): each a tag name or a prefix ending in
+/// `*`, naming a writable tag of the tag files (or, with `remote`, possibly
+/// a tag no file holds).
+fn check_write_patterns(
+    cx: &mut Ctx<'_>,
+    what: &str,
+    patterns: &[Spanned<String>],
+    tags: &HashMap<&str, (usize, &TagConfig)>,
+    remote: bool,
+) {
+    for pattern in patterns {
+        let p = pattern.get_ref();
+        if p.is_empty() || p.strip_suffix('*').is_some_and(|s| s.contains('*')) {
+            cx.err(
+                0,
+                pattern.span(),
+                format!("{what}: '{p}' must be a tag name or a prefix ending in '*'"),
+            );
+            continue;
+        }
+        let writable = |t: &TagConfig| *t.writable.get_ref();
+        let matched: Vec<&TagConfig> = tags
+            .iter()
+            .filter(|(name, _)| crate::pattern_matches(p, name))
+            .map(|(_, (_, t))| *t)
+            .collect();
+        if matched.is_empty() {
+            if !remote {
+                cx.err(
+                    0,
+                    pattern.span(),
+                    format!("{what}: '{p}' names no tag of the tag files"),
+                );
+            }
+        } else if !p.ends_with('*') && !matched.iter().copied().any(writable) {
+            cx.err(
+                0,
+                pattern.span(),
+                format!("{what}: tag '{p}' is not writable"),
+            );
+        } else if !matched.iter().copied().any(writable) {
+            cx.err(
+                0,
+                pattern.span(),
+                format!("{what}: '{p}' matches no writable tag"),
+            );
+        }
+    }
+}
+
+/// `public_origin`, `trusted_proxies`, `forwarded_header` and `base_path`
+/// (`model/proxy.rs`).
 fn check_proxy(cx: &mut Ctx<'_>, server: &crate::ServerConfig) {
     if let Some(o) = &server.public_origin {
         if let Err(why) = crate::normal_public_origin(o.get_ref()) {
@@ -166,9 +240,49 @@ fn check_proxy(cx: &mut Ctx<'_>, server: &crate::ServerConfig) {
             );
         }
     }
+    if let Some(h) = &server.forwarded_header {
+        if let Err(why) = crate::ForwardedHeader::parse(h.get_ref()) {
+            cx.err(0, h.span(), format!("[server] forwarded_header: {why}"));
+        }
+    }
     if let Some(b) = &server.base_path {
         if let Err(why) = crate::normal_base_path(b.get_ref()) {
             cx.err(0, b.span(), format!("[server] base_path: {why}"));
+        }
+    }
+}
+
+/// `[server.connections]`: caps of at least one connection, a per-client
+/// cap within the global one, timeouts of a tenth of a second to five
+/// minutes (longer ones are what slow clients feed on).
+fn check_connections(cx: &mut Ctx<'_>, c: &crate::ConnectionsConfig) {
+    let max_open = *c.max_open.get_ref();
+    if max_open == 0 {
+        cx.err(
+            0,
+            c.max_open.span(),
+            "[server.connections] max_open: must be at least 1",
+        );
+    }
+    let per_client = *c.max_per_client.get_ref();
+    if per_client == 0 || per_client > max_open.max(1) {
+        cx.err(
+            0,
+            c.max_per_client.span(),
+            format!("[server.connections] max_per_client: {per_client} must be 1 to max_open ({max_open})"),
+        );
+    }
+    for (key, secs) in [
+        ("header_timeout_s", &c.header_timeout_s),
+        ("tls_handshake_timeout_s", &c.tls_handshake_timeout_s),
+    ] {
+        let s = *secs.get_ref();
+        if !(s.is_finite() && (0.1..=300.0).contains(&s)) {
+            cx.err(
+                0,
+                secs.span(),
+                format!("[server.connections] {key}: {s} must be 0.1 to 300 seconds"),
+            );
         }
     }
 }
@@ -271,6 +385,14 @@ fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
             "[server.sessions] warn_s: at most 3600 seconds",
         );
     }
+    let wait = *sessions.store_wait_ms.get_ref();
+    if !(10..=10_000).contains(&wait) {
+        cx.err(
+            0,
+            sessions.store_wait_ms.span(),
+            format!("[server.sessions] store_wait_ms: {wait} must be 10 to 10000 milliseconds"),
+        );
+    }
     let url = &main.storage.url;
     let u = url.get_ref();
     if !(u.starts_with("sqlite:") || u.starts_with("postgres://") || u.starts_with("postgresql://"))
@@ -281,6 +403,7 @@ fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
             format!("[storage] url: '{u}' must start with sqlite:, postgres:// or postgresql://"),
         );
     }
+    check_connections(cx, &main.server.connections);
     let merge = &main.server.live_merge_ms;
     if *merge.get_ref() > 1_000 {
         cx.err(

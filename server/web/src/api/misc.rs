@@ -268,6 +268,7 @@ pub async fn metrics(
         s.db.seq() as f64,
     );
     s.http_metrics.render(&mut out);
+    s.connections.render(&mut out);
     if let Some(a) = &s.components.alarms {
         let st = a.stats();
         let g = [

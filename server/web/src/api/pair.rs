@@ -52,6 +52,28 @@ pub struct PairView {
     pub role_changes: u64,
 }
 
+impl PairView {
+    /// The view with this server's own leadership as it is now. The lease
+    /// keeper publishes its view once a round, after its calls to the
+    /// database; a grant that ran out (the server stepped down, commands
+    /// are refused) shows at once, not a round or a hung call later.
+    pub fn as_of(mut self, leadership: &Leadership) -> PairView {
+        if self.role == "active" && leadership.permit().is_err() {
+            self.role = "standby".into();
+            self.epoch = None;
+            if self.active.as_deref() == Some(self.server.as_str()) {
+                self.active = None;
+                self.active_url = None;
+            }
+            for m in self.servers.iter_mut().filter(|m| m.name == self.server) {
+                m.active = false;
+            }
+            self.healthy = false;
+        }
+        self
+    }
+}
+
 /// What the application hands the web layer for a pair.
 #[derive(Clone)]
 pub struct Pair {
@@ -76,10 +98,10 @@ pub fn active_ready(state: &WebState) -> ApiResult<()> {
 
 #[utoipa::path(get, path = "/api/pair", tag = "server", summary = "The redundant pair as this server sees it",
     responses((status = 200, description = "OK", body = PairView),
-        (status = 404, description = "This server is not one of a pair")))]
+        (status = 404, description = "This server is not one of a pair (`/api/session` says `pair: false`)")))]
 pub async fn view(State(s): State<WebState>) -> ApiResult<Json<PairView>> {
     match &s.components.pair {
-        Some(p) => Ok(Json(p.view.borrow().clone())),
+        Some(p) => Ok(Json(p.view.borrow().clone().as_of(&p.leadership))),
         None => Err(ApiError::not_found(
             "this server is not one of a redundant pair",
         )),
@@ -107,4 +129,42 @@ pub async fn sites(State(s): State<WebState>) -> ApiResult<Json<SiteList>> {
     }
     sites.sort();
     Ok(Json(SiteList { site: own, sites }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::{Duration, Instant};
+
+    fn active_view() -> PairView {
+        PairView {
+            site: "main".into(),
+            server: "a".into(),
+            role: "active".into(),
+            epoch: Some(7),
+            active: Some("a".into()),
+            active_url: Some("http://a".into()),
+            servers: vec![PairMember {
+                name: "a".into(),
+                url: "http://a".into(),
+                active: true,
+                seen_ms_ago: Some(0),
+            }],
+            healthy: true,
+            role_changes: 1,
+        }
+    }
+
+    #[test]
+    fn a_grant_that_ran_out_shows_as_standby_before_the_next_round() {
+        let leadership = Leadership::standby("a");
+        leadership.grant(7, Instant::now() + Duration::from_secs(60));
+        assert_eq!(active_view().as_of(&leadership), active_view());
+        // The deadline passed; the keeper has not published since.
+        leadership.grant(7, Instant::now() - Duration::from_millis(1));
+        let v = active_view().as_of(&leadership);
+        assert_eq!(v.role, "standby");
+        assert_eq!((v.epoch, v.active, v.healthy), (None, None, false));
+        assert!(!v.servers[0].active);
+    }
 }

@@ -136,6 +136,9 @@ pub struct SessionView {
     pub idle_timeout_s: Option<u64>,
     /// How long before an idle expiry the HMI warns, in seconds.
     pub warn_s: u64,
+    /// Whether this server is one of a redundant pair: only then does
+    /// `/api/pair` describe it (a server alone answers that 404).
+    pub pair: bool,
 }
 
 fn session_body(s: &WebState, p: &Principal) -> SessionView {
@@ -151,6 +154,7 @@ fn session_body(s: &WebState, p: &Principal) -> SessionView {
             .then(|| policy.expiry(p.role).idle.map(|d| d.as_secs()))
             .flatten(),
         warn_s: policy.warn.as_secs(),
+        pair: s.components.pair.is_some(),
     }
 }
 
@@ -215,7 +219,8 @@ pub struct TicketRequest {
 #[serde(deny_unknown_fields)]
 pub struct Ticket {
     pub ticket: String,
-    /// Seconds it may be claimed in.
+    /// Seconds it may be claimed in, at most (never after the session's
+    /// own absolute end).
     pub expires_s: u64,
 }
 
@@ -229,36 +234,33 @@ pub struct Ticket {
 pub async fn handover(
     State(s): State<WebState>,
     Extension(p): Extension<Principal>,
-    Extension(client): Extension<crate::ClientInfo>,
     headers: HeaderMap,
     body: Result<Json<TicketRequest>, axum::extract::rejection::JsonRejection>,
 ) -> ApiResult<Json<Ticket>> {
     let Json(request) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
-    let Some(user) = p.user.as_deref() else {
+    let token = auth::token_from_cookies(headers.get(header::COOKIE).and_then(|v| v.to_str().ok()));
+    // Issued from the caller's own session; an earlier ticket is ended only
+    // if that session issued it.
+    let ticket = match (p.is_logged_in(), token) {
+        (true, Some(token)) => {
+            s.auth
+                .sessions
+                .create_ticket(&token, request.previous.as_deref())
+                .await?
+        }
+        _ => None,
+    };
+    let Some((ticket, expires_at)) = ticket else {
         return Err(ApiError::new(
             StatusCode::UNAUTHORIZED,
             "unauthenticated",
             "log in first",
         ));
     };
-    // An earlier ticket is ended only if it is this user's.
-    let mut previous = None;
-    if let Some(prev) = request.previous {
-        if let Some(owner) = s.auth.sessions.user_untouched(&prev).await {
-            if owner.user == user {
-                previous = Some(prev);
-            }
-        }
-    }
-    let recorded = recorded_client(client.ip, &headers);
-    let ticket = s
-        .auth
-        .sessions
-        .create_ticket(user, p.role, previous.as_deref(), recorded)
-        .await?;
+    let left_ms = expires_at.as_millis() - gridscada_tagdb::Timestamp::now_utc().as_millis();
     Ok(Json(Ticket {
         ticket,
-        expires_s: auth::HANDOVER_TICKET.as_secs(),
+        expires_s: u64::try_from(left_ms / 1000).unwrap_or(0),
     }))
 }
 
@@ -277,7 +279,7 @@ pub struct Claim {
         (status = 204, description = "Logged in; sets the session cookie",
             headers(("Set-Cookie" = String))),
         (status = 400),
-        (status = 401, description = "No such ticket, or it has expired or was used"),
+        (status = 401, description = "No such ticket, or it has expired or was used, or the session that issued it ended"),
     ))]
 pub async fn claim(
     State(s): State<WebState>,
@@ -286,20 +288,21 @@ pub async fn claim(
     body: Result<Json<Claim>, axum::extract::rejection::JsonRejection>,
 ) -> ApiResult<Response> {
     let Json(claim) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
-    let Some(user) = s.auth.sessions.user_untouched(&claim.ticket).await else {
+    let recorded = recorded_client(client.ip, &headers);
+    // Good once; the new session ends when the one that issued the ticket
+    // would have.
+    let Some((token, user)) = s
+        .auth
+        .sessions
+        .claim_ticket(&claim.ticket, recorded)
+        .await?
+    else {
         return Err(ApiError::new(
             StatusCode::UNAUTHORIZED,
             "invalid_ticket",
-            "the failover ticket is unknown, expired or already used: log in",
+            "the failover ticket is unknown, expired, already used or its session ended: log in",
         ));
     };
-    let recorded = recorded_client(client.ip, &headers);
-    // Rotation ends the ticket: it is good for one claim.
-    let token = s
-        .auth
-        .sessions
-        .create(&user.user, user.role, Some(&claim.ticket), recorded)
-        .await?;
     let who = Principal {
         user: Some(user.user.clone()),
         role: user.role,

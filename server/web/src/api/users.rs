@@ -71,11 +71,7 @@ pub struct OneUser {
 }
 
 pub fn check_user_name(name: &str) -> ApiResult<()> {
-    if name.trim() != name
-        || name.is_empty()
-        || name.chars().count() > 64
-        || name.chars().any(char::is_control)
-    {
+    if !gridscada_config::is_account_name(name) {
         return Err(ApiError::bad_request(
             "a user name needs 1 to 64 printable characters, without spaces at either end",
         ));

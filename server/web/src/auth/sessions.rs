@@ -30,7 +30,7 @@ use std::sync::{Arc, Weak};
 use std::time::{Duration, Instant};
 
 use gridscada_config::Role;
-use gridscada_store::{SessionKey, SessionRecord, Store, StoreError};
+use gridscada_store::{SessionKey, SessionRecord, Store, StoreError, TicketRecord};
 use gridscada_tagdb::Timestamp;
 use parking_lot::Mutex;
 use rand::Rng;
@@ -59,7 +59,13 @@ pub struct SessionPolicy {
     pub by_role: std::collections::BTreeMap<Role, Expiry>,
     /// How long before an idle expiry the HMI warns.
     pub warn: Duration,
+    /// How long a request waits for the store to confirm its session's
+    /// user before it goes on with the rights last known (an outage).
+    pub store_wait: Duration,
 }
+
+/// The default of [`SessionPolicy::store_wait`] (`store_wait_ms`).
+pub const STORE_WAIT: Duration = Duration::from_millis(500);
 
 /// When one role's sessions end; `None`: never.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -82,6 +88,7 @@ impl Default for SessionPolicy {
             )]
             .into(),
             warn: Duration::from_secs(60),
+            store_wait: STORE_WAIT,
         }
     }
 }
@@ -101,6 +108,7 @@ impl SessionPolicy {
                 })
                 .collect(),
             warn: Duration::from_secs(*c.warn_s.get_ref()),
+            store_wait: Duration::from_millis(*c.store_wait_ms.get_ref()),
             ..SessionPolicy::default()
         }
     }
@@ -135,8 +143,9 @@ impl Cached {
     }
 }
 
-/// How long a failover ticket may be claimed: the HMI renews it every
-/// minute, so a takeover plus the HMI's wait always finds one valid.
+/// How long a failover ticket may be claimed (at most: never after its
+/// session's absolute end): the HMI renews it every minute, so a takeover
+/// plus the HMI's wait always finds one valid.
 pub const HANDOVER_TICKET: Duration = Duration::from_secs(180);
 
 /// The caller of a live session.
@@ -207,28 +216,78 @@ impl Sessions {
         previous: Option<&str>,
         client: Client,
     ) -> Result<String, StoreError> {
-        self.create_with(user, role, previous, client, self.policy.expiry(role))
+        let expiry = self.policy.expiry(role);
+        let ends = expiry.absolute.map(|d| after(Timestamp::now_utc(), d));
+        self.create_with(user, role, previous, client, expiry.idle, ends)
             .await
     }
 
-    /// Issues a failover ticket for `user`: a session of its own that only
-    /// lasts [`HANDOVER_TICKET`] and idles out never, which the HMI hands to
-    /// the other server of a redundant pair when it moves there (the cookie
-    /// of one host is not sent to another). Claiming it there ends it and
-    /// starts an ordinary session. `previous`, an earlier ticket of the same
-    /// user, is ended.
+    /// Issues a failover ticket for the live session `session` (the
+    /// caller's own token), which the HMI hands to the other server of a
+    /// redundant pair when it moves there (the cookie of one host is not
+    /// sent to another). A ticket is not a session: no cookie lookup finds
+    /// it. It may be claimed once ([`Sessions::claim_ticket`]), within
+    /// [`HANDOVER_TICKET`] and never after the session's own absolute end,
+    /// and not after the session ended. `previous`, an earlier ticket of
+    /// the same session, is ended. The ticket and when it expires; `None`:
+    /// `session` is not live here.
     pub async fn create_ticket(
         &self,
-        user: &str,
-        role: Role,
+        session: &str,
         previous: Option<&str>,
-        client: Client,
-    ) -> Result<String, StoreError> {
-        let expiry = Expiry {
-            idle: None,
-            absolute: Some(HANDOVER_TICKET),
+    ) -> Result<Option<(String, Timestamp)>, StoreError> {
+        let key = SessionKey::of_token(session);
+        let now = Timestamp::now_utc();
+        let origin = self.cache.lock().get(&key).cloned();
+        let Some(origin) = origin.filter(|o| !o.expired(now)) else {
+            return Ok(None);
         };
-        self.create_with(user, role, previous, client, expiry).await
+        let token = new_token();
+        let session_expires_at = origin.record.expires_at;
+        let ticket = TicketRecord {
+            key: SessionKey::of_token(&token),
+            session: key,
+            user: origin.record.user,
+            role: origin.record.role,
+            created_at: now,
+            expires_at: session_expires_at.map_or(after(now, HANDOVER_TICKET), |end| {
+                end.min(after(now, HANDOVER_TICKET))
+            }),
+            session_expires_at,
+        };
+        let previous = previous.map(SessionKey::of_token);
+        self.store.create_ticket(&ticket, previous.as_ref()).await?;
+        Ok(Some((token, ticket.expires_at)))
+    }
+
+    /// Claims a failover ticket: a new session of its user, with the idle
+    /// timeout of its role and the absolute end of the session it was
+    /// issued from (never a fresh lifetime); its token and user. `None`: no
+    /// such ticket, used already, expired, or its session ended.
+    pub async fn claim_ticket(
+        &self,
+        ticket: &str,
+        client: Client,
+    ) -> Result<Option<(String, SessionUser)>, StoreError> {
+        let now = Timestamp::now_utc();
+        let Some(t) = self
+            .store
+            .claim_ticket(&SessionKey::of_token(ticket), now)
+            .await?
+        else {
+            return Ok(None);
+        };
+        let idle = self.policy.expiry(t.role).idle;
+        let token = self
+            .create_with(&t.user, t.role, None, client, idle, t.session_expires_at)
+            .await?;
+        Ok(Some((
+            token,
+            SessionUser {
+                user: t.user,
+                role: t.role,
+            },
+        )))
     }
 
     async fn create_with(
@@ -237,7 +296,8 @@ impl Sessions {
         role: Role,
         previous: Option<&str>,
         client: Client,
-        expiry: Expiry,
+        idle: Option<Duration>,
+        expires_at: Option<Timestamp>,
     ) -> Result<String, StoreError> {
         let token = new_token();
         let now = Timestamp::now_utc();
@@ -247,13 +307,8 @@ impl Sessions {
             role,
             created_at: now,
             last_seen: now,
-            idle: expiry.idle,
-            expires_at: expiry.absolute.map(|d| {
-                Timestamp::from_millis(
-                    now.as_millis()
-                        .saturating_add(i64::try_from(d.as_millis()).unwrap_or(i64::MAX)),
-                )
-            }),
+            idle,
+            expires_at,
             client: client.address,
             user_agent: client.user_agent,
         };
@@ -327,10 +382,15 @@ impl Sessions {
     }
 
     /// The stored session of `key`, for the cache; `None` if there is
-    /// none, or the store cannot say (refused, not guessed: the caller is
+    /// none, or the store cannot say within the policy's `store_wait`
+    /// (refused, not guessed: a session this server has not seen is
     /// anonymous until the store answers again).
     async fn load(&self, key: &SessionKey) -> Option<Cached> {
-        match self.store.session(key).await {
+        let (store, k) = (self.store.clone(), key.clone());
+        match self
+            .within_store_wait(async move { store.session(&k).await })
+            .await
+        {
             Ok(Some(record)) => Some(Cached {
                 last_seen: record.last_seen,
                 record,
@@ -341,6 +401,29 @@ impl Sessions {
                 tracing::error!(error = %e, "reading a session");
                 None
             }
+        }
+    }
+
+    /// A store call the caller waits for at most the policy's
+    /// `store_wait`: in a database outage the pool would hold the request
+    /// until its own acquire timeout (tens of seconds). The call itself
+    /// runs on to its end, so a slow store (a new connection on a loaded
+    /// host) still warms the pool for the next request instead of being
+    /// abandoned at every try.
+    pub async fn within_store_wait<T: Send + 'static>(
+        &self,
+        call: impl std::future::Future<Output = Result<T, StoreError>> + Send + 'static,
+    ) -> Result<T, StoreError> {
+        match tokio::time::timeout(self.policy.store_wait, tokio::spawn(call)).await {
+            Ok(Ok(answer)) => answer,
+            Ok(Err(panicked)) => Err(StoreError::Database {
+                context: "a store call",
+                source: Box::new(panicked),
+            }),
+            Err(elapsed) => Err(StoreError::Database {
+                context: "waiting for the store ([server.sessions] store_wait_ms)",
+                source: Box::new(elapsed),
+            }),
         }
     }
 
@@ -363,9 +446,15 @@ impl Sessions {
     async fn end_key(&self, key: &SessionKey) {
         self.cache.lock().remove(key);
         self.ended.send_modify(|v| *v += 1);
-        if let Err(e) = self.store.end_session(key).await {
-            // The sweep or the next re-check deletes it; it is refused here.
-            tracing::error!(error = %e, "deleting an ended session");
+        // The request does not wait for a slow or absent store: the row is
+        // deleted once the store answers (till then it is refused here; the
+        // sweep deletes it if this fails).
+        let (store, key) = (self.store.clone(), key.clone());
+        let deleted = self
+            .within_store_wait(async move { store.end_session(&key).await })
+            .await;
+        if let Err(e) = deleted {
+            tracing::warn!(error = %e, "deleting an ended session");
         }
     }
 
@@ -472,6 +561,14 @@ impl Sessions {
     pub fn watch_ended(&self) -> tokio::sync::watch::Receiver<u64> {
         self.ended.subscribe()
     }
+}
+
+/// `d` after `t`.
+fn after(t: Timestamp, d: Duration) -> Timestamp {
+    Timestamp::from_millis(
+        t.as_millis()
+            .saturating_add(i64::try_from(d.as_millis()).unwrap_or(i64::MAX)),
+    )
 }
 
 fn new_token() -> String {

@@ -303,6 +303,11 @@ pub struct PanelStatus {
     pub lockout: bool,
     pub comm_ok: bool,
     pub last_sequence: SequenceFigures,
+    /// How the last sequence was resumed after a restart or a failover:
+    /// "sequence resumed after a restart|failover at step '...': ..." (at
+    /// which step, what was tested again); null if it was not
+    #[schema(required = true)]
+    pub resumed: Option<String>,
     /// Tag prefix of the panel's I/O, e.g. SS1
     #[schema(required = false)]
     pub prefix: String,

@@ -45,7 +45,9 @@ pub const TAG_RO: &str = "T.Feeder1.P_kW";
 pub const TAG_OP: &str = "T.Zone1.Reset";
 pub const TAG_SUP: &str = "T.BESS.Setpoint_kW";
 
-const MAIN: &str = "tag_files = [\"tags.toml\"]\n[server]\nallowed_hosts = [\"scada.test\"]\n";
+/// Group `east` may write zone 1's tags whatever its screens show.
+const MAIN: &str = "tag_files = [\"tags.toml\"]\n[server]\nallowed_hosts = [\"scada.test\"]\n\
+                    [server.access.east]\nwrite = [\"T.Zone1.*\"]\n";
 const TAGS: &str = r#"
 [[device]]
 name = "D1"
@@ -356,6 +358,7 @@ impl Harness {
             devices: None,
             tls: false,
             live: Default::default(),
+            connections: Default::default(),
         };
         let h = Harness {
             app: gridscada_web::router(state.clone()),
@@ -478,9 +481,13 @@ impl Harness {
 
     /// Serves the app on a loopback port (for real sockets); its address.
     pub async fn serve(&self) -> SocketAddr {
-        let (addr, server) = gridscada_web::bind("127.0.0.1:0".parse().unwrap(), self.app.clone())
-            .await
-            .unwrap();
+        let (addr, server) = gridscada_web::bind(
+            "127.0.0.1:0".parse().unwrap(),
+            self.app.clone(),
+            self.state.connections.clone(),
+        )
+        .await
+        .unwrap();
         tokio::spawn(server);
         addr
     }
