@@ -12,6 +12,11 @@ import { live } from '../live.js';
 import { Binder, attempt, formDialog, confirmDialog, toast } from '../ui.js';
 
 const ROW_H = 30;
+
+/** The device protocol as an engineer names it. */
+function protocolName(p) {
+  return { tcp: 'Modbus TCP', rtu: 'Modbus RTU', iec104: 'IEC 60870-5-104' }[p] || p;
+}
 const PAGE = 200;
 
 /** The write dialog of a tag; resolves with the typed value or undefined. */
@@ -241,15 +246,20 @@ export default {
           h('dt', { text: 'Writable' }), h('dd', { text: t.writable ? `yes, by ${t.write_role} and above` : 'no' })),
         h('h2', { text: 'Source' }),
         src ? h('dl', { class: 'kv', id: 'tag-source' },
-          h('dt', { text: 'Device' }), h('dd', { text: src.device }),
-          h('dt', { text: 'Table' }), h('dd', { text: src.table.replace('_', ' ') }),
-          h('dt', { text: 'Address' }), h('dd', { text: `${src.address}${src.bit !== null && src.bit !== undefined ? ` bit ${src.bit}` : ''}` }),
+          h('dt', { text: 'Device' }), h('dd', { text: `${src.device} (${protocolName(src.protocol)})` }),
+          ...(src.iec104 ? [
+            h('dt', { text: 'Point' }), h('dd', { text: `${src.iec104.point} at IOA ${src.iec104.ioa}` }),
+            h('dt', { text: 'Command' }), h('dd', { text: src.iec104.command ? `${src.iec104.command} at IOA ${src.iec104.command_ioa}${src.iec104.select ? ', select before operate' : ', direct execute'}` : 'none' }),
+          ] : [
+            h('dt', { text: 'Table' }), h('dd', { text: (src.table || '').replace('_', ' ') }),
+            h('dt', { text: 'Address' }), h('dd', { text: `${src.address}${src.bit !== null && src.bit !== undefined ? ` bit ${src.bit}` : ''}` }),
+            h('dt', { text: 'Word order' }), h('dd', { text: src.word_order }),
+            h('dt', { text: 'Byte order' }), h('dd', { text: src.byte_order }),
+          ]),
           h('dt', { text: 'Data type' }), h('dd', { text: src.data_type }),
-          h('dt', { text: 'Word order' }), h('dd', { text: src.word_order }),
-          h('dt', { text: 'Byte order' }), h('dd', { text: src.byte_order }),
           h('dt', { text: 'Scaling' }), h('dd', { text: `× ${src.scale} + ${src.offset}` }),
-          h('dt', { text: 'Timestamp' }), h('dd', { id: 'tag-time-source', text: src.time_tag ? `device clock ${src.time_tag}` : 'receive time' }))
-          : h('p', { class: 'hint', id: 'tag-source', text: 'Derived by the server (device status, sequence or dispatch), not read from a register.' }),
+          h('dt', { text: 'Timestamp' }), h('dd', { id: 'tag-time-source', text: src.iec104 ? 'the station\'s time tag (CP56Time2a) where sent, else receive time' : src.time_tag ? `device clock ${src.time_tag}` : 'receive time' }))
+          : h('p', { class: 'hint', id: 'tag-source', text: 'Derived by the server (device status, sequence or dispatch), not read from a device.' }),
         h('div', { class: 'btn-row' }, writeBtn,
           numeric ? h('a', { class: 'btn', id: 'tag-add-trend', href: `#/trends?pens=${enc(t.name)}`, text: 'Add to trend' }) : null),
         readback);

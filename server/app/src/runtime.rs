@@ -26,6 +26,7 @@ use crate::{demo_plant, settings, sinks, users};
 
 #[cfg(test)]
 mod audit_tests;
+mod field;
 pub mod northbound;
 pub(crate) mod opcua;
 #[cfg(test)]
@@ -203,7 +204,7 @@ pub fn check_screens(plant: &Plant) -> Vec<String> {
 /// Every tag the database holds: the plant's, plus the derived ones.
 pub(crate) fn all_tags(plant: &Plant) -> Vec<TagMeta> {
     let mut tags: Vec<TagMeta> = plant.tag_metas().collect();
-    tags.extend(gridscada_modbus::device_status_tags(plant));
+    tags.extend(gridscada_field::device_status_tags(plant));
     for panel in &plant.panels {
         tags.extend(fault_isolation::panel_tags(panel));
     }
@@ -293,7 +294,7 @@ pub struct Stack {
     pub mqtt_edge: Option<gridscada_sparkplug::edge::EdgeNode>,
     /// The alarm notifier's figures, if `[[notify]]` routes run.
     pub notify: Option<gridscada_notify::NotifyHandle>,
-    field: gridscada_modbus::FieldIo,
+    field: field::Field,
     /// The central Sparkplug B host (`[mqtt.host]`), if configured.
     sparkplug_host: Option<gridscada_sparkplug::host::Host>,
     historian: gridscada_store::Historian,
@@ -489,13 +490,8 @@ impl Stack {
         ));
         let mut loops = JoinSet::new();
 
-        let field = gridscada_modbus::FieldIo::start_fenced(
-            &plant,
-            db.clone(),
-            clock.clone(),
-            leadership.clone(),
-        )
-        .context("starting field I/O")?;
+        let field = field::Field::start(&plant, db.clone(), clock.clone(), leadership.clone())
+            .context("starting field I/O")?;
 
         // The lease keeper and the announcements of role changes.
         let (pair, pair_keeper) = match (lease, &plant.redundancy) {
@@ -694,7 +690,7 @@ impl Stack {
     }
 
     /// The poller's counters (requests, timeouts, transport operations in flight).
-    pub fn poll_stats(&self) -> gridscada_modbus::StatsHandle {
+    pub fn poll_stats(&self) -> gridscada_field::StatsHandle {
         self.field.stats_handle()
     }
 

@@ -66,7 +66,7 @@ impl Rig {
         steer(&handle);
 
         let mut tags: Vec<TagMeta> = plant.tag_metas().collect();
-        tags.extend(gridscada_modbus::device_status_tags(&plant));
+        tags.extend(gridscada_field::device_status_tags(&plant));
         tags.extend(dispatch::tags::dispatch_tags());
         let db = Arc::new(TagDb::new(tags).expect("building the tag database"));
         let field = gridscada_modbus::FieldIo::start(&plant, db.clone(), clock.clone())

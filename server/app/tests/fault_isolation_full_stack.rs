@@ -77,7 +77,7 @@ impl Stack {
             *d.timeout_ms.get_mut() = 1000;
         }
         let mut tags: Vec<_> = plant.tag_metas().collect();
-        tags.extend(gridscada_modbus::device_status_tags(&plant));
+        tags.extend(gridscada_field::device_status_tags(&plant));
         for p in &plant.panels {
             tags.extend(fault_isolation::panel_tags(p));
         }

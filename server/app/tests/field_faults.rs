@@ -29,7 +29,7 @@ async fn rig() -> Rig {
         .unwrap();
     sim.patch_plant(&mut plant);
     let mut tags: Vec<_> = plant.tag_metas().collect();
-    tags.extend(gridscada_modbus::device_status_tags(&plant));
+    tags.extend(gridscada_field::device_status_tags(&plant));
     let db = Arc::new(TagDb::new(tags).unwrap());
     let field = gridscada_modbus::FieldIo::start(&plant, db.clone(), clock).unwrap();
     Rig {

@@ -198,7 +198,7 @@ fn main() -> ExitCode {
     };
     let metas: Vec<_> = plant
         .tag_metas()
-        .chain(gridscada_modbus::device_status_tags(&plant))
+        .chain(gridscada_field::device_status_tags(&plant))
         .collect();
     let db = match TagDb::new(metas) {
         Ok(db) => Arc::new(db),

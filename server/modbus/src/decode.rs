@@ -25,8 +25,8 @@ pub struct Codec {
 }
 
 impl Codec {
-    pub fn from_tag(t: &TagConfig) -> Codec {
-        let table = *t.kind.get_ref();
+    /// The codec of Modbus tag `t`, on its `table`.
+    pub fn from_tag(t: &TagConfig, table: RegisterKind) -> Codec {
         Codec {
             table,
             data_type: t.data_type(),

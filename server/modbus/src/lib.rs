@@ -1,8 +1,11 @@
-//! # gridscada-modbus: field I/O
+//! # gridscada-modbus: Modbus field I/O
 //!
 //! **Owns:** polling the plant's Modbus TCP and RTU devices into the tag
-//! database, the devices' communication status tags, and writes to the field
-//! (confirmed by read-back) through [`gridscada_tagdb::TagWriter`].
+//! database, those devices' communication status tags, and writes to them
+//! (confirmed by read-back) through [`gridscada_tagdb::TagWriter`]. Devices
+//! of other protocols, and their tags, are left to their own crates; what
+//! all protocols share (status tag names, figures, write limits) is in
+//! `gridscada-field`.
 //!
 //! **Must not touch:** configuration parsing (it takes a checked [`Plant`]),
 //! alarms, history, control logic. Everything it learns goes into the
@@ -22,7 +25,6 @@ pub mod decode;
 mod frame;
 mod link;
 pub mod plan;
-mod round_trip;
 mod transport;
 
 use std::collections::HashMap;
@@ -31,91 +33,19 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use gridscada_config::{DeviceConfig, Plant, Protocol};
-use gridscada_tagdb::{
-    Clock, Leadership, TagDb, TagMeta, TagWriter, Value, ValueKind, WriteError, WriteFuture,
+use gridscada_field::{
+    check_limits, status_tag_names, DeviceStats, LinkStats, PollStats, StatsSource,
 };
+use gridscada_tagdb::{Clock, Leadership, TagDb, TagWriter, Value, WriteError, WriteFuture};
 use parking_lot::Mutex;
 use tokio::sync::{mpsc, oneshot, watch};
 use tokio::task::JoinHandle;
 
 pub use frame::exception_text;
-pub use round_trip::{RoundTripHistogram, ROUND_TRIP_BOUNDS};
 pub use transport::inter_frame_silence;
 
 use link::{ClassRt, Counters, DeviceRt, Link, LinkCounters, LinkTag, StatusIds, WriteCmd};
 use transport::{RtuLine, TcpLine, Transport};
-
-/// Names of a device's communication status tags.
-pub fn status_tag_names(device: &str) -> [(String, ValueKind, &'static str, &'static str); 8] {
-    [
-        (
-            format!("{device}.Comm.Connected"),
-            ValueKind::Bool,
-            "",
-            "Device answers its requests",
-        ),
-        (
-            format!("{device}.Comm.LastError"),
-            ValueKind::Str,
-            "",
-            "Last communication error",
-        ),
-        (
-            format!("{device}.Comm.ResponseMs"),
-            ValueKind::Float,
-            "ms",
-            "Response time of the last answered request",
-        ),
-        (
-            format!("{device}.Comm.Requests"),
-            ValueKind::Int,
-            "",
-            "Requests sent",
-        ),
-        (
-            format!("{device}.Comm.Errors"),
-            ValueKind::Int,
-            "",
-            "Requests without a good answer (timeouts, exceptions, bad replies)",
-        ),
-        (
-            format!("{device}.Comm.Timeouts"),
-            ValueKind::Int,
-            "",
-            "Requests that timed out",
-        ),
-        (
-            format!("{device}.Comm.Overruns"),
-            ValueKind::Int,
-            "",
-            "Scan periods missed because the previous scan ran over",
-        ),
-        (
-            format!("{device}.Comm.Retries"),
-            ValueKind::Int,
-            "",
-            "Reads repeated at once after no answer (the device's retries)",
-        ),
-    ]
-}
-
-/// The communication status tags of every device, for the app to register
-/// before it builds the [`TagDb`].
-pub fn device_status_tags(plant: &Plant) -> Vec<TagMeta> {
-    plant
-        .devices
-        .iter()
-        .flat_map(|d| {
-            status_tag_names(d.name.get_ref())
-                .into_iter()
-                .map(|(name, kind, units, desc)| {
-                    TagMeta::new(name, kind)
-                        .units(units)
-                        .describe(format!("{}: {desc}", d.name.get_ref()))
-                })
-        })
-        .collect()
-}
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum Error {
@@ -127,75 +57,6 @@ pub enum Error {
     Plan { device: String, reason: String },
 }
 
-/// Request and scan counters of one device.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct DeviceStats {
-    pub device: String,
-    /// The connection or port the device is on.
-    pub link: String,
-    pub connected: bool,
-    pub requests: u64,
-    /// Requests without a good answer (timeouts and exceptions included).
-    pub errors: u64,
-    pub timeouts: u64,
-    pub exceptions: u64,
-    pub writes: u64,
-    pub scans: u64,
-    /// Scans that started more than 10 % of their period after they were due.
-    pub late_scans: u64,
-    /// Scan periods skipped because a scan ran over.
-    pub overruns: u64,
-    /// Round trip of the last answered request, wall time.
-    pub last_response_ms: f64,
-    /// Round trips of every answered request, wall time.
-    pub round_trip: RoundTripHistogram,
-}
-
-/// Counters of one connection or serial port.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct LinkStats {
-    pub link: String,
-    pub connects: u64,
-    pub disconnects: u64,
-    /// Replies discarded because their request had already timed out.
-    pub late_replies: u64,
-    /// RTU bytes skipped as noise.
-    pub garbage_bytes: u64,
-    pub last_error: String,
-}
-
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct PollStats {
-    pub devices: Vec<DeviceStats>,
-    pub links: Vec<LinkStats>,
-}
-
-impl PollStats {
-    /// Sums over every device.
-    pub fn total(&self) -> DeviceStats {
-        let mut t = DeviceStats {
-            device: "total".into(),
-            ..Default::default()
-        };
-        for d in &self.devices {
-            t.requests += d.requests;
-            t.errors += d.errors;
-            t.timeouts += d.timeouts;
-            t.exceptions += d.exceptions;
-            t.writes += d.writes;
-            t.scans += d.scans;
-            t.late_scans += d.late_scans;
-            t.overruns += d.overruns;
-        }
-        t.connected = self.devices.iter().all(|d| d.connected);
-        t
-    }
-
-    pub fn device(&self, name: &str) -> Option<&DeviceStats> {
-        self.devices.iter().find(|d| d.device == name)
-    }
-}
-
 struct WriteTarget {
     link: usize,
     tag: usize,
@@ -204,34 +65,6 @@ struct WriteTarget {
     /// Engineering limits (`Plant::write_limits`), checked before anything
     /// is sent, for every writer: HMI, control loops, northbound.
     limits: (Option<f64>, Option<f64>),
-}
-
-/// Refuses a numeric value outside `limits`.
-fn check_limits(
-    name: &str,
-    value: &Value,
-    limits: (Option<f64>, Option<f64>),
-) -> Result<(), WriteError> {
-    let v = match value {
-        Value::Float(_) | Value::Int(_) | Value::UInt(_) => value.as_f64().unwrap_or(f64::NAN),
-        _ => return Ok(()),
-    };
-    let (lo, hi) = limits;
-    let inside = !v.is_nan() && lo.is_none_or(|lo| v >= lo) && hi.is_none_or(|hi| v <= hi);
-    if inside {
-        return Ok(());
-    }
-    let limits = match (lo, hi) {
-        (Some(lo), Some(hi)) => format!("{lo} to {hi}"),
-        (Some(lo), None) => format!("at least {lo}"),
-        (None, Some(hi)) => format!("at most {hi}"),
-        (None, None) => "a number".to_string(),
-    };
-    Err(WriteError::OutOfLimits {
-        tag: name.to_string(),
-        value: value.to_string(),
-        limits,
-    })
 }
 
 struct Shared {
@@ -256,7 +89,7 @@ struct LinkStatsSource {
 /// The running field I/O: one task per connection or serial port.
 pub struct FieldIo {
     shared: Arc<Shared>,
-    counters: StatsHandle,
+    counters: ModbusStats,
     shutdown: watch::Sender<bool>,
     tasks: Vec<JoinHandle<()>>,
 }
@@ -278,13 +111,14 @@ fn transport_key(d: &DeviceConfig) -> Result<String, Error> {
             .as_ref()
             .map(|s| format!("rtu://{}", s.port.get_ref()))
             .ok_or_else(|| err("an rtu device needs a serial port")),
+        Protocol::Iec104 => Err(err("not a Modbus device")),
     }
 }
 
 impl FieldIo {
     /// Plans every device's blocks and starts one task per connection or
     /// serial port. Must be called inside a Tokio runtime. The plant's tags
-    /// and [`device_status_tags`] must already be in `db`.
+    /// and `gridscada_field::device_status_tags` must already be in `db`.
     pub fn start(plant: &Plant, db: Arc<TagDb>, clock: Arc<dyn Clock>) -> Result<FieldIo, Error> {
         Self::start_fenced(plant, db, clock, Leadership::sole())
     }
@@ -303,7 +137,7 @@ impl FieldIo {
         // Group devices by transport, keeping configuration order.
         let mut keys: Vec<String> = Vec::new();
         let mut groups: HashMap<String, Vec<&DeviceConfig>> = HashMap::new();
-        for d in &plant.devices {
+        for d in plant.devices.iter().filter(|d| d.protocol.is_modbus()) {
             let key = transport_key(d)?;
             if !groups.contains_key(&key) {
                 keys.push(key.clone());
@@ -325,6 +159,12 @@ impl FieldIo {
         let mut targets = HashMap::new();
         for t in &plant.tags {
             let name = t.name.get_ref();
+            if plant
+                .device(t.device.get_ref())
+                .is_some_and(|d| !d.protocol.is_modbus())
+            {
+                continue;
+            }
             let Some(&(li, di)) = device_link.get(t.device.get_ref().as_str()) else {
                 return Err(Error::Device {
                     device: t.device.get_ref().clone(),
@@ -333,13 +173,16 @@ impl FieldIo {
             };
             let id = db.id(name).ok_or_else(|| Error::MissingTag(name.clone()))?;
             let device = groups[&keys[li]][di];
-            let codec = decode::Codec::from_tag(t);
-            let address = u16::try_from(*t.address.get_ref()).map_err(|_| Error::Device {
+            let Some((table, address)) = t.register() else {
+                return Err(Error::Device {
+                    device: device.name.get_ref().clone(),
+                    reason: format!("tag '{name}' has no Modbus kind and address"),
+                });
+            };
+            let codec = decode::Codec::from_tag(t, table);
+            let address = u16::try_from(address).map_err(|_| Error::Device {
                 device: device.name.get_ref().clone(),
-                reason: format!(
-                    "tag '{name}': address {} is past 65535",
-                    t.address.get_ref()
-                ),
+                reason: format!("tag '{name}': address {address} is past 65535"),
             })?;
             let index = link_tags[li].len();
             points[li][di].push(plan::Point {
@@ -457,7 +300,7 @@ impl FieldIo {
             }
             let first = devs[0];
             let transport = match first.protocol {
-                Protocol::Tcp => Transport::Tcp(TcpLine::new(
+                Protocol::Tcp | Protocol::Iec104 => Transport::Tcp(TcpLine::new(
                     first
                         .address
                         .as_ref()
@@ -536,7 +379,7 @@ impl FieldIo {
                 targets,
                 leadership,
             }),
-            counters: StatsHandle {
+            counters: ModbusStats {
                 stats: Arc::new(stats),
                 link_stats: Arc::new(link_stats),
             },
@@ -557,9 +400,10 @@ impl FieldIo {
         self.counters.stats()
     }
 
-    /// A cloneable reader of the same counters, for whoever reports them.
-    pub fn stats_handle(&self) -> StatsHandle {
-        self.counters.clone()
+    /// A reader of the same counters that lives past the poller, for
+    /// whoever reports them (`gridscada_field::StatsHandle`).
+    pub fn stats_source(&self) -> Arc<dyn StatsSource> {
+        Arc::new(self.counters.clone())
     }
 
     /// Stops every task and waits for them. Writes still in flight answer
@@ -574,16 +418,15 @@ impl FieldIo {
 
 /// Reads the poller's counters; cheap to clone, lives past the poller.
 #[derive(Clone)]
-pub struct StatsHandle {
+struct ModbusStats {
     stats: Arc<Vec<StatsSource>>,
     link_stats: Arc<Vec<LinkStatsSource>>,
 }
 
-impl StatsHandle {
+impl StatsSource for ModbusStats {
     /// Connection attempts and requests waiting for an answer right now, over
-    /// every link. Replay on a virtual clock advances plant time only when
-    /// this is zero, so no answer is ever outrun by the clock.
-    pub fn in_flight(&self) -> u64 {
+    /// every link.
+    fn in_flight(&self) -> u64 {
         self.link_stats
             .iter()
             .map(|s| s.counters.in_flight.load(Ordering::SeqCst))
@@ -591,7 +434,7 @@ impl StatsHandle {
     }
 
     /// Counters of every device and link.
-    pub fn stats(&self) -> PollStats {
+    fn stats(&self) -> PollStats {
         let get = |a: &std::sync::atomic::AtomicU64| a.load(Ordering::Relaxed);
         PollStats {
             devices: self
@@ -613,6 +456,7 @@ impl StatsHandle {
                         overruns: get(&c.overruns),
                         last_response_ms: get(&c.response_us) as f64 / 1000.0,
                         round_trip: c.round_trips.snapshot(),
+                        ..Default::default()
                     }
                 })
                 .collect(),
@@ -676,26 +520,3 @@ impl TagWriter for FieldWriter {
     }
 }
 
-#[cfg(test)]
-mod limit_tests {
-    use super::*;
-
-    #[test]
-    fn writes_outside_the_engineering_limits_are_refused() {
-        let pv = (Some(0.0), Some(100.0));
-        for bad in [-1e6, 1e30, -5.0, f64::NAN] {
-            let e = check_limits("MG.PV1.Setpoint_kW", &Value::Float(bad), pv).unwrap_err();
-            assert!(
-                e.to_string()
-                    .contains("outside the engineering limits of 'MG.PV1.Setpoint_kW' (0 to 100)"),
-                "{e}"
-            );
-        }
-        for good in [0.0, 42.5, 100.0] {
-            assert!(check_limits("T", &Value::Float(good), pv).is_ok());
-        }
-        assert!(check_limits("T", &Value::Int(-3), (Some(0.0), None)).is_err());
-        assert!(check_limits("T", &Value::Int(3), (None, Some(2.0))).is_err());
-        assert!(check_limits("T", &Value::Bool(true), pv).is_ok());
-    }
-}

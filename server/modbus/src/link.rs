@@ -83,7 +83,7 @@ pub(crate) struct Counters {
     /// Reads repeated at once after no answer (the device's `retries`).
     pub retries: AtomicU64,
     pub response_us: AtomicU64,
-    pub round_trips: crate::round_trip::RoundTrips,
+    pub round_trips: gridscada_field::RoundTrips,
     pub connected: AtomicBool,
 }
 

@@ -512,7 +512,7 @@ async fn status_tags_are_registered_and_kept() {
     let (addr, _server) = serve(Arc::clone(&bank), "127.0.0.1:0").await;
     let tags = "[[tag]]\nname = \"D.V\"\ndevice = \"D\"\nkind = \"input_register\"\naddress = 3\n";
     let plant = plant(&format!("{}{tags}", device("D", addr, 1, 50, 300)));
-    let names: Vec<String> = gridscada_modbus::device_status_tags(&plant)
+    let names: Vec<String> = gridscada_field::device_status_tags(&plant)
         .iter()
         .map(|m| m.name.to_string())
         .collect();

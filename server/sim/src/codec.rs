@@ -29,7 +29,10 @@ pub(crate) struct Binding {
 
 impl Binding {
     pub fn from_tag(t: &TagConfig, device: usize) -> Result<Binding, String> {
-        let address = u16::try_from(*t.address.get_ref())
+        let (kind, address) = t
+            .register()
+            .ok_or_else(|| format!("tag '{}': no Modbus kind and address", t.name.get_ref()))?;
+        let address = u16::try_from(address)
             .map_err(|_| format!("tag '{}': address beyond 65535", t.name.get_ref()))?;
         let width = t.width();
         if u32::from(address) + u32::from(width) > 65536 {
@@ -42,7 +45,7 @@ impl Binding {
         Ok(Binding {
             tag: t.name.get_ref().clone(),
             device,
-            kind: *t.kind.get_ref(),
+            kind,
             address,
             bit: t.bit.as_ref().map(|b| *b.get_ref()),
             data_type: t.data_type(),

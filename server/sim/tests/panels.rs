@@ -18,9 +18,9 @@ async fn every_demo_tag_reads_from_its_register() {
     let rig = rig(1.0).await;
     for t in &rig.plant.tags {
         let mut c = rig.client(t.device.get_ref()).await;
-        let a = *t.address.get_ref() as u16;
+        let a = t.register().unwrap().1 as u16;
         let n = t.width();
-        let ok = match t.kind.get_ref() {
+        let ok = match &t.register().unwrap().0 {
             RegisterKind::Coil => c.read_coils(a, n).await.map(|r| r.is_ok()),
             RegisterKind::DiscreteInput => c.read_discrete_inputs(a, n).await.map(|r| r.is_ok()),
             RegisterKind::InputRegister => c.read_input_registers(a, n).await.map(|r| r.is_ok()),

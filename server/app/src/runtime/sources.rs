@@ -11,7 +11,7 @@ use gridscada_tagdb::TagDb;
 pub(super) struct StackDevices {
     pub(super) plant: Arc<Plant>,
     pub(super) db: Arc<TagDb>,
-    pub(super) poll: gridscada_modbus::StatsHandle,
+    pub(super) poll: gridscada_field::StatsHandle,
     /// Per device: when its scans were last counted, the count, and the
     /// rate measured then, so the achieved rate covers the last seconds.
     pub(super) rates:
@@ -51,13 +51,7 @@ impl gridscada_web::api::devices::DeviceSource for StackDevices {
                 })
                 .unwrap_or_default()
         };
-        let protocol = |d: &gridscada_config::DeviceConfig| {
-            match d.protocol {
-                gridscada_config::Protocol::Tcp => "tcp",
-                gridscada_config::Protocol::Rtu => "rtu",
-            }
-            .to_string()
-        };
+        let protocol = |d: &gridscada_config::DeviceConfig| d.protocol.label().to_string();
         let devices: Vec<DeviceView> = poll
             .devices
             .iter()
@@ -135,7 +129,7 @@ impl gridscada_web::api::devices::DeviceSource for StackDevices {
 
 /// The poller's, the historian's and the audit trail's figures for `/metrics`.
 pub(super) struct StackMetrics {
-    pub(super) poll: gridscada_modbus::StatsHandle,
+    pub(super) poll: gridscada_field::StatsHandle,
     pub(super) historian: gridscada_store::HistorianHandle,
     pub(super) audit: gridscada_store::AuditHandle,
     /// A redundant pair's role, epoch and health.

@@ -1,5 +1,6 @@
-//! Devices: `[[device]]` in the tag files, its transport (TCP or serial
-//! line), its polling limits and its comm alarm.
+//! Devices: `[[device]]` in the tag files, its protocol and transport
+//! (Modbus over TCP or a serial line, IEC 60870-5-104 over TCP), its polling
+//! limits and its comm alarm.
 
 use serde::{Deserialize, Serialize};
 use serde_spanned::Spanned;
@@ -7,8 +8,26 @@ use serde_spanned::Spanned;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Protocol {
+    /// Modbus TCP.
     Tcp,
+    /// Modbus RTU on a serial line.
     Rtu,
+    /// IEC 60870-5-104 (`[device.iec104]`).
+    Iec104,
+}
+
+impl Protocol {
+    /// Modbus TCP or RTU: the tags are registers (`kind`, `address`).
+    pub fn is_modbus(self) -> bool {
+        matches!(self, Protocol::Tcp | Protocol::Rtu)
+    }
+    pub fn label(self) -> &'static str {
+        match self {
+            Protocol::Tcp => "tcp",
+            Protocol::Rtu => "rtu",
+            Protocol::Iec104 => "iec104",
+        }
+    }
 }
 
 #[derive(Debug, Clone, Deserialize, Serialize)]
@@ -19,7 +38,7 @@ pub struct DeviceConfig {
     #[serde(default)]
     pub description: String,
     pub protocol: Protocol,
-    /// TCP: `host:port`.
+    /// TCP (Modbus TCP, IEC 104): `host:port`.
     pub address: Option<Spanned<String>>,
     /// RTU: the serial line.
     pub serial: Option<SerialConfig>,
@@ -61,6 +80,9 @@ pub struct DeviceConfig {
     /// The device's communication-failure alarm.
     #[serde(default)]
     pub comm_alarm: CommAlarmConfig,
+    /// IEC 104 link settings, for protocol = "iec104".
+    #[serde(default)]
+    pub iec104: Option<super::Iec104DeviceConfig>,
 }
 
 /// A device's communication-failure alarm (`[device.comm_alarm]`): active

@@ -1,5 +1,6 @@
-//! Tags: `[[tag]]` in the tag files, their register, data type and byte
-//! order, write access, value words (`states`) and device clock.
+//! Tags: `[[tag]]` in the tag files, where each is read (a Modbus register,
+//! or an IEC 104 point), data type and byte order, write access, value words
+//! (`states`) and device clock.
 
 use serde::{Deserialize, Serialize};
 use serde_spanned::Spanned;
@@ -101,10 +102,15 @@ pub struct TagConfig {
     pub description: String,
     /// The device the tag is read from.
     pub device: Spanned<String>,
-    /// Modbus table.
-    pub kind: Spanned<RegisterKind>,
-    /// Zero-based address in that table.
-    pub address: Spanned<u32>,
+    /// Modbus table (Modbus devices).
+    #[serde(default)]
+    pub kind: Option<Spanned<RegisterKind>>,
+    /// Zero-based address in that table (Modbus devices).
+    #[serde(default)]
+    pub address: Option<Spanned<u32>>,
+    /// The IEC 104 point (IEC 104 devices).
+    #[serde(default)]
+    pub iec104: Option<Iec104TagConfig>,
     /// Bit within a register (0 = least significant), for bool tags on registers.
     pub bit: Option<Spanned<u8>>,
     /// Wire type; `bool` by default for coils and discrete inputs, `u16` for registers.
@@ -153,17 +159,27 @@ pub struct TagConfig {
 }
 
 impl TagConfig {
+    /// The Modbus register: its table and address. `None` for a tag of
+    /// another protocol (`check` makes sure a Modbus device's tags have one).
+    pub fn register(&self) -> Option<(RegisterKind, u32)> {
+        Some((*self.kind.as_ref()?.get_ref(), *self.address.as_ref()?.get_ref()))
+    }
+    /// Whether the tag is one Modbus bit (coil, discrete input, or a bit of a register).
+    fn is_bit(&self) -> bool {
+        self.kind.as_ref().is_some_and(|k| k.get_ref().is_bit()) || self.bit.is_some()
+    }
     /// The wire type, with its default applied.
     pub fn data_type(&self) -> DataType {
-        match &self.data_type {
-            Some(t) => *t.get_ref(),
-            None if self.kind.get_ref().is_bit() || self.bit.is_some() => DataType::Bool,
-            None => DataType::U16,
+        match (&self.data_type, &self.iec104) {
+            (Some(t), _) => *t.get_ref(),
+            (None, Some(p)) => p.point.get_ref().default_type(),
+            (None, None) if self.is_bit() => DataType::Bool,
+            (None, None) => DataType::U16,
         }
     }
     /// Registers (or bits) the tag occupies.
     pub fn width(&self) -> u16 {
-        if self.kind.get_ref().is_bit() || self.bit.is_some() {
+        if self.is_bit() {
             1
         } else {
             self.data_type()

@@ -1,6 +1,6 @@
 //! Each device on its own: its transport (TCP address or serial port),
-//! unit id, scan period, timeout and back-off, its comm alarm's delays and
-//! the Modbus request limits.
+//! unit id, scan period, timeout and back-off, its comm alarm's delays, the
+//! Modbus request limits, and an IEC 104 device's link settings.
 
 use serde_spanned::Spanned;
 
@@ -24,29 +24,8 @@ pub(super) fn check_device(cx: &mut Ctx<'_>, f: usize, d: &DeviceConfig) {
         }
     }
     match d.protocol {
-        Protocol::Tcp => {
-            match &d.address {
-                None => cx.err(
-                    f,
-                    at.clone(),
-                    format!("device '{name}': a tcp device needs address = \"host:port\""),
-                ),
-                Some(a) => {
-                    let ok = a.get_ref().rsplit_once(':').is_some_and(|(host, port)| {
-                        !host.is_empty() && port.parse::<u16>().is_ok_and(|p| p > 0)
-                    });
-                    if !ok {
-                        cx.err(
-                            f,
-                            a.span(),
-                            format!(
-                                "device '{name}': address '{}' is not host:port",
-                                a.get_ref()
-                            ),
-                        );
-                    }
-                }
-            }
+        Protocol::Tcp | Protocol::Iec104 => {
+            check_tcp_address(cx, f, d);
             if d.serial.is_some() {
                 cx.err(
                     f,
@@ -159,5 +138,122 @@ pub(super) fn limit_range(
                 v.get_ref()
             ),
         );
+    }
+}
+
+/// `host:port` of a TCP device.
+fn is_host_port(address: &str) -> bool {
+    address
+        .rsplit_once(':')
+        .is_some_and(|(host, port)| !host.is_empty() && port.parse::<u16>().is_ok_and(|p| p > 0))
+}
+
+fn check_tcp_address(cx: &mut Ctx<'_>, f: usize, d: &DeviceConfig) {
+    let name = d.name.get_ref();
+    match &d.address {
+        None => cx.err(
+            f,
+            d.name.span(),
+            format!(
+                "device '{name}': a {} device needs address = \"host:port\"",
+                d.protocol.label()
+            ),
+        ),
+        Some(a) if !is_host_port(a.get_ref()) => cx.err(
+            f,
+            a.span(),
+            format!("device '{name}': address '{}' is not host:port", a.get_ref()),
+        ),
+        Some(_) => {}
+    }
+    match (d.protocol, &d.iec104) {
+        (Protocol::Iec104, Some(link)) => check_iec104_link(cx, f, name, link),
+        (Protocol::Iec104, None) => {}
+        (_, Some(link)) => cx.err(
+            f,
+            link.common_address.span(),
+            format!("device '{name}': [device.iec104] is only for protocol = \"iec104\""),
+        ),
+        (_, None) => {}
+    }
+}
+
+/// The APCI parameters and periods of an IEC 104 link, within the ranges
+/// the standard gives (k 1..32767, w at most two thirds of k, t2 < t1).
+fn check_iec104_link(cx: &mut Ctx<'_>, f: usize, name: &str, link: &Iec104DeviceConfig) {
+    let ca = *link.common_address.get_ref();
+    if ca == 0 || ca == 0xFFFF {
+        cx.err(
+            f,
+            link.common_address.span(),
+            format!("device '{name}': common_address must be 1 to 65534 (0 is unused, 65535 is the broadcast address)"),
+        );
+    }
+    for a in &link.redundant_addresses {
+        if !is_host_port(a.get_ref()) {
+            cx.err(
+                f,
+                a.span(),
+                format!(
+                    "device '{name}': redundant address '{}' is not host:port",
+                    a.get_ref()
+                ),
+            );
+        }
+    }
+    let (k, w) = (*link.k.get_ref(), *link.w.get_ref());
+    if !(1..=32767).contains(&k) {
+        cx.err(
+            f,
+            link.k.span(),
+            format!("device '{name}': k must be 1 to 32767"),
+        );
+    }
+    if w == 0 || u32::from(w) * 3 > u32::from(k) * 2 {
+        cx.err(
+            f,
+            link.w.span(),
+            format!("device '{name}': w = {w} must be 1 to two thirds of k = {k}"),
+        );
+    }
+    for (field, v, lo, hi) in [
+        ("t0_s", &link.t0_s, 1.0, 255.0),
+        ("t1_s", &link.t1_s, 1.0, 255.0),
+        ("t2_s", &link.t2_s, 1.0, 255.0),
+        ("t3_s", &link.t3_s, 1.0, 172_800.0),
+        ("command_timeout_s", &link.command_timeout_s, 1.0, 600.0),
+    ] {
+        if !(v.get_ref().is_finite() && (lo..=hi).contains(v.get_ref())) {
+            cx.err(
+                f,
+                v.span(),
+                format!("device '{name}': {field} must be {lo} to {hi} seconds"),
+            );
+        }
+    }
+    if link.t2_s.get_ref() >= link.t1_s.get_ref() {
+        cx.err(
+            f,
+            link.t2_s.span(),
+            format!(
+                "device '{name}': t2_s = {} must be below t1_s = {} (acknowledge before the peer gives up)",
+                link.t2_s.get_ref(),
+                link.t1_s.get_ref()
+            ),
+        );
+    }
+    for (field, v) in [
+        ("interrogation_period_s", &link.interrogation_period_s),
+        ("counter_interrogation_period_s", &link.counter_interrogation_period_s),
+        ("clock_sync_period_s", &link.clock_sync_period_s),
+    ] {
+        let p = *v.get_ref();
+        if !(p.is_finite() && (p == 0.0 || (1.0..=604_800.0).contains(&p))) {
+            cx.err(
+                f,
+                v.span(),
+                format!("device '{name}': {field} must be 0 (off) or 1 to 604800 seconds"),
+            );
+        }
     }
 }

@@ -1,4 +1,5 @@
-//! Across tags: two tags on the same register (or bit) of one device.
+//! Across tags: two tags on the same register (or bit) of one Modbus
+//! device, or on the same information object address of one IEC 104 device.
 
 use std::collections::BTreeMap;
 
@@ -13,15 +14,17 @@ pub(super) fn check_overlaps(cx: &mut Ctx<'_>, tags: &[(usize, TagConfig)]) {
     type Span<'a> = (u32, u32, Option<u8>, usize, &'a TagConfig);
     let mut by_table: BTreeMap<(&str, RegisterKind), Vec<Span<'_>>> = BTreeMap::new();
     for (f, t) in tags {
-        let start = *t.address.get_ref();
+        let Some((kind, start)) = t.register() else {
+            continue;
+        };
         let end = start + t.width().max(1) as u32;
-        let bit = if t.kind.get_ref().is_bit() {
+        let bit = if kind.is_bit() {
             None
         } else {
             t.bit.as_ref().map(|b| *b.get_ref())
         };
         by_table
-            .entry((t.device.get_ref().as_str(), *t.kind.get_ref()))
+            .entry((t.device.get_ref().as_str(), kind))
             .or_default()
             .push((start, end, bit, *f, t));
     }
@@ -39,11 +42,15 @@ pub(super) fn check_overlaps(cx: &mut Ctx<'_>, tags: &[(usize, TagConfig)]) {
                     (Some(_), None) | (None, Some(_)) => false,
                     (None, None) => true,
                 };
+                // Both have an address: they are in `by_table`.
+                let (Some(first_at), Some(cur_at)) = (&o.4.address, &cur.4.address) else {
+                    continue;
+                };
                 if conflict {
-                    let first = cx.place(o.3, o.4.address.span());
+                    let first = cx.place(o.3, first_at.span());
                     cx.err(
                         cur.3,
-                        cur.4.address.span(),
+                        cur_at.span(),
                         format!(
                             "tag '{}': {} {} on device '{device}' overlaps tag '{}' (at {first})",
                             cur.4.name.get_ref(),
@@ -55,6 +62,43 @@ pub(super) fn check_overlaps(cx: &mut Ctx<'_>, tags: &[(usize, TagConfig)]) {
                 }
             }
             open.push(cur);
+        }
+    }
+}
+
+/// Two tags on the same information object address of one IEC 104 device:
+/// a monitored point read into two tags would be fine, but which one a
+/// command confirms would not be clear, so each IOA (monitored, and
+/// commanded) belongs to one tag.
+pub(super) fn check_ioa_reuse(cx: &mut Ctx<'_>, tags: &[(usize, TagConfig)]) {
+    let mut seen: BTreeMap<(&str, bool, u32), (usize, &TagConfig, &serde_spanned::Spanned<u32>)> =
+        BTreeMap::new();
+    for (f, t) in tags {
+        let Some(p) = &t.iec104 else { continue };
+        let commanded = p.command.as_ref().map(|_| p.command_ioa.as_ref().unwrap_or(&p.ioa));
+        for (is_command, ioa) in [(false, Some(&p.ioa)), (true, commanded)] {
+            let Some(ioa) = ioa else { continue };
+            let key = (t.device.get_ref().as_str(), is_command, *ioa.get_ref());
+            match seen.get(&key) {
+                Some((pf, prev, prev_at)) => {
+                    let first = cx.place(*pf, prev_at.span());
+                    cx.err(
+                        *f,
+                        ioa.span(),
+                        format!(
+                            "tag '{}': {} information object address {} of device '{}' is used by tag '{}' too (at {first})",
+                            t.name.get_ref(),
+                            if is_command { "command" } else { "monitored" },
+                            ioa.get_ref(),
+                            t.device.get_ref(),
+                            prev.name.get_ref()
+                        ),
+                    );
+                }
+                None => {
+                    seen.insert(key, (*f, t, ioa));
+                }
+            }
         }
     }
 }

@@ -25,9 +25,51 @@ pub(super) fn check_tag_name(cx: &mut Ctx<'_>, f: usize, name: &Spanned<String>)
 }
 
 pub(super) fn check_tag(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, device: Option<&DeviceConfig>) {
+    // Where the tag is read: a Modbus register or an IEC 104 point, as its
+    // device's protocol asks. An unknown device is judged by what the tag has.
+    let iec104 = match device {
+        Some(d) => d.protocol == Protocol::Iec104,
+        None => t.iec104.is_some(),
+    };
+    if iec104 {
+        check_iec104_point(cx, f, t, device);
+    } else {
+        check_modbus_register(cx, f, t, device);
+    }
+    check_tag_common(cx, f, t);
+}
+
+/// A Modbus tag's table, address, bit, type, length and write access.
+fn check_modbus_register(
+    cx: &mut Ctx<'_>,
+    f: usize,
+    t: &TagConfig,
+    device: Option<&DeviceConfig>,
+) {
     let name = t.name.get_ref();
-    let kind = *t.kind.get_ref();
     let ty = t.data_type();
+    if let Some(p) = &t.iec104 {
+        cx.err(
+            f,
+            p.ioa.span(),
+            format!(
+                "tag '{name}': iec104 is for tags of protocol = \"iec104\" devices, and device '{}' is Modbus",
+                t.device.get_ref()
+            ),
+        );
+    }
+    let (Some(kind), Some(address)) = (&t.kind, &t.address) else {
+        cx.err(
+            f,
+            t.name.span(),
+            format!(
+                "tag '{name}': a tag of a Modbus device needs kind (coil, discrete_input, input_register or holding_register) and address"
+            ),
+        );
+        return;
+    };
+    let kind = *kind.get_ref();
+    let addr = *address.get_ref();
     if kind.is_bit() {
         if let Some(dt) = &t.data_type {
             if *dt.get_ref() != DataType::Bool {
@@ -94,11 +136,10 @@ pub(super) fn check_tag(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, device: Optio
         _ => {}
     }
     let width = t.width().max(1) as u32;
-    let addr = *t.address.get_ref();
     if addr + width - 1 > 65_535 {
         cx.err(
             f,
-            t.address.span(),
+            address.span(),
             format!(
                 "tag '{name}': address {addr} with {width} {} runs past 65535",
                 if kind.is_bit() { "bits" } else { "registers" }
@@ -115,6 +156,119 @@ pub(super) fn check_tag(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, device: Optio
             cx.err(f, t.name.span(), format!("tag '{name}': {width} registers do not fit in one request to device '{}' (max {max})", d.name.get_ref()));
         }
     }
+    if *t.writable.get_ref() && !kind.is_writable() {
+        cx.err(f, t.writable.span(), format!("tag '{name}': a {} is read-only in Modbus; only coils and holding registers can be writable", kind.label()));
+    }
+}
+
+/// An IEC 104 tag's point: information object addresses, the type its
+/// values arrive as and the tag's type, the command of a writable tag.
+fn check_iec104_point(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, device: Option<&DeviceConfig>) {
+    let name = t.name.get_ref();
+    let ty = t.data_type();
+    let device_name = t.device.get_ref();
+    for (field, span) in [
+        ("kind", t.kind.as_ref().map(|k| k.span())),
+        ("address", t.address.as_ref().map(|a| a.span())),
+        ("bit", t.bit.as_ref().map(|b| b.span())),
+        ("length", t.length.as_ref().map(|l| l.span())),
+    ] {
+        if let Some(span) = span {
+            cx.err(
+                f,
+                span,
+                format!("tag '{name}': {field} is a Modbus setting; device '{device_name}' speaks IEC 104 (use iec104 = {{ ioa = …, point = … }})"),
+            );
+        }
+    }
+    let Some(p) = &t.iec104 else {
+        if device.is_some() {
+            cx.err(
+                f,
+                t.name.span(),
+                format!("tag '{name}': a tag of IEC 104 device '{device_name}' needs iec104 = {{ ioa = …, point = \"M_SP\" }}"),
+            );
+        }
+        return;
+    };
+    for ioa in std::iter::once(&p.ioa).chain(p.command_ioa.as_ref()) {
+        if !(1..=0xFF_FFFF).contains(ioa.get_ref()) {
+            cx.err(
+                f,
+                ioa.span(),
+                format!(
+                    "tag '{name}': information object address {} is outside 1..16777215",
+                    ioa.get_ref()
+                ),
+            );
+        }
+    }
+    let point = *p.point.get_ref();
+    if !point.carries(ty) {
+        let at = t.data_type.as_ref().map(|d| d.span()).unwrap_or(p.point.span());
+        cx.err(
+            f,
+            at,
+            format!(
+                "tag '{name}': a {} point cannot carry a {} value (use type = \"{}\")",
+                point.label(),
+                ty.label(),
+                point.default_type().label()
+            ),
+        );
+    }
+    let writable = *t.writable.get_ref();
+    match &p.command {
+        Some(c) if !writable => cx.err(
+            f,
+            c.span(),
+            format!(
+                "tag '{name}': command {} is set on a read-only tag (set writable = true and write_role)",
+                c.get_ref().label()
+            ),
+        ),
+        Some(c) if !c.get_ref().carries(ty) => cx.err(
+            f,
+            c.span(),
+            format!(
+                "tag '{name}': command {} cannot carry a {} value",
+                c.get_ref().label(),
+                ty.label()
+            ),
+        ),
+        None if writable => cx.err(
+            f,
+            t.writable.span(),
+            format!("tag '{name}': a writable IEC 104 tag needs command (C_SC, C_DC, C_RC, C_SE_NA, C_SE_NB, C_SE_NC or C_BO)"),
+        ),
+        _ => {}
+    }
+    if p.command.is_none() && (p.select || p.command_ioa.is_some()) {
+        cx.err(
+            f,
+            p.ioa.span(),
+            format!("tag '{name}': select and command_ioa are for a tag with a command"),
+        );
+    }
+    let qualifier = *p.qualifier.get_ref();
+    let max = match p.command.as_ref().map(|c| *c.get_ref()) {
+        Some(Iec104Command::C_SC | Iec104Command::C_DC | Iec104Command::C_RC) => 31,
+        Some(Iec104Command::C_SE_NA | Iec104Command::C_SE_NB | Iec104Command::C_SE_NC) => 127,
+        _ => 0,
+    };
+    if qualifier > max {
+        cx.err(
+            f,
+            p.qualifier.span(),
+            format!("tag '{name}': qualifier {qualifier} is outside 0..={max} for this command"),
+        );
+    }
+}
+
+/// What every tag is checked for, whatever its protocol.
+fn check_tag_common(cx: &mut Ctx<'_>, f: usize, t: &TagConfig) {
+    let name = t.name.get_ref();
+    let ty = t.data_type();
     let scale = *t.scale.get_ref();
     if scale == 0.0 || !scale.is_finite() {
         cx.err(
@@ -186,9 +340,6 @@ pub(super) fn check_tag(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, device: Optio
             t.writable.span(),
             format!("tag '{name}': a datetime is a device clock, read-only; it cannot be writable"),
         );
-    }
-    if writable && !kind.is_writable() {
-        cx.err(f, t.writable.span(), format!("tag '{name}': a {} is read-only in Modbus; only coils and holding registers can be writable", kind.label()));
     }
     match (&t.write_role, writable) {
         (None, true) => cx.err(f, t.writable.span(), format!("tag '{name}': writable tags need write_role (operator, supervisor or administrator)")),

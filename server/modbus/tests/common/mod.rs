@@ -227,7 +227,7 @@ pub fn tagdb(plant: &Plant) -> Arc<TagDb> {
                 .writable(*t.writable.get_ref())
         })
         .collect();
-    metas.extend(gridscada_modbus::device_status_tags(plant));
+    metas.extend(gridscada_field::device_status_tags(plant));
     Arc::new(TagDb::new(metas).expect("tag db"))
 }
 

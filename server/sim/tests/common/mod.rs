@@ -69,8 +69,8 @@ impl Rig {
     pub async fn read_bool(&self, tag: &str) -> bool {
         let t = self.plant.tag(tag).expect("tag");
         let mut c = self.client(t.device.get_ref()).await;
-        let a = *t.address.get_ref() as u16;
-        let r = match t.kind.get_ref() {
+        let a = t.register().unwrap().1 as u16;
+        let r = match &t.register().unwrap().0 {
             RegisterKind::Coil => c.read_coils(a, 1).await,
             RegisterKind::DiscreteInput => c.read_discrete_inputs(a, 1).await,
             k => panic!("{tag} is on {k:?}"),
@@ -81,8 +81,8 @@ impl Rig {
     pub async fn read_f32(&self, tag: &str) -> f64 {
         let t = self.plant.tag(tag).expect("tag");
         let mut c = self.client(t.device.get_ref()).await;
-        let a = *t.address.get_ref() as u16;
-        let w = match t.kind.get_ref() {
+        let a = t.register().unwrap().1 as u16;
+        let w = match &t.register().unwrap().0 {
             RegisterKind::InputRegister => c.read_input_registers(a, 2).await,
             RegisterKind::HoldingRegister => c.read_holding_registers(a, 2).await,
             k => panic!("{tag} is on {k:?}"),
@@ -95,14 +95,14 @@ impl Rig {
     pub async fn read_u16(&self, tag: &str) -> u16 {
         let t = self.plant.tag(tag).expect("tag");
         let mut c = self.client(t.device.get_ref()).await;
-        let a = *t.address.get_ref() as u16;
+        let a = t.register().unwrap().1 as u16;
         c.read_input_registers(a, 1).await.unwrap().unwrap()[0]
     }
 
     pub async fn write_coil(&self, tag: &str, v: bool) {
         let t = self.plant.tag(tag).expect("tag");
         let mut c = self.client(t.device.get_ref()).await;
-        c.write_single_coil(*t.address.get_ref() as u16, v)
+        c.write_single_coil(t.register().unwrap().1 as u16, v)
             .await
             .expect("transport")
             .expect("no exception");
@@ -112,7 +112,7 @@ impl Rig {
         let t = self.plant.tag(tag).expect("tag");
         let mut c = self.client(t.device.get_ref()).await;
         let b = v.to_bits();
-        c.write_multiple_registers(*t.address.get_ref() as u16, &[(b >> 16) as u16, b as u16])
+        c.write_multiple_registers(t.register().unwrap().1 as u16, &[(b >> 16) as u16, b as u16])
             .await
             .expect("transport")
             .expect("no exception");

@@ -40,9 +40,17 @@ pub struct TagView {
 #[serde(deny_unknown_fields)]
 pub struct TagSource {
     pub device: String,
-    #[schema(value_type = shapes::RegisterKind, inline)]
-    pub table: RegisterKind,
-    pub address: u32,
+    /// The device's protocol: tcp or rtu (Modbus), iec104
+    pub protocol: String,
+    /// The Modbus table; null for a tag of another protocol
+    #[schema(value_type = Option<shapes::RegisterKind>, inline, required = true)]
+    pub table: Option<RegisterKind>,
+    /// The Modbus address; null for a tag of another protocol
+    #[schema(required = true)]
+    pub address: Option<u32>,
+    /// The IEC 104 point: type, information object address, command
+    #[schema(required = true)]
+    pub iec104: Option<Iec104Source>,
     #[schema(required = true)]
     pub bit: Option<u8>,
     #[schema(value_type = String)]
@@ -57,6 +65,21 @@ pub struct TagSource {
     /// the time the reply arrived
     #[schema(required = true)]
     pub time_tag: Option<String>,
+}
+
+/// Where an IEC 104 tag is read and commanded.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct Iec104Source {
+    /// Monitoring type without suffix, e.g. M_DP
+    pub point: String,
+    pub ioa: u32,
+    /// Command type, e.g. C_DC; null: read-only
+    #[schema(required = true)]
+    pub command: Option<String>,
+    #[schema(required = true)]
+    pub command_ioa: Option<u32>,
+    /// Select before operate
+    pub select: bool,
 }
 
 impl WebState {
@@ -92,8 +115,21 @@ impl WebState {
             write_role: self.write_role(&meta.name),
             source: config.map(|t| TagSource {
                 device: t.device.get_ref().clone(),
-                table: *t.kind.get_ref(),
-                address: *t.address.get_ref(),
+                protocol: self
+                    .plant
+                    .device(t.device.get_ref())
+                    .map(|d| d.protocol.label())
+                    .unwrap_or_default()
+                    .to_string(),
+                table: t.kind.as_ref().map(|k| *k.get_ref()),
+                address: t.address.as_ref().map(|a| *a.get_ref()),
+                iec104: t.iec104.as_ref().map(|p| Iec104Source {
+                    point: p.point.get_ref().label().to_string(),
+                    ioa: *p.ioa.get_ref(),
+                    command: p.command.as_ref().map(|c| c.get_ref().label().to_string()),
+                    command_ioa: p.command.as_ref().map(|_| p.command_ioa()),
+                    select: p.select,
+                }),
                 bit: t.bit.as_ref().map(|b| *b.get_ref()),
                 data_type: t.data_type(),
                 word_order: t.word_order,

@@ -1,4 +1,5 @@
-//! The round trip of each Modbus request, as a fixed-bucket histogram.
+//! The round trip of each request to a device (a Modbus read, an IEC 104
+//! command or test frame), as a fixed-bucket histogram.
 //!
 //! Kept here, in plain atomics, so field I/O owes nothing to any exposition
 //! format: `app` hands the snapshot to `/metrics`. The buckets are fixed
@@ -18,13 +19,13 @@ const BUCKETS: usize = ROUND_TRIP_BOUNDS.len() + 1;
 /// Where the poller counts round trips: one per device, written by its link
 /// task only, read by whoever reports.
 #[derive(Default)]
-pub(crate) struct RoundTrips {
+pub struct RoundTrips {
     buckets: [AtomicU64; BUCKETS],
     sum_us: AtomicU64,
 }
 
 impl RoundTrips {
-    pub(crate) fn observe(&self, elapsed: Duration) {
+    pub fn observe(&self, elapsed: Duration) {
         let s = elapsed.as_secs_f64();
         let i = ROUND_TRIP_BOUNDS
             .iter()
@@ -37,7 +38,7 @@ impl RoundTrips {
         );
     }
 
-    pub(crate) fn snapshot(&self) -> RoundTripHistogram {
+    pub fn snapshot(&self) -> RoundTripHistogram {
         let mut counts = [0; BUCKETS];
         for (c, b) in counts.iter_mut().zip(&self.buckets) {
             *c = b.load(Ordering::Relaxed);

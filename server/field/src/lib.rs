@@ -1,0 +1,315 @@
+//! # gridscada-field: the protocol-neutral device interface
+//!
+//! **Owns:** what every field protocol (Modbus, IEC 60870-5-104, …) shares
+//! with the rest of the server: the names of a device's communication status
+//! tags, the device and link figures ([`PollStats`]) that the devices screen
+//! and `/metrics` show, the engineering write limits every write is checked
+//! against ([`check_limits`]), and the writer that sends each tag's write to
+//! the protocol its device speaks ([`Router`]).
+//!
+//! **Must not touch:** any protocol's framing or connections (each protocol
+//! crate owns its own), SQL, HTTP, alarms. A protocol crate implements
+//! [`gridscada_tagdb::TagWriter`] and [`StatsSource`]; `app` puts them
+//! together here.
+
+mod round_trip;
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use gridscada_config::Plant;
+use gridscada_tagdb::{TagMeta, TagWriter, Value, ValueKind, WriteError, WriteFuture};
+
+pub use round_trip::{RoundTripHistogram, RoundTrips, ROUND_TRIP_BOUNDS};
+
+/// Names of a device's communication status tags.
+pub fn status_tag_names(device: &str) -> [(String, ValueKind, &'static str, &'static str); 8] {
+    [
+        (
+            format!("{device}.Comm.Connected"),
+            ValueKind::Bool,
+            "",
+            "Device answers its requests",
+        ),
+        (
+            format!("{device}.Comm.LastError"),
+            ValueKind::Str,
+            "",
+            "Last communication error",
+        ),
+        (
+            format!("{device}.Comm.ResponseMs"),
+            ValueKind::Float,
+            "ms",
+            "Response time of the last answered request",
+        ),
+        (
+            format!("{device}.Comm.Requests"),
+            ValueKind::Int,
+            "",
+            "Requests sent",
+        ),
+        (
+            format!("{device}.Comm.Errors"),
+            ValueKind::Int,
+            "",
+            "Requests without a good answer (timeouts, exceptions, bad replies)",
+        ),
+        (
+            format!("{device}.Comm.Timeouts"),
+            ValueKind::Int,
+            "",
+            "Requests that timed out",
+        ),
+        (
+            format!("{device}.Comm.Overruns"),
+            ValueKind::Int,
+            "",
+            "Scan periods missed because the previous scan ran over",
+        ),
+        (
+            format!("{device}.Comm.Retries"),
+            ValueKind::Int,
+            "",
+            "Reads repeated at once after no answer (the device's retries)",
+        ),
+    ]
+}
+
+/// The communication status tags of every device, for the app to register
+/// before it builds the [`TagDb`].
+pub fn device_status_tags(plant: &Plant) -> Vec<TagMeta> {
+    plant
+        .devices
+        .iter()
+        .flat_map(|d| {
+            status_tag_names(d.name.get_ref())
+                .into_iter()
+                .map(|(name, kind, units, desc)| {
+                    TagMeta::new(name, kind)
+                        .units(units)
+                        .describe(format!("{}: {desc}", d.name.get_ref()))
+                })
+        })
+        .collect()
+}
+
+/// Request and scan counters of one device.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct DeviceStats {
+    pub device: String,
+    /// The connection or port the device is on.
+    pub link: String,
+    pub connected: bool,
+    pub requests: u64,
+    /// Requests without a good answer (timeouts and exceptions included).
+    pub errors: u64,
+    pub timeouts: u64,
+    pub exceptions: u64,
+    pub writes: u64,
+    pub scans: u64,
+    /// Scans that started more than 10 % of their period after they were due.
+    pub late_scans: u64,
+    /// Scan periods skipped because a scan ran over.
+    pub overruns: u64,
+    /// Round trip of the last answered request, wall time.
+    pub last_response_ms: f64,
+    /// Round trips of every answered request, wall time.
+    pub round_trip: RoundTripHistogram,
+    /// Telecontrol links (IEC 104): the state of the device's connection
+    /// ("started", "connected", "testing", "stopped"); empty for Modbus.
+    pub state: String,
+    /// Spontaneous or event data received.
+    pub events: u64,
+    /// General interrogations completed.
+    pub interrogations: u64,
+    /// When the last general interrogation completed, Unix ms.
+    pub last_interrogation_ms: Option<i64>,
+    /// Writes (commands) the device refused or did not confirm.
+    pub writes_failed: u64,
+    /// The device clock minus ours at the last clock synchronisation, ms.
+    pub clock_offset_ms: Option<f64>,
+    /// The device reported lost events (buffer overflow).
+    pub overflows: u64,
+}
+
+/// Counters of one connection or serial port.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LinkStats {
+    pub link: String,
+    pub connects: u64,
+    pub disconnects: u64,
+    /// Replies discarded because their request had already timed out.
+    pub late_replies: u64,
+    /// RTU bytes skipped as noise.
+    pub garbage_bytes: u64,
+    pub last_error: String,
+}
+
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PollStats {
+    pub devices: Vec<DeviceStats>,
+    pub links: Vec<LinkStats>,
+}
+
+impl PollStats {
+    /// Sums over every device.
+    pub fn total(&self) -> DeviceStats {
+        let mut t = DeviceStats {
+            device: "total".into(),
+            ..Default::default()
+        };
+        for d in &self.devices {
+            t.requests += d.requests;
+            t.errors += d.errors;
+            t.timeouts += d.timeouts;
+            t.exceptions += d.exceptions;
+            t.writes += d.writes;
+            t.scans += d.scans;
+            t.late_scans += d.late_scans;
+            t.overruns += d.overruns;
+        }
+        t.connected = self.devices.iter().all(|d| d.connected);
+        t
+    }
+
+    pub fn device(&self, name: &str) -> Option<&DeviceStats> {
+        self.devices.iter().find(|d| d.device == name)
+    }
+}
+
+/// A protocol's running devices, as the figures see them.
+pub trait StatsSource: Send + Sync {
+    /// Counters of the protocol's devices and links.
+    fn stats(&self) -> PollStats;
+    /// Connection attempts and requests waiting for an answer right now.
+    /// Replay on a virtual clock advances plant time only when every
+    /// protocol's count is zero, so no answer is ever outrun by the clock.
+    fn in_flight(&self) -> u64;
+}
+
+/// The figures of every protocol together; cheap to clone, lives past the
+/// protocols' tasks.
+#[derive(Clone, Default)]
+pub struct StatsHandle {
+    sources: Vec<Arc<dyn StatsSource>>,
+}
+
+impl StatsHandle {
+    pub fn new(sources: Vec<Arc<dyn StatsSource>>) -> StatsHandle {
+        StatsHandle { sources }
+    }
+
+    pub fn in_flight(&self) -> u64 {
+        self.sources.iter().map(|s| s.in_flight()).sum()
+    }
+
+    /// Counters of every device and link, in configuration order within
+    /// each protocol.
+    pub fn stats(&self) -> PollStats {
+        let mut all = PollStats::default();
+        for s in &self.sources {
+            let PollStats { devices, links } = s.stats();
+            all.devices.extend(devices);
+            all.links.extend(links);
+        }
+        all
+    }
+}
+
+/// Refuses a numeric value outside `limits`.
+pub fn check_limits(
+    name: &str,
+    value: &Value,
+    limits: (Option<f64>, Option<f64>),
+) -> Result<(), WriteError> {
+    let v = match value {
+        Value::Float(_) | Value::Int(_) | Value::UInt(_) => value.as_f64().unwrap_or(f64::NAN),
+        _ => return Ok(()),
+    };
+    let (lo, hi) = limits;
+    let inside = !v.is_nan() && lo.is_none_or(|lo| v >= lo) && hi.is_none_or(|hi| v <= hi);
+    if inside {
+        return Ok(());
+    }
+    let limits = match (lo, hi) {
+        (Some(lo), Some(hi)) => format!("{lo} to {hi}"),
+        (Some(lo), None) => format!("at least {lo}"),
+        (None, Some(hi)) => format!("at most {hi}"),
+        (None, None) => "a number".to_string(),
+    };
+    Err(WriteError::OutOfLimits {
+        tag: name.to_string(),
+        value: value.to_string(),
+        limits,
+    })
+}
+
+/// The one writer of the field: each tag's write goes to the writer of the
+/// protocol its device speaks. Control loops, the HMI and northbound hold
+/// this, never a protocol's own.
+pub struct Router {
+    routes: HashMap<Arc<str>, Arc<dyn TagWriter>>,
+}
+
+impl Router {
+    /// `writers`: each protocol's writer with the tags it serves.
+    pub fn new<'a>(
+        writers: impl IntoIterator<Item = (Arc<dyn TagWriter>, Vec<&'a str>)>,
+    ) -> Router {
+        let mut routes = HashMap::new();
+        for (writer, tags) in writers {
+            for t in tags {
+                routes.insert(Arc::<str>::from(t), Arc::clone(&writer));
+            }
+        }
+        Router { routes }
+    }
+
+    /// The tags of `plant` whose device's protocol satisfies `speaks`.
+    pub fn tags_of(plant: &Plant, speaks: impl Fn(gridscada_config::Protocol) -> bool) -> Vec<&str> {
+        plant
+            .tags
+            .iter()
+            .filter(|t| {
+                plant
+                    .device(t.device.get_ref())
+                    .is_some_and(|d| speaks(d.protocol))
+            })
+            .map(|t| t.name.get_ref().as_str())
+            .collect()
+    }
+}
+
+impl TagWriter for Router {
+    fn write<'a>(&'a self, name: &'a str, value: Value) -> WriteFuture<'a> {
+        match self.routes.get(name) {
+            Some(w) => w.write(name, value),
+            None => Box::pin(async move { Err(WriteError::UnknownTag(name.to_string())) }),
+        }
+    }
+}
+
+#[cfg(test)]
+mod limit_tests {
+    use super::*;
+
+    #[test]
+    fn writes_outside_the_engineering_limits_are_refused() {
+        let pv = (Some(0.0), Some(100.0));
+        for bad in [-1e6, 1e30, -5.0, f64::NAN] {
+            let e = check_limits("MG.PV1.Setpoint_kW", &Value::Float(bad), pv).unwrap_err();
+            assert!(
+                e.to_string()
+                    .contains("outside the engineering limits of 'MG.PV1.Setpoint_kW' (0 to 100)"),
+                "{e}"
+            );
+        }
+        for good in [0.0, 42.5, 100.0] {
+            assert!(check_limits("T", &Value::Float(good), pv).is_ok());
+        }
+        assert!(check_limits("T", &Value::Int(-3), (Some(0.0), None)).is_err());
+        assert!(check_limits("T", &Value::Int(3), (None, Some(2.0))).is_err());
+        assert!(check_limits("T", &Value::Bool(true), pv).is_ok());
+    }
+}
