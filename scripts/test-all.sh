@@ -62,7 +62,7 @@ root_cmd=()
 # call; ca-certificates: cargo and pip over HTTPS.
 debian_packages=(postgresql socat mbpoll libmodbus-dev pkg-config curl python3-venv nginx
     gcc libc6-dev ca-certificates mosquitto
-    poppler-utils)
+    poppler-utils tshark)
 # Debian's nodejs comes without npm (the browser tests install playwright-core with it).
 command -v npm >/dev/null 2>&1 || debian_packages+=(npm)
 missing=()

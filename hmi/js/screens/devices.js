@@ -22,8 +22,12 @@ export default {
     // Scrolling tables are reachable from the keyboard.
     const devBox = h('div', { class: 'table-wrap', tabindex: '0', role: 'group', 'aria-label': 'Devices table' });
     const linkBox = h('div', { class: 'table-wrap', tabindex: '0', role: 'group', 'aria-label': 'Connections table' });
+    const teleBox = h('div', { class: 'table-wrap', tabindex: '0', role: 'group', 'aria-label': 'Telecontrol stations table' });
+    const teleCard = h('section', { class: 'card', 'aria-labelledby': 'tele-title', hidden: true },
+      h('h2', { id: 'tele-title', text: 'Telecontrol stations' }), teleBox);
     el.append(h('h1', { class: 'screen-title', text: 'Devices' }), summary,
       h('section', { class: 'card', 'aria-labelledby': 'devices-title' }, h('h2', { id: 'devices-title', text: 'Devices' }), devBox),
+      teleCard,
       h('section', { class: 'card', 'aria-labelledby': 'links-title' }, h('h2', { id: 'links-title', text: 'Connections and serial ports' }), linkBox));
     let timer = null;
 
@@ -45,6 +49,17 @@ export default {
           num(d.unit_id), num(d.scan_ms), num(d.achieved_scans_per_s, 1), num(d.response_ms, 1),
           num(d.requests), num(d.errors), num(d.timeouts), num(d.exceptions), num(d.writes), num(d.late_scans), num(d.overruns),
           h('td', { class: 'last-error', text: d.last_error || '—' }))))));
+      const stations = view.devices.filter((d) => d.telecontrol);
+      teleCard.hidden = stations.length === 0;
+      replace(teleBox, h('table', { class: 'data', id: 'telecontrol-table' },
+        h('thead', {}, h('tr', {}, ['Station', 'Link', 'Interrogated (s ago)', 'Interrogations', 'Events', 'Commands', 'Failed', 'Clock offset (ms)', 'Overflows']
+          .map((t) => h('th', { scope: 'col', text: t })))),
+        h('tbody', {}, stations.map((d) => h('tr', { dataset: { station: d.name } },
+          h('th', { scope: 'row', text: d.name }),
+          h('td', {}, h('span', { class: `badge ${d.telecontrol.state === 'started' ? 'badge-ok' : 'badge-bad'}`, text: d.telecontrol.state.toUpperCase() })),
+          num(d.telecontrol.interrogation_age_s ?? NaN), num(d.telecontrol.interrogations), num(d.telecontrol.events),
+          num(d.telecontrol.commands), num(d.telecontrol.commands_failed), num(d.telecontrol.clock_offset_ms ?? NaN),
+          num(d.telecontrol.overflows))))));
       replace(linkBox, h('table', { class: 'data', id: 'links-table' },
         h('thead', {}, h('tr', {}, ['Connection', 'State', 'Devices', 'Connects', 'Disconnects', 'Late replies', 'Noise bytes', 'Last error']
           .map((t) => h('th', { scope: 'col', text: t })))),

@@ -267,7 +267,10 @@ impl Router {
     }
 
     /// The tags of `plant` whose device's protocol satisfies `speaks`.
-    pub fn tags_of(plant: &Plant, speaks: impl Fn(gridscada_config::Protocol) -> bool) -> Vec<&str> {
+    pub fn tags_of(
+        plant: &Plant,
+        speaks: impl Fn(gridscada_config::Protocol) -> bool,
+    ) -> Vec<&str> {
         plant
             .tags
             .iter()

@@ -1,15 +1,20 @@
-//! # gridscada-iec104: the IEC 60870-5-104 codec
+//! # gridscada-iec104: IEC 60870-5-104
 //!
-//! **Owns:** bytes on the wire of IEC 104: the APCI frames (I, S, U) with a
+//! **Owns:** the IEC 104 field protocol of gridscada: the controlling
+//! station (client) of the plant's `protocol = "iec104"` devices
+//! ([`client`]: connections, interrogation, clock sync, commands, the
+//! points' samples and status tags), the APCI procedures of one connection
+//! ([`session`]: k, w, t1-t3, pure), and the codec underneath. The codec
+//! covers bytes on the wire of IEC 104: the APCI frames (I, S, U) with a
 //! streaming decoder and the sequence-number arithmetic for k and w
 //! ([`apci`]), the ASDU with its type identifications, causes of transmission
 //! and information elements ([`asdu`], [`types`], [`element`]), and the
 //! CP56Time2a time tag ([`time`]). Pure functions over buffers; decoders never
 //! panic and say what is wrong, and where.
 //!
-//! **Must not touch:** sockets, timers, tokio, tags. The link layer (t1/t2/t3,
-//! k/w windows, STARTDT) and the mapping to tags live elsewhere and feed this
-//! crate bytes.
+//! **Must not touch:** other protocols' devices, configuration parsing (it
+//! takes a checked plant), alarms, SQL, HTTP. The codec modules stay pure
+//! (no sockets, timers or tags); `client` is their I/O shell.
 //!
 //! Why our own codec: the Rust IEC 104 crates on crates.io are unmaintained,
 //! incomplete (no time-tagged types, no commands), or bind lib60870, which is
@@ -18,7 +23,9 @@
 
 pub mod apci;
 pub mod asdu;
+pub mod client;
 pub mod element;
+pub mod session;
 pub mod time;
 pub mod types;
 
@@ -26,6 +33,7 @@ pub use apci::{
     decode, encode, seq_ack_valid, seq_add, seq_distance, Frame, FrameError, UFunction,
 };
 pub use asdu::{Asdu, AsduError, InformationObject};
+pub use client::{Iec104Io, StartError};
 pub use element::{normalized_from_f64, normalized_to_f64, DoublePoint, Element, Quality};
 pub use time::{Cp56Time2a, TimeError};
 pub use types::{Cause, TypeId};

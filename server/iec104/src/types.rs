@@ -103,10 +103,13 @@ impl TypeId {
     }
 
     /// Whether an ASDU of this type may use SQ=1 (one IOA, then consecutive
-    /// elements): the monitoring types without time tag, as in the standard's
-    /// type definitions. Time-tagged events and commands are one object each.
+    /// elements): the monitoring types (`M_`, end of initialisation aside).
+    /// The standard's type definitions give SQ=1 to those without time tag,
+    /// but lib60870 answers a general interrogation with time-tagged types
+    /// in SQ=1 form, so a controlling station must take them; commands are
+    /// one object each.
     pub fn allows_sequence(self) -> bool {
-        matches!(self.as_u8(), 1 | 3 | 5 | 7 | 9 | 11 | 13 | 15 | 21)
+        self.name().starts_with("M_") && self != TypeId::M_EI_NA_1
     }
 
     /// Octets of one information element, time tag included, IOA excluded.

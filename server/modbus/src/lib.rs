@@ -74,7 +74,7 @@ struct Shared {
     leadership: Leadership,
 }
 
-struct StatsSource {
+struct DeviceStatsSource {
     device: String,
     link: String,
     counters: Arc<Counters>,
@@ -259,7 +259,7 @@ impl FieldIo {
                     retries: status_id(&names[7].0)?,
                 };
                 let counters = Arc::new(Counters::default());
-                stats.push(StatsSource {
+                stats.push(DeviceStatsSource {
                     device: dname.clone(),
                     link: key.clone(),
                     counters: Arc::clone(&counters),
@@ -419,7 +419,7 @@ impl FieldIo {
 /// Reads the poller's counters; cheap to clone, lives past the poller.
 #[derive(Clone)]
 struct ModbusStats {
-    stats: Arc<Vec<StatsSource>>,
+    stats: Arc<Vec<DeviceStatsSource>>,
     link_stats: Arc<Vec<LinkStatsSource>>,
 }
 
@@ -519,4 +519,3 @@ impl TagWriter for FieldWriter {
         })
     }
 }
-

@@ -5,12 +5,13 @@
 use std::sync::Arc;
 
 use anyhow::Context;
-use gridscada_config::Plant;
+use gridscada_config::{Plant, Protocol};
 use gridscada_field::{Router, StatsHandle};
 use gridscada_tagdb::{Clock, Leadership, TagDb, TagWriter};
 
 pub(crate) struct Field {
     modbus: gridscada_modbus::FieldIo,
+    iec104: gridscada_iec104::Iec104Io,
     writer: Arc<dyn TagWriter>,
     stats: StatsHandle,
 }
@@ -23,16 +24,26 @@ impl Field {
         clock: Arc<dyn Clock>,
         leadership: Leadership,
     ) -> anyhow::Result<Field> {
-        let modbus =
-            gridscada_modbus::FieldIo::start_fenced(plant, db, clock, leadership)
-                .context("starting Modbus field I/O")?;
-        let writer: Arc<dyn TagWriter> = Arc::new(Router::new([(
-            modbus.writer(),
-            Router::tags_of(plant, |p| p.is_modbus()),
-        )]));
-        let stats = StatsHandle::new(vec![modbus.stats_source()]);
+        let modbus = gridscada_modbus::FieldIo::start_fenced(
+            plant,
+            db.clone(),
+            clock.clone(),
+            leadership.clone(),
+        )
+        .context("starting Modbus field I/O")?;
+        let iec104 = gridscada_iec104::Iec104Io::start(plant, db, clock, leadership)
+            .context("starting the IEC 104 client")?;
+        let writer: Arc<dyn TagWriter> = Arc::new(Router::new([
+            (modbus.writer(), Router::tags_of(plant, |p| p.is_modbus())),
+            (
+                iec104.writer(),
+                Router::tags_of(plant, |p| p == Protocol::Iec104),
+            ),
+        ]));
+        let stats = StatsHandle::new(vec![modbus.stats_source(), iec104.stats_source()]);
         Ok(Field {
             modbus,
+            iec104,
             writer,
             stats,
         })
@@ -52,5 +63,6 @@ impl Field {
     /// Stops every protocol's tasks and waits for them.
     pub(crate) async fn shutdown(self) {
         self.modbus.shutdown().await;
+        self.iec104.shutdown().await;
     }
 }

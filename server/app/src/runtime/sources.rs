@@ -39,7 +39,8 @@ impl StackDevices {
 
 impl gridscada_web::api::devices::DeviceSource for StackDevices {
     fn devices(&self) -> gridscada_web::api::devices::DevicesView {
-        use gridscada_web::api::devices::{DeviceView, DevicesView, LinkView};
+        use gridscada_web::api::devices::{DeviceView, DevicesView, LinkView, TelecontrolView};
+        let now_ms = gridscada_tagdb::Timestamp::now_utc().as_millis();
         let poll = self.poll.stats();
         let last_error = |device: &str| {
             self.db
@@ -92,6 +93,20 @@ impl gridscada_web::api::devices::DeviceSource for StackDevices {
                     connected: st.connected,
                     backing_off: !st.connected && st.requests > 0,
                     last_error: last_error(&st.device),
+                    telecontrol: cfg
+                        .filter(|d| !d.protocol.is_modbus())
+                        .map(|_| TelecontrolView {
+                            state: st.state.clone(),
+                            events: st.events,
+                            interrogations: st.interrogations,
+                            interrogation_age_s: st
+                                .last_interrogation_ms
+                                .map(|at| (now_ms - at).max(0) as f64 / 1000.0),
+                            commands: st.writes,
+                            commands_failed: st.writes_failed,
+                            clock_offset_ms: st.clock_offset_ms,
+                            overflows: st.overflows,
+                        }),
                 }
             })
             .collect();

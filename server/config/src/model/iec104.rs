@@ -57,6 +57,15 @@ pub struct Iec104DeviceConfig {
     /// feedback point), seconds.
     #[serde(default = "default_command_timeout")]
     pub command_timeout_s: Spanned<f64>,
+    /// Whether the station ends each command with ACT_TERM (most RTUs do;
+    /// some end set points at ACT_CON). When false, a positive ACT_CON and
+    /// the returned status point confirm the command.
+    #[serde(default = "yes")]
+    pub command_termination: bool,
+}
+
+fn yes() -> bool {
+    true
 }
 
 impl Default for Iec104DeviceConfig {
@@ -74,6 +83,7 @@ impl Default for Iec104DeviceConfig {
             counter_interrogation_period_s: never(),
             clock_sync_period_s: never(),
             command_timeout_s: default_command_timeout(),
+            command_termination: true,
         }
     }
 }

@@ -162,7 +162,10 @@ impl TagConfig {
     /// The Modbus register: its table and address. `None` for a tag of
     /// another protocol (`check` makes sure a Modbus device's tags have one).
     pub fn register(&self) -> Option<(RegisterKind, u32)> {
-        Some((*self.kind.as_ref()?.get_ref(), *self.address.as_ref()?.get_ref()))
+        Some((
+            *self.kind.as_ref()?.get_ref(),
+            *self.address.as_ref()?.get_ref(),
+        ))
     }
     /// Whether the tag is one Modbus bit (coil, discrete input, or a bit of a register).
     fn is_bit(&self) -> bool {

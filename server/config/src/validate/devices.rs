@@ -162,7 +162,10 @@ fn check_tcp_address(cx: &mut Ctx<'_>, f: usize, d: &DeviceConfig) {
         Some(a) if !is_host_port(a.get_ref()) => cx.err(
             f,
             a.span(),
-            format!("device '{name}': address '{}' is not host:port", a.get_ref()),
+            format!(
+                "device '{name}': address '{}' is not host:port",
+                a.get_ref()
+            ),
         ),
         Some(_) => {}
     }
@@ -244,7 +247,10 @@ fn check_iec104_link(cx: &mut Ctx<'_>, f: usize, name: &str, link: &Iec104Device
     }
     for (field, v) in [
         ("interrogation_period_s", &link.interrogation_period_s),
-        ("counter_interrogation_period_s", &link.counter_interrogation_period_s),
+        (
+            "counter_interrogation_period_s",
+            &link.counter_interrogation_period_s,
+        ),
         ("clock_sync_period_s", &link.clock_sync_period_s),
     ] {
         let p = *v.get_ref();

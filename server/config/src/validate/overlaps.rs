@@ -75,7 +75,10 @@ pub(super) fn check_ioa_reuse(cx: &mut Ctx<'_>, tags: &[(usize, TagConfig)]) {
         BTreeMap::new();
     for (f, t) in tags {
         let Some(p) = &t.iec104 else { continue };
-        let commanded = p.command.as_ref().map(|_| p.command_ioa.as_ref().unwrap_or(&p.ioa));
+        let commanded = p
+            .command
+            .as_ref()
+            .map(|_| p.command_ioa.as_ref().unwrap_or(&p.ioa));
         for (is_command, ioa) in [(false, Some(&p.ioa)), (true, commanded)] {
             let Some(ioa) = ioa else { continue };
             let key = (t.device.get_ref().as_str(), is_command, *ioa.get_ref());

@@ -40,12 +40,7 @@ pub(super) fn check_tag(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, device: Optio
 }
 
 /// A Modbus tag's table, address, bit, type, length and write access.
-fn check_modbus_register(
-    cx: &mut Ctx<'_>,
-    f: usize,
-    t: &TagConfig,
-    device: Option<&DeviceConfig>,
-) {
+fn check_modbus_register(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, device: Option<&DeviceConfig>) {
     let name = t.name.get_ref();
     let ty = t.data_type();
     if let Some(p) = &t.iec104 {
@@ -205,7 +200,11 @@ fn check_iec104_point(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, device: Option<
     }
     let point = *p.point.get_ref();
     if !point.carries(ty) {
-        let at = t.data_type.as_ref().map(|d| d.span()).unwrap_or(p.point.span());
+        let at = t
+            .data_type
+            .as_ref()
+            .map(|d| d.span())
+            .unwrap_or(p.point.span());
         cx.err(
             f,
             at,

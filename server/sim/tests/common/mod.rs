@@ -112,10 +112,13 @@ impl Rig {
         let t = self.plant.tag(tag).expect("tag");
         let mut c = self.client(t.device.get_ref()).await;
         let b = v.to_bits();
-        c.write_multiple_registers(t.register().unwrap().1 as u16, &[(b >> 16) as u16, b as u16])
-            .await
-            .expect("transport")
-            .expect("no exception");
+        c.write_multiple_registers(
+            t.register().unwrap().1 as u16,
+            &[(b >> 16) as u16, b as u16],
+        )
+        .await
+        .expect("transport")
+        .expect("no exception");
     }
 
     /// Pulses a coil on then off, as the controller does with ELCB reset.

@@ -43,6 +43,34 @@ pub struct DeviceView {
     /// until it answers again.
     pub backing_off: bool,
     pub last_error: String,
+    /// A telecontrol station's link (IEC 104); null for Modbus devices.
+    #[schema(required = true)]
+    pub telecontrol: Option<TelecontrolView>,
+}
+
+/// The link of a telecontrol station (IEC 104).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TelecontrolView {
+    /// started (data transfer on), tested (connected, kept as standby),
+    /// stopped (no connection)
+    pub state: String,
+    /// Spontaneous data received (objects)
+    pub events: u64,
+    /// General interrogations completed
+    pub interrogations: u64,
+    /// Seconds since the last general interrogation completed; null: none yet
+    #[schema(required = true)]
+    pub interrogation_age_s: Option<f64>,
+    /// Commands sent
+    pub commands: u64,
+    /// Commands refused or not confirmed
+    pub commands_failed: u64,
+    /// The station's clock minus ours at the last clock synchronisation, ms; null: not synchronised
+    #[schema(required = true)]
+    pub clock_offset_ms: Option<f64>,
+    /// Events the station reported lost (buffer overflow)
+    pub overflows: u64,
 }
 
 /// One connection or serial port.
