@@ -343,12 +343,19 @@ def main():
     sys.exit(1 if FAILED else 0)
 
 
+HOSTILE_FROM = [None]  # when the hostile station began: its frames are meant to be malformed
+
+
 def wire_check(cap, port_a, port_b):
     decode = ["-d", f"tcp.port=={port_a},iec60870_104", "-d", f"tcp.port=={port_b},iec60870_104"]
     count = subprocess.run(["tshark", "-r", cap, *decode, "-Y", "iec60870_asdu"],
                            capture_output=True, text=True)
     asdus = len(count.stdout.splitlines())
-    bad = subprocess.run(["tshark", "-r", cap, *decode, "-Y", "_ws.malformed || _ws.expert.severity >= error"],
+    # Everything gridscada sent, and everything before the hostile station.
+    ours = f"tcp.dstport == {port_a} || tcp.dstport == {port_b}"
+    scope = f"({ours}) || frame.time_epoch < {HOSTILE_FROM[0] or 1e12}"
+    bad = subprocess.run(["tshark", "-r", cap, *decode, "-Y",
+                          f"({scope}) && (_ws.malformed || _ws.expert.severity >= error)"],
                          capture_output=True, text=True)
     lines = bad.stdout.splitlines()
     check(asdus > 20 and not lines and bad.returncode == 0,
@@ -513,6 +520,47 @@ def run(plant, data, http_port, rtu_a, rtu_b):
     silent.close()
     for c in held:
         c.close()
+
+    # A hostile station: confirms STARTDT, then sends a malformed frame. The
+    # connection is dropped and the reason named; the server goes on.
+    HOSTILE_FROM[0] = time.time()
+    hostile = socket.socket()
+    hostile.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    hostile.bind(("127.0.0.1", rtu_b.port))
+    hostile.listen(4)
+    def serve_hostile():
+        hostile.settimeout(20)
+        try:
+            while True:
+                c, _ = hostile.accept()
+                c.settimeout(5)
+                try:
+                    if c.recv(6)[:3] == b"\x68\x04\x07":
+                        c.sendall(bytes.fromhex("68040b000000"))
+                        c.recv(64)  # the interrogation
+                        c.sendall(bytes.fromhex("68 03 00 00 00 16 ff ff".replace(" ", "")))
+                        time.sleep(0.5)
+                except OSError:
+                    pass
+                c.close()
+        except OSError:
+            pass
+    threading.Thread(target=serve_hostile, daemon=True).start()
+    def malformed():
+        t = api.tag("RTU1.Comm.LastError")
+        return t if t and "malformed" in str(t.get("value")) else None
+    t = wait_for(malformed, 20)
+    check(t is not None, "a hostile station's malformed frame drops the connection, named",
+          f"{api.tag('RTU1.Comm.LastError')}")
+    try:
+        with urllib.request.urlopen(f"http://127.0.0.1:{http_port}/healthz", timeout=5) as r:
+            alive = r.status in (200, 503)
+    except urllib.error.HTTPError as e:
+        alive = e.code == 503
+    except OSError:
+        alive = False
+    check(alive, "the server goes on after the hostile frames")
+    hostile.close()
 
 
 if __name__ == "__main__":

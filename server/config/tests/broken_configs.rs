@@ -700,3 +700,46 @@ fn opcua_connection_caps_are_checked_and_located() {
         &["DIR/gridscada.toml:5:30: error: [opcua] max_connections_per_client: 17 must be 1 to max_connections (16)"],
     );
 }
+
+const STATION: &str = r#"[[device]]
+name = "RTU"
+protocol = "iec104"
+address = "127.0.0.1:2404"
+"#;
+
+#[test]
+fn an_iec104_plant_loads() {
+    let tags = format!(
+        "{STATION}\n[device.iec104]\ncommon_address = 7\nredundant_addresses = [\"127.0.0.1:2405\"]\n\n\
+         [[tag]]\nname = \"RTU.Q1\"\ndevice = \"RTU\"\ntype = \"bool\"\nwritable = true\nwrite_role = \"operator\"\n\
+         iec104 = {{ ioa = 1001, point = \"M_DP\", command = \"C_DC\", command_ioa = 2001, select = true }}\n\n\
+         [[tag]]\nname = \"RTU.U\"\ndevice = \"RTU\"\nscale = 0.1\niec104 = {{ ioa = 3001, point = \"M_ME_NB\" }}\n"
+    );
+    assert_eq!(problems(MAIN, &tags), Vec::<String>::new());
+}
+
+#[test]
+fn iec104_points_are_checked_against_their_tag_and_device() {
+    let tags = format!(
+        "{STATION}\n[device.iec104]\nw = 20\n\n\
+         [[tag]]\nname = \"RTU.A\"\ndevice = \"RTU\"\ntype = \"f32\"\niec104 = {{ ioa = 5, point = \"M_SP\" }}\n\n\
+         [[tag]]\nname = \"RTU.B\"\ndevice = \"RTU\"\niec104 = {{ ioa = 5, point = \"M_DP\", command = \"C_DC\" }}\n\n\
+         [[tag]]\nname = \"RTU.C\"\ndevice = \"RTU\"\nkind = \"coil\"\naddress = 3\n\n\
+         {DEVICE}\n[[tag]]\nname = \"D.X\"\ndevice = \"D1\"\niec104 = {{ ioa = 9, point = \"M_SP\" }}\n"
+    );
+    assert_problems(
+        MAIN,
+        &tags,
+        &[
+            "DIR/tags.toml:7:5: error: device 'RTU': w = 20 must be 1 to two thirds of k = 12",
+            "DIR/tags.toml:12:8: error: tag 'RTU.A': a M_SP point cannot carry a f32 value (use type = \"bool\")",
+            "DIR/tags.toml:18:18: error: tag 'RTU.B': monitored information object address 5 of device 'RTU' is used by tag 'RTU.A' too (at DIR/tags.toml:13:18)",
+            "DIR/tags.toml:18:47: error: tag 'RTU.B': command C_DC is set on a read-only tag (set writable = true and write_role)",
+            "DIR/tags.toml:21:8: error: tag 'RTU.C': a tag of IEC 104 device 'RTU' needs iec104 = { ioa = …, point = \"M_SP\" }",
+            "DIR/tags.toml:23:8: error: tag 'RTU.C': kind is a Modbus setting; device 'RTU' speaks IEC 104 (use iec104 = { ioa = …, point = … })",
+            "DIR/tags.toml:24:11: error: tag 'RTU.C': address is a Modbus setting; device 'RTU' speaks IEC 104 (use iec104 = { ioa = …, point = … })",
+            "DIR/tags.toml:32:8: error: tag 'D.X': a tag of a Modbus device needs kind (coil, discrete_input, input_register or holding_register) and address",
+            "DIR/tags.toml:34:18: error: tag 'D.X': iec104 is for tags of protocol = \"iec104\" devices, and device 'D1' is Modbus",
+        ],
+    );
+}

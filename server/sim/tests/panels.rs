@@ -241,8 +241,8 @@ async fn a_bigger_plant_from_configuration() {
                 .clone();
             t.name = Spanned::new(0..0, format!("SS9.Zone{z}.{suffix}"));
             t.device = Spanned::new(0..0, dev.into());
-            t.kind = Spanned::new(0..0, kind);
-            t.address = Spanned::new(0..0, z - 1);
+            t.kind = Some(Spanned::new(0..0, kind));
+            t.address = Some(Spanned::new(0..0, z - 1));
             tags.push(t);
         }
     }

@@ -468,13 +468,22 @@ async fn postgres_down_during_fault_isolation_and_an_alarm_flood_loses_nothing()
             .sum::<u64>()
     };
     // The control loops settled first (the faulty zone locked out), so any
-    // write counted below would be the refused command's.
+    // write counted below would be the refused command's. Settled means no
+    // write for longer than a sequence's longest wait between two commands
+    // (reclose delay, dwell and confirm window), or a gap between reclose
+    // attempts would pass for the end.
+    let quiet = stack
+        .plant
+        .panels
+        .iter()
+        .map(|p| p.reclose_delay_s.get_ref() + p.dwell_s.get_ref() + p.confirm_timeout_s.get_ref())
+        .fold(2.0, f64::max);
     let mut writes_before = writes();
     let settle = Instant::now();
     loop {
-        tokio::time::sleep(Duration::from_secs(2)).await;
+        tokio::time::sleep(Duration::from_secs_f64(quiet + 1.0)).await;
         let now = writes();
-        if now == writes_before || settle.elapsed() > Duration::from_secs(60) {
+        if now == writes_before || settle.elapsed() > Duration::from_secs(120) {
             break;
         }
         writes_before = now;

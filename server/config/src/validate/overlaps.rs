@@ -71,8 +71,11 @@ pub(super) fn check_overlaps(cx: &mut Ctx<'_>, tags: &[(usize, TagConfig)]) {
 /// command confirms would not be clear, so each IOA (monitored, and
 /// commanded) belongs to one tag.
 pub(super) fn check_ioa_reuse(cx: &mut Ctx<'_>, tags: &[(usize, TagConfig)]) {
-    let mut seen: BTreeMap<(&str, bool, u32), (usize, &TagConfig, &serde_spanned::Spanned<u32>)> =
-        BTreeMap::new();
+    /// Device, commanded or monitored, IOA.
+    type Key<'a> = (&'a str, bool, u32);
+    /// The first tag on it: file, tag, where its IOA is written.
+    type First<'a> = (usize, &'a TagConfig, &'a serde_spanned::Spanned<u32>);
+    let mut seen: BTreeMap<Key<'_>, First<'_>> = BTreeMap::new();
     for (f, t) in tags {
         let Some(p) = &t.iec104 else { continue };
         let commanded = p
