@@ -18,7 +18,9 @@ use std::collections::HashMap;
 use std::sync::Arc;
 
 use gridscada_config::Plant;
-use gridscada_tagdb::{TagMeta, TagWriter, Value, ValueKind, WriteError, WriteFuture};
+use gridscada_tagdb::{
+    TagDb, TagId, TagMeta, TagWriter, Value, ValueKind, WriteError, WriteFuture,
+};
 
 pub use round_trip::{RoundTripHistogram, RoundTrips, ROUND_TRIP_BOUNDS};
 
@@ -74,6 +76,39 @@ pub fn status_tag_names(device: &str) -> [(String, ValueKind, &'static str, &'st
             "Reads repeated at once after no answer (the device's retries)",
         ),
     ]
+}
+
+/// The ids of one device's status tags in the tag database, in the order
+/// of [`status_tag_names`].
+#[derive(Debug, Clone, Copy)]
+pub struct StatusIds {
+    pub connected: TagId,
+    pub last_error: TagId,
+    pub response_ms: TagId,
+    pub requests: TagId,
+    pub errors: TagId,
+    pub timeouts: TagId,
+    pub overruns: TagId,
+    pub retries: TagId,
+}
+
+impl StatusIds {
+    /// Looks up `device`'s status tags; `Err` is the name of one missing
+    /// (the app registers them all before it starts a protocol).
+    pub fn resolve(db: &TagDb, device: &str) -> Result<StatusIds, String> {
+        let names = status_tag_names(device);
+        let id = |i: usize| db.id(&names[i].0).ok_or_else(|| names[i].0.clone());
+        Ok(StatusIds {
+            connected: id(0)?,
+            last_error: id(1)?,
+            response_ms: id(2)?,
+            requests: id(3)?,
+            errors: id(4)?,
+            timeouts: id(5)?,
+            overruns: id(6)?,
+            retries: id(7)?,
+        })
+    }
 }
 
 /// The communication status tags of every device, for the app to register

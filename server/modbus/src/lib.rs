@@ -33,9 +33,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use gridscada_config::{DeviceConfig, Plant, Protocol};
-use gridscada_field::{
-    check_limits, status_tag_names, DeviceStats, LinkStats, PollStats, StatsSource,
-};
+use gridscada_field::{check_limits, DeviceStats, LinkStats, PollStats, StatsSource};
 use gridscada_tagdb::{Clock, Leadership, TagDb, TagWriter, Value, WriteError, WriteFuture};
 use parking_lot::Mutex;
 use tokio::sync::{mpsc, oneshot, watch};
@@ -44,7 +42,7 @@ use tokio::task::JoinHandle;
 pub use frame::exception_text;
 pub use transport::inter_frame_silence;
 
-use link::{ClassRt, Counters, DeviceRt, Link, LinkCounters, LinkTag, StatusIds, WriteCmd};
+use link::{ClassRt, Counters, DeviceRt, Link, LinkCounters, LinkTag, WriteCmd};
 use transport::{RtuLine, TcpLine, Transport};
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -246,18 +244,8 @@ impl FieldIo {
                         device: dname.clone(),
                         reason: e.to_string(),
                     })?;
-                let status_id = |n: &str| db.id(n).ok_or_else(|| Error::MissingTag(n.to_string()));
-                let names = status_tag_names(&dname);
-                let status = StatusIds {
-                    connected: status_id(&names[0].0)?,
-                    last_error: status_id(&names[1].0)?,
-                    response_ms: status_id(&names[2].0)?,
-                    requests: status_id(&names[3].0)?,
-                    errors: status_id(&names[4].0)?,
-                    timeouts: status_id(&names[5].0)?,
-                    overruns: status_id(&names[6].0)?,
-                    retries: status_id(&names[7].0)?,
-                };
+                let status =
+                    gridscada_field::StatusIds::resolve(&db, &dname).map_err(Error::MissingTag)?;
                 let counters = Arc::new(Counters::default());
                 stats.push(DeviceStatsSource {
                     device: dname.clone(),

@@ -57,18 +57,6 @@ pub(crate) struct LinkTag {
     pub time_from: Option<usize>,
 }
 
-/// The status tags of one device.
-pub(crate) struct StatusIds {
-    pub connected: TagId,
-    pub last_error: TagId,
-    pub response_ms: TagId,
-    pub requests: TagId,
-    pub errors: TagId,
-    pub timeouts: TagId,
-    pub overruns: TagId,
-    pub retries: TagId,
-}
-
 /// Counters shared with [`crate::PollStats`].
 #[derive(Default)]
 pub(crate) struct Counters {
@@ -111,7 +99,7 @@ pub(crate) struct DeviceRt {
     pub retries: u32,
     pub max_write_registers: u16,
     pub classes: Vec<ClassRt>,
-    pub status: StatusIds,
+    pub status: gridscada_field::StatusIds,
     pub counters: Arc<Counters>,
     // Health.
     pub answering: bool,

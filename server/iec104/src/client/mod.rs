@@ -17,9 +17,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use gridscada_config::{Iec104DeviceConfig, Plant, Protocol};
-use gridscada_field::{
-    check_limits, status_tag_names, DeviceStats, LinkStats, PollStats, RoundTrips, StatsSource,
-};
+use gridscada_field::{check_limits, DeviceStats, LinkStats, PollStats, RoundTrips, StatsSource};
 use gridscada_tagdb::{
     Clock, Leadership, Sample, TagDb, TagId, TagWriter, Value, WriteError, WriteFuture,
 };
@@ -29,7 +27,7 @@ use tokio::task::JoinHandle;
 
 use command::CommandSpec;
 use points::{PointMap, PointTag};
-use station::{Station, StationSettings, StatusIds};
+use station::{Station, StationSettings};
 
 /// Why the client cannot start.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -167,19 +165,8 @@ impl Iec104Io {
                     );
                 }
             }
-            let names = status_tag_names(&name);
-            let status_id = |n: &str| {
-                db.id(n)
-                    .ok_or_else(|| StartError::MissingTag(n.to_string()))
-            };
-            let status = StatusIds {
-                connected: status_id(&names[0].0)?,
-                last_error: status_id(&names[1].0)?,
-                response_ms: status_id(&names[2].0)?,
-                requests: status_id(&names[3].0)?,
-                errors: status_id(&names[4].0)?,
-                timeouts: status_id(&names[5].0)?,
-            };
+            let status =
+                gridscada_field::StatusIds::resolve(&db, &name).map_err(StartError::MissingTag)?;
             let counters = Arc::new(Counters::default());
             stations.push((name.clone(), addresses.join(","), Arc::clone(&counters)));
             let (tx, rx) = mpsc::channel(16);

@@ -12,6 +12,7 @@ use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use gridscada_field::StatusIds;
 use gridscada_tagdb::{Clock, Leadership, Quality as TagQuality, Sample, TagDb, TagId, WriteError};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::tcp::OwnedWriteHalf;
@@ -40,16 +41,6 @@ pub(crate) struct StationSettings {
     pub command_timeout: Duration,
     pub termination: bool,
     pub backoff_max: Duration,
-}
-
-/// The station's status tags.
-pub(crate) struct StatusIds {
-    pub connected: TagId,
-    pub last_error: TagId,
-    pub response_ms: TagId,
-    pub requests: TagId,
-    pub errors: TagId,
-    pub timeouts: TagId,
 }
 
 /// What the readers and connectors tell the task.
