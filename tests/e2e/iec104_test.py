@@ -288,16 +288,48 @@ data_dir = "data"
 
 [storage]
 url = "sqlite://gridscada.db"
+
+# gridscada as a controlled station toward a control centre.
+[iec104_server]
+listen = "127.0.0.1:{centre_port}"
+allowed_clients = ["127.0.0.1"]
+common_address = 9
+
+[[iec104_server.point]]
+tag = "RTU1.Q1.Closed"
+ioa = 5001
+point = "M_DP"
+command = "C_DC"
+command_ioa = 6001
+select = true
+
+[[iec104_server.point]]
+tag = "RTU1.Voltage"
+ioa = 5002
+point = "M_ME_NC"
+deadband = 0.1
+
+[[iec104_server.point]]
+tag = "RTU1.Setpoint"
+ioa = 5003
+point = "M_ME_NC"
+command = "C_SE_NC"
+command_ioa = 6003
+
+[[iec104_server.point]]
+tag = "RTU1.Comm.Connected"
+ioa = 5004
+point = "M_SP"
 """
 
 
 def main():
     tmp = tempfile.mkdtemp(prefix="gridscada-iec104-")
-    port_a, port_b, http_port = free_port(), free_port(), free_port()
+    port_a, port_b, http_port, centre_port = free_port(), free_port(), free_port(), free_port()
     plant = os.path.join(tmp, "plant")
     os.makedirs(plant)
     with open(os.path.join(plant, "gridscada.toml"), "w") as f:
-        f.write(MAIN)
+        f.write(MAIN.format(centre_port=centre_port))
     with open(os.path.join(plant, "rtu.toml"), "w") as f:
         f.write(TAGS.format(port_a=port_a, port_b=port_b))
 
@@ -308,19 +340,20 @@ def main():
     # IEC 104 dissector afterwards, must be well formed.
     cap = os.path.join(tmp, "iec104.pcapng")
     tshark = subprocess.Popen(
-        ["tshark", "-q", "-i", "lo", "-f", f"tcp port {port_a} or tcp port {port_b}", "-w", cap],
+        ["tshark", "-q", "-i", "lo", "-f", f"tcp port {port_a} or tcp port {port_b} or tcp port {centre_port}", "-w", cap],
         stdout=subprocess.DEVNULL, stderr=open(os.path.join(tmp, "tshark.log"), "w"))
     wait_for(lambda: os.path.exists(cap), 10)
     time.sleep(1)
     rtu_a, rtu_b = Rtu(port_a), Rtu(port_b)
+    # B, the second address of the redundancy group, comes up once A is
+    # started (so A is the started connection, B the tested one).
     rtu_a.start()
-    rtu_b.start()
     data = os.path.join(tmp, "data")
     log = open(os.path.join(tmp, "server.log"), "w")
     proc = subprocess.Popen([BIN, "demo", "--config", plant, "--http", f"127.0.0.1:{http_port}",
                              "--data", data], stdout=log, stderr=subprocess.STDOUT)
     try:
-        run(plant, data, http_port, rtu_a, rtu_b)
+        run(plant, data, http_port, rtu_a, rtu_b, centre_port)
     finally:
         proc.terminate()
         try:
@@ -335,7 +368,7 @@ def main():
         time.sleep(1)
         tshark.terminate()
         tshark.wait(10)
-        wire_check(cap, port_a, port_b)
+        wire_check(cap, [port_a, port_b, centre_port])
         if FAILED:
             print("--- server log (last 40 lines) ---")
             print("".join(open(os.path.join(tmp, "server.log")).readlines()[-40:]))
@@ -346,13 +379,83 @@ def main():
 HOSTILE_FROM = [None]  # when the hostile station began: its frames are meant to be malformed
 
 
-def wire_check(cap, port_a, port_b):
-    decode = ["-d", f"tcp.port=={port_a},iec60870_104", "-d", f"tcp.port=={port_b},iec60870_104"]
+def control_centre(api, rtu, centre_port):
+    """gridscada's [iec104_server] polled and commanded by a lib60870 client."""
+    cl = c104.Client(tick_rate_ms=50, command_timeout_ms=10000)
+    conn = cl.add_connection(ip="127.0.0.1", port=centre_port, init=c104.Init.ALL)
+    st = conn.add_station(common_address=9)
+    q1 = st.add_point(io_address=5001, type=c104.Type.M_DP_TB_1)
+    volts = st.add_point(io_address=5002, type=c104.Type.M_ME_TF_1)
+    setp = st.add_point(io_address=5003, type=c104.Type.M_ME_TF_1)
+    comm = st.add_point(io_address=5004, type=c104.Type.M_SP_TB_1)
+    q1_cmd = st.add_point(io_address=6001, type=c104.Type.C_DC_NA_1,
+                          command_mode=c104.CommandMode.SELECT_AND_EXECUTE)
+    sp_cmd = st.add_point(io_address=6003, type=c104.Type.C_SE_NC_1)
+    cl.start()
+    try:
+        ok = wait_for(lambda: conn.is_connected and volts.value is not None and abs(volts.value - 231.5) < 1e-3, 20)
+        check(bool(ok), "control centre: connected, interrogated, the voltage is 231.5",
+              f"connected={conn.is_connected} volts={volts.value}")
+        check(comm.value is True, "control centre: a derived tag (the RTU's Connected) is exported", str(comm.value))
+        # A change at the RTU reaches the centre spontaneously, with the RTU's time tag.
+        stamp = datetime.datetime(2026, 11, 28, 11, 0, 0, 250000, tzinfo=datetime.timezone.utc)
+        rtu.nc.info = c104.ShortInfo(actual=232.75, recorded_at=stamp)
+        rtu.nc.transmit(cause=c104.Cot.SPONTANEOUS)
+        got = wait_for(lambda: abs((volts.value or 0) - 232.75) < 1e-3, 10)
+        rec = volts.recorded_at
+        check(bool(got) and rec is not None and utc_ms(rec) == utc_ms(stamp),
+              "control centre: a spontaneous change arrives with the RTU's time tag, to the ms",
+              f"value={volts.value} recorded_at={rec}")
+        # The centre opens Q1: select, execute, through gridscada to the RTU.
+        before = [c for c in rtu.double_commands]
+        q1_cmd.value = c104.Double.OFF
+        sent = q1_cmd.transmit(cause=c104.Cot.ACTIVATION)
+        done = wait_for(lambda: q1.value == c104.Double.OFF, 10)
+        check(bool(sent) and bool(done), "control centre: opening Q1 (C_DC, select before operate) is executed and confirmed",
+              f"transmit={sent} q1={q1.value}")
+        check(rtu.double_commands[len(before):] == ["select", "execute"],
+              "control centre: the RTU received the command through gridscada (select, execute)",
+              str(rtu.double_commands[len(before):]))
+        # Outside the engineering limits: refused, nothing goes to the RTU.
+        n = len(rtu.commands)
+        sp_cmd.value = 900.0
+        sent = sp_cmd.transmit(cause=c104.Cot.ACTIVATION)
+        time.sleep(0.5)
+        check(not sent and len(rtu.commands) == n,
+              "control centre: a set point outside the limits gets a negative confirmation, nothing is sent",
+              f"transmit={sent}")
+        sp_cmd.value = 42.0
+        sent = sp_cmd.transmit(cause=c104.Cot.ACTIVATION)
+        check(bool(sent) and wait_for(lambda: abs((setp.value or 0) - 42.0) < 1e-3, 10),
+              "control centre: a set point within the limits is written and returned", f"transmit={sent} setp={setp.value}")
+        status, body = api.call("GET", "/api/events?limit=100")
+        text = json.dumps(body)
+        check("IEC 104 control centre" in text, "control centre: its commands are in the event log, named",
+              text[:300])
+    finally:
+        cl.stop()
+    # An address not in allowed_clients is closed at once.
+    s = socket.socket()
+    s.bind(("127.0.0.2", 0))
+    s.settimeout(5)
+    s.connect(("127.0.0.1", centre_port))
+    s.sendall(bytes.fromhex("680407000000"))
+    try:
+        closed = s.recv(16) == b""
+    except OSError:
+        closed = True
+    s.close()
+    check(closed, "control centre: a client outside allowed_clients is closed without an answer")
+
+
+def wire_check(cap, ports):
+    decode = [a for p in ports for a in ("-d", f"tcp.port=={p},iec60870_104")]
     count = subprocess.run(["tshark", "-r", cap, *decode, "-Y", "iec60870_asdu"],
                            capture_output=True, text=True)
     asdus = len(count.stdout.splitlines())
     # Everything gridscada sent, and everything before the hostile station.
-    ours = f"tcp.dstport == {port_a} || tcp.dstport == {port_b}"
+    # (the stations' ports are the first two; the centre's side is ours too)
+    ours = " || ".join([f"tcp.dstport == {p}" for p in ports[:2]] + [f"tcp.srcport == {ports[2]}"])
     scope = f"({ours}) || frame.time_epoch < {HOSTILE_FROM[0] or 1e12}"
     bad = subprocess.run(["tshark", "-r", cap, *decode, "-Y",
                           f"({scope}) && (_ws.malformed || _ws.expert.severity >= error)"],
@@ -389,7 +492,7 @@ def good(api, name, value=None):
     return t
 
 
-def run(plant, data, http_port, rtu_a, rtu_b):
+def run(plant, data, http_port, rtu_a, rtu_b, centre_port):
     base = f"http://127.0.0.1:{http_port}"
     api = login(base, data)
     check(api is not None, "gridscada demo --config serves the plant and logs in")
@@ -407,6 +510,7 @@ def run(plant, data, http_port, rtu_a, rtu_b):
         got = t.get("value") if t else None
         same = got is not None and (abs(got - want) < 1e-3 if isinstance(want, float) else got == want)
         check(same, f"interrogation: {name} = {want}", f"got {t}")
+    rtu_b.start()
     src = (api.tag("RTU1.Q1.Closed") or {}).get("source") or {}
     check(src.get("protocol") == "iec104" and (src.get("iec104") or {}).get("command") == "C_DC",
           "the tag's source names the IEC 104 point and its command", json.dumps(src))
@@ -479,6 +583,8 @@ def run(plant, data, http_port, rtu_a, rtu_b):
     text = json.dumps(body)
     check(status == 200 and "RTU1.Q1.Closed" in text and "RTU1.Remote" in text,
           "the commands are in the event log", text[:300])
+
+    control_centre(api, rtu_a, centre_port)
 
     # Redundancy group: the started RTU goes away, the other address takes over.
     # B holds a value A never sent: seen only once B is started and interrogated.

@@ -468,6 +468,7 @@ fn check(path: &std::path::Path) -> ExitCode {
                 eprintln!("{w}");
             }
             let mut problems = runtime::check_screens(&plant);
+            problems.extend(runtime::check_exports(&plant));
             // The certificate and key are read as `serve` would.
             if let Err(e) = https::load(&plant) {
                 problems.push(format!("{e:#}"));

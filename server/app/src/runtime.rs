@@ -825,6 +825,23 @@ async fn run(
     web.auth.metrics_open = mode == Mode::Demo;
     load_screens(&web, mode).await?;
     let opcua = opcua::start(&stack.plant, data, &mut web).await?;
+    let telecontrol = match &stack.plant.iec104_server {
+        Some(cfg) => Some(
+            gridscada_iec104::Iec104Server::start(
+                cfg,
+                &stack.plant,
+                gridscada_iec104::ServerContext {
+                    db: stack.db.clone(),
+                    writer: stack.writer.clone(),
+                    audit: Arc::new(stack.audit.handle()),
+                    clock: stack.clock.clone(),
+                },
+            )
+            .await
+            .map_err(anyhow::Error::msg)?,
+        ),
+        None => None,
+    };
     let listening = crate::https::listen(&stack.plant, http, web, https).await?;
     crate::https::reload_on_sighup(listening.https.clone(), events_tx.clone(), clock.clone());
     let (url, server) = (listening.url, listening.server);
@@ -851,6 +868,9 @@ async fn run(
     }
     if let Some(ua) = &opcua {
         println!("  OPC UA:      {}", ua.endpoint());
+    }
+    if let Some(t) = &telecontrol {
+        println!("  IEC 104:     {} (controlled station)", t.local_addr);
     }
     println!("  Data folder: {}", data.display());
     if let Some(creds) = &credentials {
@@ -887,8 +907,35 @@ async fn run(
     if let Some(ua) = opcua {
         ua.shutdown().await;
     }
+    if let Some(t) = telecontrol {
+        t.shutdown().await;
+    }
     stack.shutdown().await;
     outcome
+}
+
+/// The `[iec104_server]` points whose tag is neither configured nor
+/// derived (a panel's or the dispatch's), as `check` reports them.
+pub(crate) fn check_exports(plant: &Plant) -> Vec<String> {
+    let Some(server) = &plant.iec104_server else {
+        return Vec::new();
+    };
+    let known: std::collections::HashSet<String> = all_tags(plant)
+        .into_iter()
+        .map(|t| t.name.to_string())
+        .collect();
+    server
+        .points
+        .iter()
+        .filter(|p| !known.contains(p.tag.get_ref()))
+        .map(|p| {
+            format!(
+                "{}: [iec104_server] point: unknown tag '{}' (neither in the tag files nor a panel's or the dispatch's)",
+                plant.main_path.display(),
+                p.tag.get_ref()
+            )
+        })
+        .collect()
 }
 
 /// Takes the user-drawn screens from the store, then the plant's

@@ -41,6 +41,8 @@ pub struct Plant {
     pub mqtt: Option<MqttConfig>,
     /// `[opcua]`: the OPC UA server, if configured.
     pub opcua: Option<OpcUaConfig>,
+    /// `[iec104_server]`: the IEC 104 controlled station, if configured.
+    pub iec104_server: Option<Iec104ServerConfig>,
     /// `[redundancy]`: one of a redundant pair, if configured.
     pub redundancy: Option<RedundancyConfig>,
     /// `[[notify]]`: alarm notification routes (none: no alarm leaves the
@@ -233,6 +235,7 @@ pub fn load_with(
         microgrid: main_cfg.microgrid,
         mqtt: main_cfg.mqtt,
         opcua: main_cfg.opcua,
+        iec104_server: main_cfg.iec104_server,
         redundancy: main_cfg.redundancy,
         notify: main_cfg.notify,
         suppression: main_cfg.suppression,
@@ -335,6 +338,7 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
     let mut microgrid = None;
     let mut mqtt = None;
     let mut opcua = None;
+    let mut iec104_server = None;
     let mut redundancy = None;
     let mut notify = vec![];
     let mut suppression = vec![];
@@ -349,6 +353,7 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
             "microgrid" => microgrid = de(file, value, "[microgrid]", diags),
             "mqtt" => mqtt = de(file, value, "[mqtt]", diags),
             "opcua" => opcua = de(file, value, "[opcua]", diags),
+            "iec104_server" => iec104_server = de(file, value, "[iec104_server]", diags),
             "redundancy" => redundancy = de(file, value, "[redundancy]", diags),
             "notify" => notify = de_each(file, value, "notify", diags),
             "suppression" => suppression = de_each(file, value, "suppression", diags),
@@ -356,7 +361,7 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
             other => diags.push(file.error_at(
                 key.span(),
                 format!(
-                    "unknown key '{other}' in the main file; expected one of tag_files, server, storage, panel, microgrid, mqtt, opcua, redundancy, notify, suppression, reports"
+                    "unknown key '{other}' in the main file; expected one of tag_files, server, storage, panel, microgrid, mqtt, opcua, iec104_server, redundancy, notify, suppression, reports"
                 ),
             )),
         }
@@ -382,6 +387,7 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
         microgrid,
         mqtt,
         opcua,
+        iec104_server,
         redundancy,
         notify,
         suppression,

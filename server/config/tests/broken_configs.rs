@@ -743,3 +743,29 @@ fn iec104_points_are_checked_against_their_tag_and_device() {
         ],
     );
 }
+
+#[test]
+fn iec104_server_points_are_checked() {
+    let main = "tag_files = [\"tags.toml\"]\n\n[iec104_server]\nlisten = \"0.0.0.0:2404\"\nallowed_clients = [\"10.0.0.300\"]\n\n\
+                [[iec104_server.point]]\ntag = \"A.Volts\"\nioa = 7\npoint = \"M_SP\"\n\n\
+                [[iec104_server.point]]\ntag = \"A.Volts\"\nioa = 7\npoint = \"M_ME_NC\"\ncommand = \"C_SE_NC\"\n";
+    let tags = format!(
+        "{DEVICE}\n[[tag]]\nname = \"A.Volts\"\ndevice = \"D1\"\nkind = \"input_register\"\naddress = 0\ntype = \"f32\"\n"
+    );
+    let got = problems(main, &tags);
+    let want = [
+        "'10.0.0.300' is not an IP address",
+        "a M_SP point cannot carry the tag's f32 values",
+        "IOA 7 is already point 'A.Volts'",
+        "command C_SE_NC on a tag that is not writable",
+    ];
+    for w in want {
+        assert!(
+            got.iter()
+                .any(|g| g.contains(w) && g.starts_with("DIR/gridscada.toml:")),
+            "{w}\ngot:\n{}",
+            got.join("\n")
+        );
+    }
+    assert_eq!(got.len(), want.len(), "{}", got.join("\n"));
+}

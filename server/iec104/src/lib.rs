@@ -3,7 +3,9 @@
 //! **Owns:** the IEC 104 field protocol of gridscada: the controlling
 //! station (client) of the plant's `protocol = "iec104"` devices
 //! ([`client`]: connections, interrogation, clock sync, commands, the
-//! points' samples and status tags), the APCI procedures of one connection
+//! points' samples and status tags), the controlled station toward a control
+//! centre ([`server`]: `[iec104_server]`, exported tags and the centre's
+//! audited commands), the APCI procedures of one connection
 //! ([`session`]: k, w, t1-t3, pure), and the codec underneath. The codec
 //! covers bytes on the wire of IEC 104: the APCI frames (I, S, U) with a
 //! streaming decoder and the sequence-number arithmetic for k and w
@@ -25,6 +27,7 @@ pub mod apci;
 pub mod asdu;
 pub mod client;
 pub mod element;
+pub mod server;
 pub mod session;
 pub mod time;
 pub mod types;
@@ -35,5 +38,6 @@ pub use apci::{
 pub use asdu::{Asdu, AsduError, InformationObject};
 pub use client::{Iec104Io, StartError};
 pub use element::{normalized_from_f64, normalized_to_f64, DoublePoint, Element, Quality};
+pub use server::{Iec104Server, ServerContext, ServerCounters};
 pub use time::{Cp56Time2a, TimeError};
 pub use types::{Cause, TypeId};

@@ -9,6 +9,8 @@
 use serde::{Deserialize, Serialize};
 use serde_spanned::Spanned;
 
+use gridscada_tagdb::ValueKind;
+
 use super::DataType;
 
 /// `[device.iec104]`: one controlled station (RTU) and its link.
@@ -187,6 +189,20 @@ impl Iec104Point {
             Iec104Point::M_IT => DataType::I32,
         }
     }
+    /// Whether the IEC 104 server can send a tag of this engineering kind
+    /// as this point (any number as a measurand, a bool or 0..3 as a
+    /// double point).
+    pub fn exports(self, kind: ValueKind) -> bool {
+        match self {
+            Iec104Point::M_SP => kind == ValueKind::Bool,
+            Iec104Point::M_DP => matches!(kind, ValueKind::Bool | ValueKind::Int),
+            Iec104Point::M_ST | Iec104Point::M_BO | Iec104Point::M_IT => kind == ValueKind::Int,
+            Iec104Point::M_ME_NA | Iec104Point::M_ME_NB | Iec104Point::M_ME_NC => {
+                matches!(kind, ValueKind::Int | ValueKind::Float)
+            }
+        }
+    }
+
     /// Whether a tag of type `ty` can carry this point's values.
     pub fn carries(self, ty: DataType) -> bool {
         use DataType::*;
@@ -216,6 +232,19 @@ impl Iec104Command {
             Iec104Command::C_BO => "C_BO",
         }
     }
+    /// Whether the IEC 104 server can take this command for a tag of this
+    /// engineering kind.
+    pub fn exports(self, kind: ValueKind) -> bool {
+        match self {
+            Iec104Command::C_SC => kind == ValueKind::Bool,
+            Iec104Command::C_DC => matches!(kind, ValueKind::Bool | ValueKind::Int),
+            Iec104Command::C_RC | Iec104Command::C_BO => kind == ValueKind::Int,
+            Iec104Command::C_SE_NA | Iec104Command::C_SE_NB | Iec104Command::C_SE_NC => {
+                matches!(kind, ValueKind::Int | ValueKind::Float)
+            }
+        }
+    }
+
     /// Whether a tag of type `ty` can carry this command's value.
     pub fn carries(self, ty: DataType) -> bool {
         use DataType::*;
@@ -259,6 +288,98 @@ fn no_qualifier() -> Spanned<u8> {
 }
 
 impl Iec104TagConfig {
+    pub fn command_ioa(&self) -> u32 {
+        self.command_ioa
+            .as_ref()
+            .map(|a| *a.get_ref())
+            .unwrap_or(*self.ioa.get_ref())
+    }
+}
+
+/// `[iec104_server]`: gridscada as a controlled station toward a control
+/// centre: the tags it exports, answered from the tag database, and the
+/// commands it takes, through the same audited write as the HMI's.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Iec104ServerConfig {
+    /// Where to listen, e.g. `0.0.0.0:2404`.
+    pub listen: Spanned<String>,
+    /// The IP addresses of the control centre's front ends allowed to
+    /// connect; any other is closed at once (and counted).
+    pub allowed_clients: Vec<Spanned<String>>,
+    /// Most connections at once (a control centre's redundant front ends).
+    #[serde(default = "default_max_connections")]
+    pub max_connections: Spanned<u16>,
+    /// Our common address of ASDU.
+    #[serde(default = "default_common_address")]
+    pub common_address: Spanned<u16>,
+    #[serde(default = "default_k")]
+    pub k: Spanned<u16>,
+    #[serde(default = "default_w")]
+    pub w: Spanned<u16>,
+    #[serde(default = "default_t1")]
+    pub t1_s: Spanned<f64>,
+    #[serde(default = "default_t2")]
+    pub t2_s: Spanned<f64>,
+    #[serde(default = "default_t3")]
+    pub t3_s: Spanned<f64>,
+    /// The role the control centre's commands have: a tag whose
+    /// `write_role` is above it cannot be commanded from the centre.
+    #[serde(default = "default_command_role")]
+    pub command_role: Spanned<super::Role>,
+    /// How long a select holds before its execute must come.
+    #[serde(default = "default_select_timeout")]
+    pub select_timeout_s: Spanned<f64>,
+    /// Answer an interrogation with the time-tagged types (M_SP_TB_1 …,
+    /// each value with its timestamp), as lib60870 does; `false`: the types
+    /// without time tag (M_SP_NA_1 …). Spontaneous data always carries its
+    /// time tag.
+    #[serde(default = "yes")]
+    pub interrogation_time_tags: bool,
+    /// The exported points.
+    #[serde(default, rename = "point")]
+    pub points: Vec<Iec104ExportConfig>,
+}
+
+fn default_max_connections() -> Spanned<u16> {
+    Spanned::new(0..0, 2)
+}
+fn default_command_role() -> Spanned<super::Role> {
+    Spanned::new(0..0, super::Role::Operator)
+}
+fn default_select_timeout() -> Spanned<f64> {
+    Spanned::new(0..0, 30.0)
+}
+
+/// One exported tag: `[[iec104_server.point]]`.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Iec104ExportConfig {
+    pub tag: Spanned<String>,
+    /// Its information object address.
+    pub ioa: Spanned<u32>,
+    /// The monitored type it is sent as: spontaneous data with the
+    /// CP56Time2a time tag (the TB form), interrogation without.
+    pub point: Spanned<Iec104Point>,
+    /// A measurand is sent spontaneously only when it moved more than this
+    /// (engineering units) from the value last sent.
+    #[serde(default = "never")]
+    pub deadband: Spanned<f64>,
+    /// Also sent every this many seconds with cause periodic; 0: never.
+    #[serde(default = "never")]
+    pub cyclic_s: Spanned<f64>,
+    /// The command the centre may send to the tag (writable tags only).
+    #[serde(default)]
+    pub command: Option<Spanned<Iec104Command>>,
+    /// Where the command comes; the point's `ioa` by default.
+    #[serde(default)]
+    pub command_ioa: Option<Spanned<u32>>,
+    /// The command must be selected before it is executed.
+    #[serde(default)]
+    pub select: bool,
+}
+
+impl Iec104ExportConfig {
     pub fn command_ioa(&self) -> u32 {
         self.command_ioa
             .as_ref()

@@ -58,6 +58,8 @@ pub struct MainFile {
     pub microgrid: Option<MicrogridConfig>,
     pub mqtt: Option<MqttConfig>,
     pub opcua: Option<OpcUaConfig>,
+    /// `[iec104_server]`: the IEC 104 controlled station toward a control centre.
+    pub iec104_server: Option<Iec104ServerConfig>,
     pub redundancy: Option<RedundancyConfig>,
     /// `[[notify]]`: alarm notification routes.
     #[serde(default)]

@@ -32,6 +32,7 @@ mod overlaps;
 mod panels;
 mod redundancy;
 mod tags;
+mod telecontrol;
 
 use clocks::check_time_tags;
 use devices::check_device;
@@ -140,6 +141,9 @@ pub(crate) fn check(
     }
     if let Some(mg) = &main.microgrid {
         check_microgrid(&mut cx, mg, &lookup);
+    }
+    if let Some(server) = &main.iec104_server {
+        telecontrol::check_iec104_server(&mut cx, server, &lookup);
     }
     alarms::check_suppression(&mut cx, &main.suppression, tags, &lookup, &|d| {
         device_by_name.contains_key(d)
