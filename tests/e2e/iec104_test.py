@@ -432,6 +432,15 @@ def control_centre(api, rtu, centre_port):
         text = json.dumps(body)
         check("IEC 104 control centre" in text, "control centre: its commands are in the event log, named",
               text[:300])
+        with urllib.request.urlopen(api.base + "/metrics", timeout=10) as r:
+            metrics = r.read().decode()
+        want = ['gridscada_iec104_station_state{device="RTU1",state="started"} 1',
+                'gridscada_iec104_interrogations_total{device="RTU1"}',
+                'gridscada_iec104_server_commands_total']
+        missing = [w for w in want if w not in metrics]
+        served = [l for l in metrics.splitlines() if l.startswith("gridscada_iec104_server_commands_total")]
+        check(not missing and served and float(served[0].split()[-1]) >= 2,
+              "/metrics: the station's state and interrogations, the server's commands", f"missing {missing}, {served}")
     finally:
         cl.stop()
     # An address not in allowed_clients is closed at once.
@@ -623,6 +632,10 @@ def run(plant, data, http_port, rtu_a, rtu_b, centre_port):
     connected = api.tag("RTU1.Comm.Connected")
     check(connected is not None and connected.get("value") is False, "the silent station shows not connected",
           str(connected))
+    t0 = time.time()
+    status, body = api.call("POST", "/api/tags/RTU1.Remote/write", {"value": True})
+    check(status == 502 and "no started connection" in json.dumps(body) and time.time() - t0 < 5,
+          "a command to a station without a started connection fails at once, named", f"{status} {body}")
     silent.close()
     for c in held:
         c.close()

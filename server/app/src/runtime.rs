@@ -294,6 +294,8 @@ pub struct Stack {
     pub mqtt_edge: Option<gridscada_sparkplug::edge::EdgeNode>,
     /// The alarm notifier's figures, if `[[notify]]` routes run.
     pub notify: Option<gridscada_notify::NotifyHandle>,
+    /// The IEC 104 server's figures (`[iec104_server]`), zero without one.
+    pub(crate) iec104_server_counters: Arc<gridscada_iec104::ServerCounters>,
     field: field::Field,
     /// The central Sparkplug B host (`[mqtt.host]`), if configured.
     sparkplug_host: Option<gridscada_sparkplug::host::Host>,
@@ -679,6 +681,7 @@ impl Stack {
             pair_keeper,
             mqtt_edge: None,
             notify,
+            iec104_server_counters: Default::default(),
             field,
             sparkplug_host,
             historian,
@@ -835,6 +838,7 @@ async fn run(
                     writer: stack.writer.clone(),
                     audit: Arc::new(stack.audit.handle()),
                     clock: stack.clock.clone(),
+                    counters: stack.iec104_server_counters.clone(),
                 },
             )
             .await
@@ -1010,6 +1014,7 @@ pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
                 .map(|h| Arc::new(h.stats_source()) as sparkplug_host::HostStatsSource),
             mqtt: stack.mqtt_edge.as_ref().map(|e| e.metrics()),
             notify: stack.notify.clone(),
+            iec104_server: stack.iec104_server_counters.clone(),
         })),
         screens: Default::default(),
         tag_index: Arc::new(gridscada_web::access::TagIndex::new(&stack.plant)),

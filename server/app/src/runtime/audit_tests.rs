@@ -448,46 +448,60 @@ async fn postgres_down_during_fault_isolation_and_an_alarm_flood_loses_nothing()
     .expect_err("a panel command with no durable audit record is refused");
     assert_eq!(refused.status.as_u16(), 503, "{refused:?}");
     assert!(refused.detail.contains("audit record"), "{refused:?}");
-    // A tag write likewise, before anything goes to the device.
-    let tag = stack
-        .plant
-        .tags
-        .iter()
-        .find(|t| *t.writable.get_ref())
-        .expect("the demo plant has a writable tag");
-    let name = tag.name.get_ref().to_string();
-    let id = stack.db.id(&name).unwrap();
-    let before = stack.db.get(id).unwrap();
-    let writes = || {
+    // A tag write likewise, before anything goes to the device. The tag is
+    // one on a device no control loop is writing to (the dispatch loop
+    // writes its units' setpoints every period; a panel's sequence its
+    // breakers until it locks out), so any write counted on that device
+    // below would be the refused command's. Quiet means no write for
+    // longer than a sequence's longest wait between two commands (reclose
+    // delay, dwell and confirm window), or a gap between reclose attempts
+    // would pass for the end.
+    let device_writes = |device: &str| {
         stack
             .poll_stats()
             .stats()
             .devices
             .iter()
+            .filter(|d| d.device == device)
             .map(|d| d.writes)
             .sum::<u64>()
     };
-    // The control loops settled first (the faulty zone locked out), so any
-    // write counted below would be the refused command's. Settled means no
-    // write for longer than a sequence's longest wait between two commands
-    // (reclose delay, dwell and confirm window), or a gap between reclose
-    // attempts would pass for the end.
     let quiet = stack
         .plant
         .panels
         .iter()
         .map(|p| p.reclose_delay_s.get_ref() + p.dwell_s.get_ref() + p.confirm_timeout_s.get_ref())
         .fold(2.0, f64::max);
-    let mut writes_before = writes();
+    let writable: Vec<&gridscada_config::TagConfig> = stack
+        .plant
+        .tags
+        .iter()
+        .filter(|t| *t.writable.get_ref())
+        .collect();
+    assert!(!writable.is_empty(), "the demo plant has writable tags");
     let settle = Instant::now();
-    loop {
+    let (tag, writes_before) = loop {
+        let counts: Vec<u64> = writable
+            .iter()
+            .map(|t| device_writes(t.device.get_ref()))
+            .collect();
         tokio::time::sleep(Duration::from_secs_f64(quiet + 1.0)).await;
-        let now = writes();
-        if now == writes_before || settle.elapsed() > Duration::from_secs(120) {
-            break;
+        let quiet_tag = writable
+            .iter()
+            .zip(&counts)
+            .find(|(t, n)| device_writes(t.device.get_ref()) == **n);
+        if let Some((t, n)) = quiet_tag {
+            break (*t, *n);
         }
-        writes_before = now;
-    }
+        assert!(
+            settle.elapsed() < Duration::from_secs(120),
+            "every device with a writable tag is still being written to"
+        );
+    };
+    let name = tag.name.get_ref().to_string();
+    let device = tag.device.get_ref().to_string();
+    let id = stack.db.id(&name).unwrap();
+    let before = stack.db.get(id).unwrap();
     let (code, body) = curl(&[
         "-b",
         jar,
@@ -509,10 +523,10 @@ async fn postgres_down_during_fault_isolation_and_an_alarm_flood_loses_nothing()
     assert!(body.contains("audit record"), "{body}");
     tokio::time::sleep(Duration::from_millis(500)).await;
     assert_eq!(stack.panels[0].status.borrow().mode, mode_before);
-    let writes_after = writes();
     assert_eq!(
-        writes_after, writes_before,
-        "a write went out to the device"
+        device_writes(&device),
+        writes_before,
+        "a write went out to device {device}"
     );
     std::fs::remove_file(&spool_dir).unwrap();
     relay.restore();

@@ -154,9 +154,136 @@ pub(super) struct StackMetrics {
     /// The Sparkplug B edge node's figures, when it runs.
     pub(super) mqtt: Option<Arc<gridscada_sparkplug::edge::EdgeMetrics>>,
     pub(super) notify: Option<gridscada_notify::NotifyHandle>,
+    /// The IEC 104 server's figures (counted from the stack's start).
+    pub(super) iec104_server: Arc<gridscada_iec104::ServerCounters>,
 }
 
 impl StackMetrics {
+    /// The IEC 104 stations (one per device) and the IEC 104 server.
+    fn render_telecontrol(
+        &self,
+        out: &mut gridscada_web::metrics::Prom,
+        poll: &gridscada_field::PollStats,
+    ) {
+        let now_ms = gridscada_tagdb::Timestamp::now_utc().as_millis();
+        for d in poll.devices.iter().filter(|d| !d.state.is_empty()) {
+            let l = [("device", d.device.as_str())];
+            for state in ["started", "tested", "stopped"] {
+                out.gauge(
+                    "gridscada_iec104_station_state",
+                    "1 for the station's connection state: started (data transfer), tested (standby), stopped.",
+                    &[("device", d.device.as_str()), ("state", state)],
+                    f64::from(u8::from(d.state == state)),
+                );
+            }
+            for (name, help, v) in [
+                (
+                    "gridscada_iec104_frames_sent_total",
+                    "I-frames sent to the station.",
+                    d.requests,
+                ),
+                (
+                    "gridscada_iec104_events_total",
+                    "Spontaneous data received (objects).",
+                    d.events,
+                ),
+                (
+                    "gridscada_iec104_interrogations_total",
+                    "General interrogations completed.",
+                    d.interrogations,
+                ),
+                (
+                    "gridscada_iec104_commands_total",
+                    "Commands sent.",
+                    d.writes,
+                ),
+                (
+                    "gridscada_iec104_commands_failed_total",
+                    "Commands refused by the station or not confirmed.",
+                    d.writes_failed,
+                ),
+                (
+                    "gridscada_iec104_overflows_total",
+                    "Events the station reported lost.",
+                    d.overflows,
+                ),
+                (
+                    "gridscada_iec104_timeouts_total",
+                    "Connections closed by t1 expiry.",
+                    d.timeouts,
+                ),
+            ] {
+                out.counter(name, help, &l, v as f64);
+            }
+            if let Some(at) = d.last_interrogation_ms {
+                out.gauge(
+                    "gridscada_iec104_interrogation_age_seconds",
+                    "Time since the last general interrogation completed.",
+                    &l,
+                    (now_ms - at).max(0) as f64 / 1000.0,
+                );
+            }
+            if let Some(offset) = d.clock_offset_ms {
+                out.gauge(
+                    "gridscada_iec104_clock_offset_seconds",
+                    "The station's clock minus the server's at the last clock synchronisation.",
+                    &l,
+                    offset / 1000.0,
+                );
+            }
+        }
+        let c = &self.iec104_server;
+        for (name, help, v) in [
+            (
+                "gridscada_iec104_server_connections_total",
+                "Control centre connections accepted.",
+                &c.connections,
+            ),
+            (
+                "gridscada_iec104_server_refused_connections_total",
+                "Connections refused: not in allowed_clients, or max_connections reached.",
+                &c.refused_connections,
+            ),
+            (
+                "gridscada_iec104_server_interrogations_total",
+                "General interrogations answered.",
+                &c.interrogations,
+            ),
+            (
+                "gridscada_iec104_server_spontaneous_total",
+                "Spontaneous objects sent.",
+                &c.spontaneous,
+            ),
+            (
+                "gridscada_iec104_server_commands_total",
+                "Commands executed for the control centre.",
+                &c.commands,
+            ),
+            (
+                "gridscada_iec104_server_commands_refused_total",
+                "Commands refused (not the point's, not selected, outside the limits).",
+                &c.commands_refused,
+            ),
+            (
+                "gridscada_iec104_server_commands_failed_total",
+                "Commands the device did not take or confirm.",
+                &c.commands_failed,
+            ),
+            (
+                "gridscada_iec104_server_malformed_total",
+                "Connections closed for a malformed frame or ASDU.",
+                &c.malformed,
+            ),
+        ] {
+            out.counter(
+                name,
+                help,
+                &[],
+                v.load(std::sync::atomic::Ordering::Relaxed) as f64,
+            );
+        }
+    }
+
     /// The audit trail: records stored, spooled while the store was away,
     /// replayed from the spool, waiting in it, and lost.
     fn render_audit(&self, out: &mut gridscada_web::metrics::Prom) {
@@ -348,6 +475,7 @@ impl gridscada_web::metrics::MetricsSource for StackMetrics {
         self.render_mqtt(out);
         self.render_notify(out);
         let poll = self.poll.stats();
+        self.render_telecontrol(out, &poll);
         for d in &poll.devices {
             let l = [("device", d.device.as_str())];
             out.gauge(
@@ -356,6 +484,10 @@ impl gridscada_web::metrics::MetricsSource for StackMetrics {
                 &l,
                 f64::from(u8::from(d.connected)),
             );
+            // The rest are Modbus figures; a telecontrol station has its own.
+            if !d.state.is_empty() {
+                continue;
+            }
             out.counter(
                 "gridscada_poll_requests_total",
                 "Modbus requests sent.",

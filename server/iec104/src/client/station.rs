@@ -162,7 +162,9 @@ impl Station {
                 continue;
             }
             let wake = tokio::time::Instant::from_std(self.next_wake(now));
-            let take_command = self.active.is_none() && self.started.is_some();
+            // One command at a time; without a started connection it is
+            // refused at once rather than left waiting.
+            let take_command = self.active.is_none();
             tokio::select! {
                 _ = shutdown.changed() => break,
                 Some(ev) = self.events_rx.recv() => self.on_event(ev).await,
@@ -565,6 +567,14 @@ impl Station {
 
     async fn begin_command(&mut self, request: CommandRequest) {
         let now = Instant::now();
+        if self.started.is_none() {
+            let last = self.counters.last_error.lock().clone();
+            let _ = request.reply.send(Err(WriteError::Device {
+                device: self.s.name.clone(),
+                reason: format!("no started connection to the station ({last}); nothing was sent"),
+            }));
+            return;
+        }
         let execute = match request.spec.element(&request.value) {
             Ok(e) => e,
             Err(reason) => {

@@ -34,6 +34,8 @@ pub struct ServerContext {
     pub writer: Arc<dyn TagWriter>,
     pub audit: Arc<dyn CommandAudit>,
     pub clock: Arc<dyn Clock>,
+    /// Where the server counts (the `/metrics` source holds it too).
+    pub counters: Arc<ServerCounters>,
 }
 
 /// The server's figures, for `/metrics`.
@@ -141,7 +143,7 @@ impl Iec104Server {
             .iter()
             .filter_map(|a| a.get_ref().parse().ok())
             .collect();
-        let counters = Arc::new(ServerCounters::default());
+        let counters = Arc::clone(&ctx.counters);
         let secs = |s: f64| Duration::from_secs_f64(s.max(0.001));
         let shared = Arc::new(Shared {
             ctx,
