@@ -16,10 +16,9 @@ if [ ! -x "$bin" ]; then
 fi
 out=tests/e2e/artifacts/replay
 mkdir -p "$out"
-passed=0
-failed=0
-failures=()
-for scenario in scenarios/*.toml; do
+# One scenario: its verdict line goes to $out/NAME.verdict.
+replay_one() {
+    local scenario=$1 name start verdict
     name=$(basename "$scenario" .toml)
     start=$(date +%s)
     rm -f "$out/$name.optimum.json"
@@ -29,14 +28,39 @@ for scenario in scenarios/*.toml; do
         --report "$out/$name.json" --html "$out/$name.html" >"$out/$name.txt" 2>"$out/$name.log" &&
         { [ ! -s "$out/$name.optimum.json" ] ||
             python3 tests/dispatch/foresight_highs.py "$out/$name.json" "$out/$name.optimum.json" >>"$out/$name.txt"; }; then
-        passed=$((passed + 1))
         verdict=ok
     else
-        failed=$((failed + 1))
-        failures+=("$name")
         verdict=FAILED
     fi
-    echo "$verdict $name ($(( $(date +%s) - start )) s): $(grep -E '^(scenarios/|realized )' "$out/$name.txt" | tr '\n' ' ')"
+    echo "$verdict $name ($(( $(date +%s) - start )) s): $(grep -E '^(scenarios/|realized )' "$out/$name.txt" | tr '\n' ' ')" >"$out/$name.verdict"
+}
+
+# Two scenarios at a time: a replay keeps about one core busy, and its
+# outcome does not depend on the machine's load (the virtual clock advances
+# only when every task is idle), so two run side by side on CI's two cores.
+jobs_at_once=${REPLAY_JOBS:-2}
+running=0
+for scenario in scenarios/*.toml; do
+    rm -f "$out/$(basename "$scenario" .toml).verdict"
+    replay_one "$scenario" &
+    running=$((running + 1))
+    if [ "$running" -ge "$jobs_at_once" ]; then
+        wait -n || true
+        running=$((running - 1))
+    fi
+done
+wait
+passed=0
+failed=0
+failures=()
+for scenario in scenarios/*.toml; do
+    name=$(basename "$scenario" .toml)
+    line=$(cat "$out/$name.verdict" 2>/dev/null || echo "FAILED $name (no verdict)")
+    echo "$line"
+    case "$line" in
+        ok\ *) passed=$((passed + 1)) ;;
+        *) failed=$((failed + 1)); failures+=("$name") ;;
+    esac
 done
 echo "$passed passed, $failed failed"
 if [ "$failed" -gt 0 ]; then
