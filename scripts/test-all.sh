@@ -160,7 +160,7 @@ for t in tests/e2e/*.sh; do
     [ -e "$t" ] || continue
     step "end-to-end: $t"
     started=$(date +%s)
-    # Replay runs whole simulated days (about 9 minutes on 2 cores, two at a time); the
+    # Replay runs whole simulated days (about 15 minutes on 2 cores); the
     # other stages take a few minutes each.
     case "$t" in *replay.sh) secs=2400 ;; *sparkplug_sites.sh) secs=600 ;; *sparkplug_*.sh) secs=300 ;; *notify.sh) secs=600 ;; *pair_browser.sh) secs=300 ;; *) secs=1200 ;; esac
     if limit "$secs" bash "$t"; then

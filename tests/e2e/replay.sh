@@ -35,9 +35,10 @@ replay_one() {
     echo "$verdict $name ($(( $(date +%s) - start )) s): $(grep -E '^(scenarios/|realized )' "$out/$name.txt" | tr '\n' ' ')" >"$out/$name.verdict"
 }
 
-# Two scenarios at a time: a replay keeps about one core busy, and its
-# outcome does not depend on the machine's load (the virtual clock advances
-# only when every task is idle), so two run side by side on CI's two cores.
+# Two scenarios at a time: a replay does not keep both cores busy all the
+# time, and its outcome does not depend on the machine's load (the virtual
+# clock advances only when every task is idle), so two side by side fill
+# CI's two cores better than one after the other.
 jobs_at_once=${REPLAY_JOBS:-2}
 running=0
 for scenario in scenarios/*.toml; do
