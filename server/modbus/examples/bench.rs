@@ -16,7 +16,7 @@
 //!
 //! Loopback only; every loop is bounded in time.
 
-#[path = "../tests/common/mod.rs"]
+#[path = "../tests/it/common/mod.rs"]
 mod common;
 
 use std::io::{BufRead, BufReader, Read, Write};

@@ -1,0 +1,255 @@
+//! `/api/live` over a real socket: hello, subscription snapshot, pushed
+//! changes in the documented shape, closing when the session ends, and
+//! refusing a foreign Origin at the handshake.
+
+use crate::common;
+
+use std::time::Duration;
+
+use axum::http::Method;
+use common::*;
+use futures::{SinkExt, StreamExt};
+use gridscada_tagdb::{Sample, Timestamp};
+use serde_json::{json, Value};
+use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+use tokio_tungstenite::tungstenite::Message;
+
+#[tokio::test]
+async fn live_push_follows_the_session() {
+    let h = Harness::new(Options::default()).await;
+    let (addr, server) = gridscada_web::bind(
+        "127.0.0.1:0".parse().unwrap(),
+        h.app.clone(),
+        h.state.connections.clone(),
+    )
+    .await
+    .unwrap();
+    tokio::spawn(server);
+    // An operator's screens include the tag browser: every tag is readable
+    // (what a Guest may read is tested in plant_screens.rs).
+    let cookie = h.login("operator", PASSWORD).await;
+    let connect = |origin: Option<String>| {
+        let mut req = format!("ws://{addr}/api/live")
+            .into_client_request()
+            .unwrap();
+        req.headers_mut().insert("cookie", cookie.parse().unwrap());
+        if let Some(o) = origin {
+            req.headers_mut().insert("origin", o.parse().unwrap());
+        }
+        tokio_tungstenite::connect_async(req)
+    };
+
+    // A foreign page cannot open the socket.
+    let err = connect(Some("http://evil.test".into())).await.unwrap_err();
+    assert!(err.to_string().contains("403"), "{err}");
+
+    let (mut ws, _) = connect(Some(format!("http://{addr}"))).await.unwrap();
+    let hello = next_message(&mut ws).await.unwrap();
+    assert_eq!(hello["type"], "hello");
+    assert_eq!(hello["user"], "operator");
+    assert_eq!(hello["role"], "operator");
+
+    ws.send(Message::Text(
+        json!({"subscribe": {"tags": [TAG_RO, "No.Such.Tag"]}})
+            .to_string()
+            .into(),
+    ))
+    .await
+    .unwrap();
+    let snap = next_message(&mut ws).await.unwrap();
+    assert_eq!(snap["type"], "tags");
+    assert_eq!(snap["snapshot"], true);
+    assert_eq!(
+        snap["values"],
+        json!([{"name": TAG_RO, "value": 1.5, "quality": {"code": "good"}, "timestamp": snap["values"][0]["timestamp"]}])
+    );
+
+    // A change is pushed; changes to tags not subscribed are not.
+    let t = Timestamp::from_millis(1_800_000_000_000);
+    let ro = h.state.db.id(TAG_RO).unwrap();
+    let other = h.state.db.id(TAG_SUP).unwrap();
+    h.state.db.apply([(other, Sample::good(99.0, t))]);
+    h.state.db.apply([(ro, Sample::good(42.25, t))]);
+    let push = next_message(&mut ws).await.unwrap();
+    assert_eq!(
+        push,
+        json!({"type": "tags", "snapshot": false, "values": [
+            {"name": TAG_RO, "value": 42.25, "quality": {"code": "good"}, "timestamp": 1_800_000_000_000i64}
+        ]})
+    );
+
+    // A bad message gets an error, and the socket stays open.
+    ws.send(Message::Text("{\"subscribe\": 5}".into()))
+        .await
+        .unwrap();
+    let err = next_message(&mut ws).await.unwrap();
+    assert_eq!(err["type"], "error");
+
+    // Logging out closes the socket with 4001.
+    let r = h
+        .call(Method::DELETE, "/api/session", Some(&cookie), None)
+        .await;
+    assert_eq!(r.status, axum::http::StatusCode::NO_CONTENT);
+    let closed = next_message(&mut ws).await.unwrap();
+    assert_eq!(closed, json!({"closed": 4001}));
+
+    // Anonymous clients cannot open it at all.
+    let req = format!("ws://{addr}/api/live")
+        .into_client_request()
+        .unwrap();
+    let err = tokio_tungstenite::connect_async(req).await.unwrap_err();
+    assert!(err.to_string().contains("401"), "{err}");
+}
+
+/// A frozen server is told from a quiet plant by the heartbeat, and a
+/// screen on view keeps its session alive past the idle timeout (a wall
+/// display), while a socket that says nothing does not.
+#[tokio::test]
+async fn heartbeats_and_a_visible_screen_keep_a_watch_session() {
+    let h = Harness::new(Options {
+        policy: gridscada_web::auth::SessionPolicy {
+            idle: Duration::from_millis(1500),
+            absolute: Duration::from_secs(60),
+            ..Default::default()
+        },
+        ..Options::default()
+    })
+    .await;
+    let addr = h.serve().await;
+    let watcher = h.login("guest", PASSWORD).await;
+    let idle = h.login("operator", PASSWORD).await;
+    let mut ws = live_socket(addr, &watcher).await.unwrap();
+    let mut quiet = live_socket(addr, &idle).await.unwrap();
+    // Heartbeats arrive every second, with the server's time.
+    let mut beats = 0;
+    let started = std::time::Instant::now();
+    while started.elapsed() < Duration::from_secs(4) {
+        ws.send(Message::Text(json!({"visible": true}).to_string().into()))
+            .await
+            .unwrap();
+        let msg = tokio::time::timeout(Duration::from_millis(1500), ws.next())
+            .await
+            .expect("a heartbeat within 1.5 s")
+            .unwrap()
+            .unwrap();
+        if let Message::Text(t) = msg {
+            let v: Value = serde_json::from_str(&t).unwrap();
+            if v["type"] == "heartbeat" {
+                assert!(v["ts"].as_i64().unwrap() > 0);
+                beats += 1;
+            }
+        }
+    }
+    assert!(beats >= 3, "{beats} heartbeats in 4 s");
+    // 4 s on a 1.5 s idle timeout: the visible screen's session lives...
+    let me = h
+        .call(Method::GET, "/api/session", Some(&watcher), None)
+        .await
+        .json();
+    assert_eq!(me["authenticated"], true);
+    // ...the silent one's does not, and its socket is closed.
+    let me = h
+        .call(Method::GET, "/api/session", Some(&idle), None)
+        .await
+        .json();
+    assert_eq!(me["authenticated"], false);
+    let mut closed = next_message(&mut quiet).await.unwrap();
+    if closed["type"] == "hello" {
+        closed = next_message(&mut quiet).await.unwrap();
+    }
+    assert_eq!(closed, json!({"closed": 4001}));
+}
+
+/// Sockets subscribed to the same tags share one feed (one subscription,
+/// each message serialized once); another set of tags gets its own.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sockets_with_the_same_tags_share_one_feed() {
+    let h = Harness::new(Options::default()).await;
+    let addr = h.serve().await;
+    let cookie = h.login("operator", PASSWORD).await;
+    let subscribe =
+        |tags: &[&str]| Message::Text(json!({"subscribe": {"tags": tags}}).to_string().into());
+    let mut sockets = Vec::new();
+    for tags in [&[TAG_RO][..], &[TAG_RO], &[TAG_SUP, TAG_RO]] {
+        let mut ws = live_socket(addr, &cookie).await.unwrap();
+        assert_eq!(next_message(&mut ws).await.unwrap()["type"], "hello");
+        ws.send(subscribe(tags)).await.unwrap();
+        let snap = next_message(&mut ws).await.unwrap();
+        assert_eq!(snap["snapshot"], true);
+        assert_eq!(snap["values"].as_array().unwrap().len(), tags.len());
+        sockets.push(ws);
+    }
+    assert_eq!(h.state.live.len(), 2, "two distinct sets of tags");
+    let ro = h.state.db.id(TAG_RO).unwrap();
+    let t = Timestamp::from_millis(1_800_000_000_000);
+    h.state.db.apply([(ro, Sample::good(7.0, t))]);
+    for ws in &mut sockets {
+        let push = next_message(ws).await.unwrap();
+        assert_eq!(push["snapshot"], false);
+        assert_eq!(push["values"][0]["name"], TAG_RO);
+        assert_eq!(push["values"][0]["value"], 7.0);
+    }
+    // The feed goes with its last socket.
+    drop(sockets);
+    for _ in 0..100 {
+        if h.state.live.is_empty() {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert!(h.state.live.is_empty(), "feeds end with their sockets");
+}
+
+/// A socket that does not read falls behind its feed: it is sent a fresh
+/// snapshot, not every message it missed, and ends on the current value.
+/// With `live_merge_ms = 0` each batch is its own message.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_slow_socket_gets_a_snapshot_instead_of_a_backlog() {
+    let h = Harness::new(Options::default()).await;
+    let app = h.app_with_plant(|p| p.server.live_merge_ms = serde_spanned::Spanned::new(0..0, 0));
+    let (addr, server) =
+        gridscada_web::bind("127.0.0.1:0".parse().unwrap(), app, Default::default())
+            .await
+            .unwrap();
+    tokio::spawn(server);
+    let cookie = h.login("operator", PASSWORD).await;
+    let mut ws = live_socket(addr, &cookie).await.unwrap();
+    assert_eq!(next_message(&mut ws).await.unwrap()["type"], "hello");
+    ws.send(Message::Text(
+        json!({"subscribe": {"tags": [TAG_SUP]}}).to_string().into(),
+    ))
+    .await
+    .unwrap();
+    assert_eq!(next_message(&mut ws).await.unwrap()["snapshot"], true);
+    // Far more than the socket buffers and the feed's ring hold, unread.
+    let id = h.state.db.id(TAG_SUP).unwrap();
+    const CHANGES: u32 = 200_000;
+    for i in 1..=CHANGES {
+        let t = Timestamp::from_millis(1_800_000_000_000 + i as i64);
+        h.state.db.apply([(id, Sample::good(i as f64, t))]);
+        if i % 100 == 0 {
+            tokio::task::yield_now().await;
+        }
+    }
+    let (mut messages, mut snapshots) = (0u32, 0u32);
+    loop {
+        let m = next_message(&mut ws)
+            .await
+            .expect("messages until the last value");
+        if m["type"] != "tags" {
+            continue;
+        }
+        messages += 1;
+        if m["snapshot"] == true {
+            snapshots += 1;
+        }
+        if m["values"][0]["value"] == CHANGES as f64 {
+            break;
+        }
+    }
+    assert!(snapshots >= 1, "a snapshot replaced the backlog");
+    assert!(
+        messages < CHANGES / 2,
+        "{messages} messages for {CHANGES} changes: the backlog was dropped"
+    );
+}
