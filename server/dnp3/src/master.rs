@@ -654,6 +654,7 @@ impl Master {
         match f.task {
             Task::Command(c) => {
                 self.in_flight = None;
+                self.iin_changes(header.iin, out);
                 let result = self.command_response(&c, &f, header.iin, &objects, now);
                 match result {
                     Ok(true) => {
@@ -683,7 +684,9 @@ impl Master {
                 } else {
                     match f.step {
                         Step::RecordTime { unix_ms } => {
-                            self.iin_changes(header.iin, out);
+                            // NEED_TIME stays set until the WRITE: the
+                            // sync under way answers it.
+                            self.iin_changes(Iin(header.iin.0 & !Iin::NEED_TIME.0), out);
                             self.start(task, Step::WriteTime { unix_ms }, now, out);
                             return;
                         }
@@ -722,7 +725,6 @@ impl Master {
         now: Clock,
     ) -> Result<bool, CommandError> {
         let stage = f.function;
-        self.iin_changes_quiet(iin);
         let bad_iin = iin.0
             & (Iin::NO_FUNC_CODE_SUPPORT.0
                 | Iin::OBJECT_UNKNOWN.0
@@ -790,10 +792,6 @@ impl Master {
         if !objects.measurements.is_empty() {
             out.push(Action::Measurements(objects.measurements.clone()));
         }
-    }
-
-    fn iin_changes_quiet(&mut self, iin: Iin) {
-        self.iin = iin;
     }
 
     /// Report a changed IIN and queue what its bits call for.
