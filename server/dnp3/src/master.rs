@@ -481,46 +481,36 @@ impl Master {
         let seq = self.app_seq;
         self.app_seq = (self.app_seq + 1) & crate::app::SEQ_MASK;
         let (function, apdu) = match (task, step) {
-            (Task::Command(c), Step::Select) => (FunctionCode::Select, c),
-            (Task::Command(c), Step::Operate { .. }) => (FunctionCode::Operate, c),
-            (Task::Command(c), _) => (FunctionCode::DirectOperate, c),
-            (t, s) => {
-                let (f, apdu) = match (t, s) {
-                    (_, Step::RecordTime { .. }) => (
-                        FunctionCode::RecordCurrentTime,
-                        request::record_current_time(seq),
-                    ),
-                    (_, Step::WriteTime { unix_ms }) => (
-                        FunctionCode::Write,
-                        request::write_recorded_time(seq, unix_ms),
-                    ),
-                    (Task::ClearRestart, _) => (FunctionCode::Write, request::clear_restart(seq)),
-                    (Task::DisableUnsolicited, _) => (
-                        FunctionCode::DisableUnsolicited,
-                        request::unsolicited(seq, false),
-                    ),
-                    (Task::EnableUnsolicited, _) => (
-                        FunctionCode::EnableUnsolicited,
-                        request::unsolicited(seq, true),
-                    ),
-                    (Task::Integrity, _) => (FunctionCode::Read, request::integrity_poll(seq)),
-                    (Task::Read(g, v, r), _) => (FunctionCode::Read, request::read(seq, g, v, r)),
-                    _ => (FunctionCode::Read, request::event_poll(seq)),
+            (Task::Command(c), step) => {
+                let f = match step {
+                    Step::Select => FunctionCode::Select,
+                    Step::Operate { .. } => FunctionCode::Operate,
+                    _ => FunctionCode::DirectOperate,
                 };
-                self.send_apdu(&apdu, out);
-                self.in_flight = Some(InFlight {
-                    task,
-                    step,
-                    function: f,
-                    seq,
-                    sent_at: now.mono,
-                    deadline: now.mono + self.cfg.response_timeout,
-                });
-                return;
+                (f, request::command(seq, f, c.index, c.object))
             }
+            (_, Step::WriteTime { unix_ms }) => (
+                FunctionCode::Write,
+                request::write_recorded_time(seq, unix_ms),
+            ),
+            (Task::TimeSync, _) | (_, Step::RecordTime { .. }) => (
+                FunctionCode::RecordCurrentTime,
+                request::record_current_time(seq),
+            ),
+            (Task::ClearRestart, _) => (FunctionCode::Write, request::clear_restart(seq)),
+            (Task::DisableUnsolicited, _) => (
+                FunctionCode::DisableUnsolicited,
+                request::unsolicited(seq, false),
+            ),
+            (Task::EnableUnsolicited, _) => (
+                FunctionCode::EnableUnsolicited,
+                request::unsolicited(seq, true),
+            ),
+            (Task::Integrity, _) => (FunctionCode::Read, request::integrity_poll(seq)),
+            (Task::Read(g, v, r), _) => (FunctionCode::Read, request::read(seq, g, v, r)),
+            (Task::EventPoll, _) => (FunctionCode::Read, request::event_poll(seq)),
         };
-        let c = apdu;
-        self.send_apdu(&request::command(seq, function, c.index, c.object), out);
+        self.send_apdu(&apdu, out);
         self.in_flight = Some(InFlight {
             task,
             step,
