@@ -4,7 +4,7 @@
 //!
 //! cargo run -p gridscada-dnp3 --example dnp3_poll -- 127.0.0.1:20000 \
 //!     [--master 1] [--outstation 1024] [--seconds 8] [--crob INDEX] [--sbo] \
-//!     [--analog INDEX VALUE]
+//!     [--analog INDEX VALUE] [--event-period SECONDS]
 
 use std::io::{ErrorKind, Read, Write};
 use std::net::TcpStream;
@@ -37,7 +37,10 @@ fn main() {
     let cfg = MasterConfig {
         master_address: num("--master", 1) as u16,
         outstation_address: num("--outstation", 1024) as u16,
-        event_period: Some(Duration::from_secs(2)),
+        // --event-period 0: no event polls (rely on unsolicited responses).
+        event_period: Some(num("--event-period", 2))
+            .filter(|&s| s > 0)
+            .map(Duration::from_secs),
         ..MasterConfig::default()
     };
     let seconds = num("--seconds", 8);
