@@ -480,8 +480,8 @@ fn size(group: u8, variation: u8) -> Option<Size> {
         (1, 2) | (2, 1) | (3, 2) | (4, 1) | (10, 2) => Fixed(1),
         (2, 2) | (4, 2) => Fixed(7),
         (2, 3) | (4, 3) => Fixed(3),
-        (11, 1) | (13, 1) => Fixed(2),
-        (11, 2) | (13, 2) => Fixed(8),
+        (11, 1) | (13, 1) => Fixed(1),
+        (11, 2) | (13, 2) => Fixed(7),
         (12, 1) => Fixed(Crob::LEN),
         (20..=23, 1) => Fixed(5),
         (20..=23, 2) => Fixed(3),
@@ -762,12 +762,12 @@ fn object(
             };
             m(K::DoubleBit, value, Some(o[0]), time, g == 4)
         }
-        (10, 2) => m(
+        (10, 2) | (11, 1) | (11, 2) => m(
             K::BinaryOutputStatus,
             Value::Binary(o[0] & 0x80 != 0),
             Some(o[0]),
-            None,
-            false,
+            (g == 11 && v == 2).then(|| time48_at(o, 1)),
+            g == 11,
         ),
         (20..=23, _) => {
             let kind = if g == 21 || g == 23 {
@@ -794,8 +794,8 @@ fn object(
                 is_event,
             )
         }
-        (30 | 32 | 40, _) => {
-            let kind = if g == 40 {
+        (30 | 32 | 40 | 42, _) => {
+            let kind = if g == 40 || g == 42 {
                 K::AnalogOutputStatus
             } else {
                 K::Analog
@@ -803,18 +803,18 @@ fn object(
             let i32v = |at| f64::from(u32_at(o, at) as i32);
             let i16v = |at| f64::from(u16_at(o, at) as i16);
             let (flags, value, time) = match (g, v) {
-                (30, 1) | (32, 1) | (40, 1) => (Some(o[0]), i32v(1), None),
-                (30, 2) | (32, 2) | (40, 2) => (Some(o[0]), i16v(1), None),
+                (30, 1) | (32 | 42, 1) | (40, 1) => (Some(o[0]), i32v(1), None),
+                (30, 2) | (32 | 42, 2) | (40, 2) => (Some(o[0]), i16v(1), None),
                 (30, 3) => (None, i32v(0), None),
                 (30, 4) => (None, i16v(0), None),
-                (30, 5) | (32, 5) | (40, 3) => (Some(o[0]), f32_at(o, 1), None),
-                (30, 6) | (32, 6) | (40, 4) => (Some(o[0]), f64_at(o, 1), None),
-                (32, 3) => (Some(o[0]), i32v(1), Some(time48_at(o, 5))),
-                (32, 4) => (Some(o[0]), i16v(1), Some(time48_at(o, 3))),
-                (32, 7) => (Some(o[0]), f32_at(o, 1), Some(time48_at(o, 5))),
+                (30, 5) | (32 | 42, 5) | (40, 3) => (Some(o[0]), f32_at(o, 1), None),
+                (30, 6) | (32 | 42, 6) | (40, 4) => (Some(o[0]), f64_at(o, 1), None),
+                (32 | 42, 3) => (Some(o[0]), i32v(1), Some(time48_at(o, 5))),
+                (32 | 42, 4) => (Some(o[0]), i16v(1), Some(time48_at(o, 3))),
+                (32 | 42, 7) => (Some(o[0]), f32_at(o, 1), Some(time48_at(o, 5))),
                 _ => (Some(o[0]), f64_at(o, 1), Some(time48_at(o, 9))),
             };
-            m(kind, Value::Analog(value), flags, time, g == 32)
+            m(kind, Value::Analog(value), flags, time, g == 32 || g == 42)
         }
         (12, 1) => {
             out.commands.push(CommandEcho {
@@ -993,6 +993,8 @@ mod tests {
                 Value::DoubleBit(super::DoubleBit::Intermediate),
             ),
             (10, 2, "81", Value::Binary(true)),
+            (11, 1, "81", Value::Binary(true)),
+            (11, 2, "01 01 00 00 00 00 00", Value::Binary(false)),
             (20, 1, "01 07 00 00 00", Value::Counter(7)),
             (20, 2, "01 07 00", Value::Counter(7)),
             (20, 5, "07 00 00 00", Value::Counter(7)),
@@ -1040,6 +1042,29 @@ mod tests {
             (40, 2, "01 02 00", Value::Analog(2.0)),
             (40, 3, "01 00 00 C0 3F", Value::Analog(1.5)),
             (40, 4, "01 00 00 00 00 00 00 F8 3F", Value::Analog(1.5)),
+            (42, 1, "01 02 00 00 00", Value::Analog(2.0)),
+            (42, 2, "01 02 00", Value::Analog(2.0)),
+            (
+                42,
+                3,
+                "01 02 00 00 00 01 00 00 00 00 00",
+                Value::Analog(2.0),
+            ),
+            (42, 4, "01 02 00 01 00 00 00 00 00", Value::Analog(2.0)),
+            (42, 5, "01 00 00 C0 3F", Value::Analog(1.5)),
+            (42, 6, "01 00 00 00 00 00 00 F8 3F", Value::Analog(1.5)),
+            (
+                42,
+                7,
+                "01 00 00 C0 3F 01 00 00 00 00 00",
+                Value::Analog(1.5),
+            ),
+            (
+                42,
+                8,
+                "01 00 00 00 00 00 00 F8 3F 01 00 00 00 00 00",
+                Value::Analog(1.5),
+            ),
         ];
         for (g, v, obj, value) in one {
             let f = hex(&format!("C0 81 00 00 {g:02X} {v:02X} 17 01 09 {obj}"));
@@ -1051,13 +1076,17 @@ mod tests {
             assert!(m.flags.contains(Flags::ONLINE), "g{g}v{v}");
             let timed = matches!(
                 (g, v),
-                (2, 2) | (4, 2) | (21 | 22, 5 | 6) | (32, 3 | 4 | 7 | 8)
+                (2, 2) | (4, 2) | (11, 2) | (21 | 22, 5 | 6) | (32 | 42, 3 | 4 | 7 | 8)
             );
             assert_eq!(m.time.is_some(), timed, "g{g}v{v}");
             if timed {
                 assert_eq!(m.time, Some(1));
             }
-            assert_eq!(m.is_event, matches!(g, 2 | 4 | 22 | 32), "g{g}v{v}");
+            assert_eq!(
+                m.is_event,
+                matches!(g, 2 | 4 | 11 | 22 | 32 | 42),
+                "g{g}v{v}"
+            );
         }
         // Packed: g1v1 start 0 stop 9, g10v1, g3v1 start 0 stop 4, g80v1.
         let o = objects_of(&hex(
@@ -1175,11 +1204,11 @@ mod tests {
             })
         );
         // A known-size object the master does not use is skipped.
-        let o = objects_of(&hex("C0 81 00 00 0B 01 17 01 02 81 00 01 02 00 00 00 81"));
+        let o = objects_of(&hex("C0 81 00 00 0D 01 17 01 02 81 01 02 00 00 00 81"));
         assert_eq!(o.error, None);
         assert_eq!(o.measurements.len(), 1);
         assert!(
-            o.notes[0].contains("g11v1 index 2 at octet 8 skipped"),
+            o.notes[0].contains("g13v1 index 2 at octet 8 skipped"),
             "{:?}",
             o.notes
         );

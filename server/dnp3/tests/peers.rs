@@ -88,7 +88,10 @@ fn py1815_response_with_a_common_time_of_occurrence() {
          A2 03 17 01 01 81 00 00 20 03 17 01 00 01 D3 04 00 DB F7 00 DE 39 52 25 A2 01 01 \
          02 00 00 01 01 81 1E 01 3C 57 00 00 00 01 D2 04 00 00 25 DF",
     );
-    assert_eq!((h.control.fir, h.control.fin, h.control.con), (true, true, true));
+    assert_eq!(
+        (h.control.fir, h.control.fin, h.control.con),
+        (true, true, true)
+    );
     assert_eq!(o.error, None);
     assert_eq!(o.notes.len(), 1, "the CTO is unsynchronised: {:?}", o.notes);
     use Value::*;
@@ -123,4 +126,85 @@ fn py1815_unsolicited_events() {
             (K::Analog, 0, Analog(1236.0), t, true),
         ]
     );
+}
+
+/// opendnp3 (through dnp3-python 0.3.0b1, `dnp3demo outstation
+/// --init-random`): a fragment of two transport segments with g2v1, g11v1,
+/// g32v1, g42v1 events, then g1v2, g3v2, g20v1, g21v1, g30v1, g10v2 and
+/// g40v1 static data.
+pub const OPENDNP3_INTEGRITY: [&str; 2] = [
+    "05 64 FF 44 01 00 00 04 53 46 43 E2 81 00 00 02 01 28 05 00 00 00 01 01 00 01 C7 46 \
+         02 00 01 03 00 81 04 00 01 0B 01 28 05 00 00 00 00 66 01 01 00 81 02 00 81 03 00 01 \
+         04 00 01 20 01 28 AB AE 05 00 00 00 01 00 00 00 00 01 00 01 06 00 00 00 3B 4D 02 00 \
+         01 29 00 00 00 03 00 01 0D 00 00 00 04 00 10 83 01 D9 13 00 00 2A 01 28 05 00 00 00 \
+         01 00 00 00 E5 CB 00 01 00 01 00 00 00 00 02 00 01 23 00 00 00 03 AA 70 00 01 96 02 \
+         00 00 04 00 01 26 13 00 00 01 02 00 02 79 00 04 01 01 01 81 01 03 02 00 00 04 02 02 \
+         02 02 11 31 02 14 01 00 00 04 02 00 00 00 00 02 00 00 00 00 68 7B 02 00 00 00 00 02 \
+         00 00 00 00 02 00 00 00 00 15 01 32 01 00 00 04 02 00 00 00 00 02 00 00 00 00 02 00 \
+         70 B2 00 00 00 02 00 00 00 00 02 00 00 00 00 1E 01 00 4A 88 00 04 01 00 00 00 00 01 \
+         06 00 00 00 01 29 00 00 A0 68 00 01 0D 00 00 00 01 D9 13 00 00 0A 02 00 00 04 EE 73 \
+         01 81 81 01 01 28 01 00 00 04 F7 6C",
+    "05 64 5B 44 01 00 00 04 3C EB 84 01 00 00 00 00 01 00 00 00 00 01 23 00 00 00 B0 34 \
+         01 96 02 00 00 01 26 13 00 00 32 04 00 00 04 00 B8 DD 00 00 00 00 00 00 00 00 00 00 \
+         00 00 00 00 00 00 FF FF 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 FF FF 00 00 \
+         00 00 00 00 00 00 00 00 00 00 00 00 00 00 FF FF 00 00 00 00 00 00 FF FF",
+];
+
+#[test]
+fn opendnp3_integrity_response_in_two_segments() {
+    let mut r = Reassembler::default();
+    let mut fragment = None;
+    for wire in OPENDNP3_INTEGRITY {
+        let b = hex(wire);
+        let (frame, n) = link::decode(&b).unwrap().unwrap();
+        assert_eq!(n, b.len());
+        fragment = r.push(&frame.data).unwrap();
+    }
+    let fragment = fragment.expect("FIN in the second segment");
+    assert_eq!(fragment.len(), 249 + 85);
+    let h = ResponseHeader::decode(&fragment).unwrap();
+    assert!(h.control.con, "events: the master must confirm");
+    let o = objects::parse(&fragment[4..], 4);
+    assert_eq!(o.error, None);
+    assert!(o.notes.is_empty(), "{:?}", o.notes);
+    let count = |k: K, event: bool| {
+        o.measurements
+            .iter()
+            .filter(|m| m.kind == k && m.is_event == event)
+            .count()
+    };
+    for k in [
+        K::Binary,
+        K::BinaryOutputStatus,
+        K::Analog,
+        K::AnalogOutputStatus,
+    ] {
+        assert_eq!(count(k, true), 5, "{k:?} events");
+    }
+    for k in [
+        K::Binary,
+        K::DoubleBit,
+        K::Counter,
+        K::FrozenCounter,
+        K::Analog,
+        K::BinaryOutputStatus,
+        K::AnalogOutputStatus,
+    ] {
+        assert_eq!(count(k, false), 5, "{k:?} static");
+    }
+    let find = |k: K, i: u16| {
+        o.measurements
+            .iter()
+            .find(|m| m.kind == k && m.index == i && !m.is_event)
+            .unwrap()
+    };
+    assert_eq!(find(K::Analog, 4).value, Value::Analog(5081.0));
+    assert_eq!(find(K::AnalogOutputStatus, 3).value, Value::Analog(662.0));
+    assert_eq!(find(K::BinaryOutputStatus, 1).value, Value::Binary(true));
+    let db = find(K::DoubleBit, 0);
+    assert_eq!(
+        db.value,
+        Value::DoubleBit(gridscada_dnp3::DoubleBit::Intermediate)
+    );
+    assert_eq!(db.flags.quality().0, Quality::Bad);
 }
