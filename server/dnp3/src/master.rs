@@ -252,6 +252,11 @@ pub struct Master {
     next_integrity: Option<Instant>,
     next_events: Option<Instant>,
     last_unsolicited: Option<Vec<u8>>,
+    /// ENABLE_UNSOLICITED was accepted on this connection.
+    unsolicited_enabled: bool,
+    /// IIN bits whose procedure the outstation refused (restart clear, time
+    /// sync): not acted on again until the outstation clears them.
+    refused_bits: Iin,
 }
 
 impl Master {
@@ -270,6 +275,8 @@ impl Master {
             next_integrity: None,
             next_events: None,
             last_unsolicited: None,
+            unsolicited_enabled: false,
+            refused_bits: Iin::default(),
         }
     }
 
@@ -297,6 +304,8 @@ impl Master {
         self.rx.clear();
         self.reassembler.reset();
         self.last_unsolicited = None;
+        self.unsolicited_enabled = false;
+        self.refused_bits = Iin::default();
         if self.cfg.disable_unsolicited_at_start {
             self.enqueue(Task::DisableUnsolicited);
         }
@@ -671,7 +680,20 @@ impl Master {
                         task: task.name(),
                         iin: header.iin,
                     }));
+                    // Asking again at every response would loop.
+                    match task {
+                        Task::TimeSync => self.refused_bits = self.refused_bits | Iin::NEED_TIME,
+                        Task::ClearRestart => {
+                            self.refused_bits = self.refused_bits | Iin::DEVICE_RESTART
+                        }
+                        _ => {}
+                    }
                 } else {
+                    match task {
+                        Task::EnableUnsolicited => self.unsolicited_enabled = true,
+                        Task::DisableUnsolicited => self.unsolicited_enabled = false,
+                        _ => {}
+                    }
                     match f.step {
                         Step::RecordTime { unix_ms } => {
                             // NEED_TIME stays set until the WRITE: the
@@ -696,7 +718,7 @@ impl Master {
                     && header
                         .iin
                         .any(Iin::CLASS1_EVENTS | Iin::CLASS2_EVENTS | Iin::CLASS3_EVENTS)
-                    && !self.cfg.enable_unsolicited
+                    && !self.unsolicited_enabled
                 {
                     self.enqueue(Task::EventPoll);
                 }
@@ -792,10 +814,13 @@ impl Master {
         }
         let raised = iin.raised_since(before);
         self.iin = iin;
-        if iin.contains(Iin::DEVICE_RESTART) {
-            if raised.contains(Iin::DEVICE_RESTART) {
-                out.push(Action::Report(Report::DeviceRestart));
-            }
+        // A refused bit is acted on again once the outstation has cleared it.
+        self.refused_bits = Iin(self.refused_bits.0 & iin.0);
+        let act = Iin(iin.0 & !self.refused_bits.0);
+        if raised.contains(Iin::DEVICE_RESTART) {
+            out.push(Action::Report(Report::DeviceRestart));
+        }
+        if act.contains(Iin::DEVICE_RESTART) {
             let clearing = self.queue.contains(&Task::ClearRestart)
                 || self
                     .in_flight
@@ -809,7 +834,7 @@ impl Master {
                 }
             }
         }
-        if iin.contains(Iin::NEED_TIME) && self.cfg.time_sync {
+        if act.contains(Iin::NEED_TIME) && self.cfg.time_sync {
             self.enqueue(Task::TimeSync);
         }
         if raised.contains(Iin::EVENT_BUFFER_OVERFLOW) {

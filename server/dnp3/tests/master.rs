@@ -284,6 +284,59 @@ fn need_time_runs_the_lan_time_sync() {
 }
 
 #[test]
+fn a_refused_time_sync_is_not_asked_again_until_need_time_clears() {
+    let mut o = Outstation::connect(no_periodic());
+    let (_, s, _) = o.request();
+    o.respond(s, false, Iin::NEED_TIME, "");
+    let (f, s, _) = o.request();
+    assert_eq!(f, FunctionCode::RecordCurrentTime);
+    o.respond(s, false, Iin::NEED_TIME | Iin::NO_FUNC_CODE_SUPPORT, "");
+    assert!(matches!(
+        &o.reports()[..],
+        [Report::Refused {
+            task: "time sync",
+            ..
+        }]
+    ));
+    let (f, s, apdu) = o.request();
+    assert_eq!(
+        (f, apdu.len()),
+        (FunctionCode::Read, 14),
+        "integrity, no new sync"
+    );
+    o.respond(s, false, Iin::NEED_TIME, "");
+    let (f, s, _) = o.request();
+    assert_eq!(f, FunctionCode::EnableUnsolicited);
+    o.respond(s, false, Iin::default(), "");
+    o.nothing_sent();
+    // Cleared, then asked for again: a new attempt.
+    o.send(&hex("F1 82 10 00"));
+    let r = o.requests();
+    assert_eq!(r[0], hex("D1 00"));
+    assert_eq!(
+        RequestHeader::decode(&r[1]).unwrap().function,
+        FunctionCode::RecordCurrentTime
+    );
+}
+
+#[test]
+fn without_unsolicited_the_class_bits_call_for_an_event_poll() {
+    let mut o = Outstation::connect(no_periodic());
+    let (_, s, _) = o.request();
+    o.respond(s, false, Iin::default(), "");
+    let (_, s, _) = o.request();
+    o.respond(s, false, Iin::CLASS1_EVENTS, "");
+    let (f, s, _) = o.request();
+    assert_eq!(f, FunctionCode::EnableUnsolicited);
+    o.respond(s, false, Iin::CLASS1_EVENTS | Iin::NO_FUNC_CODE_SUPPORT, "");
+    let (f, s, apdu) = o.request();
+    assert_eq!((f, apdu.len()), (FunctionCode::Read, 11), "event poll");
+    o.respond(s, true, Iin::default(), "02 01 17 01 00 81");
+    assert_eq!(o.requests(), vec![vec![0xC0 | s, 0x00]]);
+    assert_eq!(o.values(), vec![(0, Value::Binary(true))]);
+}
+
+#[test]
 fn event_buffer_overflow_polls_integrity_and_reports() {
     let mut o = Outstation::connect(no_periodic());
     o.startup();
