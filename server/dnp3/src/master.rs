@@ -232,7 +232,11 @@ struct InFlight {
     task: Task,
     step: Step,
     function: FunctionCode,
+    /// The request's sequence number.
     seq: u8,
+    /// The sequence number the next response fragment must carry: the
+    /// request's for the first, one more for each following fragment.
+    expect_seq: u8,
     sent_at: Instant,
     deadline: Instant,
 }
@@ -525,6 +529,7 @@ impl Master {
             step,
             function,
             seq,
+            expect_seq: seq,
             sent_at: now.mono,
             deadline: now.mono + self.cfg.response_timeout,
         });
@@ -636,10 +641,10 @@ impl Master {
             ))));
             return;
         };
-        if header.control.seq != f.seq {
+        if header.control.seq != f.expect_seq {
             out.push(Action::Report(Report::Ignored(format!(
-                "response seq {}, the request outstanding has seq {}",
-                header.control.seq, f.seq
+                "response seq {}, expected {} (request seq {})",
+                header.control.seq, f.expect_seq, f.seq
             ))));
             return;
         }
@@ -670,6 +675,7 @@ impl Master {
                     // More fragments follow: the timeout starts again.
                     if let Some(f) = &mut self.in_flight {
                         f.deadline = now.mono + self.cfg.response_timeout;
+                        f.expect_seq = (f.expect_seq + 1) & crate::app::SEQ_MASK;
                     }
                     self.iin_changes(header.iin, out);
                     return;

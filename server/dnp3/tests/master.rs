@@ -529,18 +529,27 @@ fn periodic_polls_and_multi_fragment_responses() {
     o.advance(Duration::from_secs(10));
     let (f, s, apdu) = o.request();
     assert_eq!((f, apdu.len()), (FunctionCode::Read, 11), "event poll");
-    // First fragment (FIR, CON), then the last (FIN, CON).
+    // First fragment (FIR, CON) with the request's seq, then the last
+    // (FIN, CON) with the next: each confirmed with its own.
     o.send(&hex(&format!(
         "{:02X} 81 00 00 01 02 00 00 00 81",
         0xA0 | s
     )));
     assert_eq!(o.requests(), vec![vec![0xC0 | s, 0x00]]);
     assert!(o.master.is_busy());
+    // A repeat of the first fragment is not the one expected.
+    o.send(&hex(&format!(
+        "{:02X} 81 00 00 01 02 00 00 00 81",
+        0xA0 | s
+    )));
+    o.nothing_sent();
+    assert!(matches!(&o.reports()[..], [Report::Ignored(_)]));
+    let s2 = (s + 1) % 16;
     o.send(&hex(&format!(
         "{:02X} 81 00 00 01 02 00 01 01 01",
-        0x60 | s
+        0x60 | s2
     )));
-    assert_eq!(o.requests(), vec![vec![0xC0 | s, 0x00]]);
+    assert_eq!(o.requests(), vec![vec![0xC0 | s2, 0x00]]);
     assert!(!o.master.is_busy());
     assert_eq!(
         o.values(),
