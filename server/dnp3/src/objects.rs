@@ -847,7 +847,7 @@ fn object(
             });
             return;
         }
-        (50, 1) | (50, 3) | (50, 4) => {
+        (50, 1) | (50, 3) => {
             out.time = Some(time48_at(o, 0));
             return;
         }
