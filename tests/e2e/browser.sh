@@ -1,10 +1,15 @@
 #!/usr/bin/env bash
 # End-to-end tests of the web HMI in headless Chromium (Debian's package),
-# driven by playwright-core. Starts a demo server on a free port with a fresh
-# data directory, runs tests/e2e/browser/tests/*.test.js, stops the server,
-# and prints "N passed, M failed". Screenshots go to tests/e2e/artifacts/.
+# driven by playwright-core. Starts two servers on free ports with fresh data
+# directories (the demo plant, and tests/plants/three-panels), runs
+# tests/e2e/browser/tests/*.test.js against the first and
+# tests/e2e/browser/plant2/*.test.js against the second, side by side, stops
+# them, and prints "N passed, M failed". Screenshots, each run's report
+# (spec-NAME.log, results-NAME.tap) and the servers' logs go to
+# tests/e2e/artifacts/.
 #
-# Environment: GRIDSCADA_BIN (default target/debug/gridscada, built if missing).
+# Environment: GRIDSCADA_BIN (default target/debug/gridscada, built if missing);
+# GRIDSCADA_BROWSER_SERIAL=1 runs the two plants one after the other.
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -43,7 +48,7 @@ cd "$here/browser"
 if [ -f package-lock.json ]; then npm ci --no-audit --no-fund --loglevel=error; else npm install --no-audit --no-fund --loglevel=error; fi
 
 mkdir -p "$artifacts"
-rm -f "$artifacts"/*.png "$artifacts"/*.csv "$artifacts"/*.log "$artifacts"/*.tap
+rm -f "$artifacts"/*.png "$artifacts"/*.csv "$artifacts"/*.log "$artifacts"/*.tap "$artifacts"/rc-*
 
 free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1]); s.close()'; }
 
@@ -72,45 +77,61 @@ start() {
   echo "browser.sh: the $name server gave no credentials.txt after 30 s"; cat "$artifacts/server-$name.log"; exit 1
 }
 
-total_passed=0
-total_failed=0
-# run NAME PORT DATA FILES...: the test files against one server, under a time limit.
+# run NAME PORT DATA PID FILES...: the test files against one server, under
+# a time limit; the spec report goes to $artifacts/spec-NAME.log, the exit
+# status to $artifacts/rc-NAME.
 run() {
-  local name=$1 port=$2 dir=$3; shift 3
-  local tap="$artifacts/results-$name.tap"
-  set +e
+  local name=$1 port=$2 dir=$3 pid=$4; shift 4
+  local rc=0
   GRIDSCADA_URL="http://127.0.0.1:$port" GRIDSCADA_CREDENTIALS="$dir/credentials.txt" GRIDSCADA_ARTIFACTS="$artifacts" \
-  GRIDSCADA_PID="$server_pid" \
+  GRIDSCADA_PID="$pid" \
     timeout --kill-after=20 900 node --test --test-concurrency=1 \
       --test-reporter=spec --test-reporter-destination=stdout \
-      --test-reporter=tap --test-reporter-destination="$tap" \
-      "$@"
-  local rc=$?
-  set -e
-  local p f
+      --test-reporter=tap --test-reporter-destination="$artifacts/results-$name.tap" \
+      "$@" >"$artifacts/spec-$name.log" 2>&1 || rc=$?
+  echo "$rc" >"$artifacts/rc-$name"
+}
+
+# The demo plant, and another plant (tests/plants/three-panels: other panel
+# ids and zone counts, no microgrid, a plain device): nothing may depend on
+# the demo.
+port1="$(free_port)"
+start demo "$port1"
+data1=$data pid1=$server_pid
+port2="$(free_port)"
+start plant2 "$port2" --config "$root/tests/plants/three-panels"
+data2=$data pid2=$server_pid
+# Let the demo record a few seconds of history for the trend test.
+sleep 3
+# The two plants' tests side by side, each one test at a time: they spend
+# most of their time waiting on the servers' clocks (dwell times, session
+# expiry, scan periods), so together they take the time of the longer one.
+# GRIDSCADA_BROWSER_SERIAL=1 runs them one after the other.
+if [ -n "${GRIDSCADA_BROWSER_SERIAL:-}" ]; then
+  run demo "$port1" "$data1" "$pid1" tests/*.test.js
+  run plant2 "$port2" "$data2" "$pid2" plant2/*.test.js
+else
+  run demo "$port1" "$data1" "$pid1" tests/*.test.js &
+  demo_run=$!
+  run plant2 "$port2" "$data2" "$pid2" plant2/*.test.js &
+  plant2_run=$!
+  wait "$demo_run" "$plant2_run" || true
+fi
+
+total_passed=0
+total_failed=0
+for name in demo plant2; do
+  echo "--- $name"
+  cat "$artifacts/spec-$name.log" 2>/dev/null || true
+  tap="$artifacts/results-$name.tap"
+  rc="$(cat "$artifacts/rc-$name" 2>/dev/null || echo 1)"
   # A run that died before its summary has none: counted as failed below.
   p="$(grep -E '^# pass ' "$tap" 2>/dev/null | awk '{print $3}' | tail -1 || true)"
   f="$(grep -E '^# fail ' "$tap" 2>/dev/null | awk '{print $3}' | tail -1 || true)"
   [ "$rc" -ne 0 ] && [ "${f:-0}" -eq 0 ] && f=1
   total_passed=$((total_passed + ${p:-0}))
   total_failed=$((total_failed + ${f:-0}))
-}
-
-# The demo plant.
-port1="$(free_port)"
-start demo "$port1"
-data1=$data
-# Let the demo record a few seconds of history for the trend test.
-sleep 3
-run demo "$port1" "$data1" tests/*.test.js
-
-# Another plant (tests/plants/three-panels: other panel ids and zone
-# counts, no microgrid, a plain device): nothing may depend on the demo.
-port2="$(free_port)"
-start plant2 "$port2" --config "$root/tests/plants/three-panels"
-data2=$data
-sleep 2
-run plant2 "$port2" "$data2" plant2/*.test.js
+done
 
 echo "screenshots: $artifacts"
 echo "${total_passed} passed, ${total_failed} failed"
