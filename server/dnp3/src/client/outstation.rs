@@ -336,7 +336,9 @@ impl Outstation {
     /// Measurements into the tag database, in one batch split where a tag
     /// repeats, so every event of a burst reaches the subscribers.
     fn deliver(&mut self, ms: &[crate::objects::Measurement]) {
-        self.counters.connected.store(true, Ordering::Relaxed);
+        if !self.counters.connected.swap(true, Ordering::Relaxed) {
+            self.publish_status();
+        }
         let received = self.clock.now();
         let events = ms.iter().filter(|m| m.is_event).count() as u64;
         self.counters.events.fetch_add(events, Ordering::Relaxed);
