@@ -390,3 +390,64 @@ impl TagWriter for Dnp3Writer {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec(command: Dnp3Command, op: Dnp3Op, data_type: DataType, scale: f64) -> CommandSpec {
+        CommandSpec {
+            command,
+            index: 0,
+            select: true,
+            op,
+            on_ms: 500,
+            off_ms: 0,
+            data_type,
+            scale,
+            offset: 0.0,
+        }
+    }
+
+    #[test]
+    fn crob_operations_follow_the_tags_op() {
+        let latch = spec(Dnp3Command::Crob, Dnp3Op::Latch, DataType::Bool, 1.0);
+        assert_eq!(
+            latch.object(&Value::Bool(true)),
+            Ok(CommandObject::Crob(Crob::latch(true)))
+        );
+        assert_eq!(
+            latch.object(&Value::Bool(false)),
+            Ok(CommandObject::Crob(Crob::latch(false)))
+        );
+        let tc = spec(Dnp3Command::Crob, Dnp3Op::TripClose, DataType::Bool, 1.0);
+        assert_eq!(
+            tc.object(&Value::Bool(false)),
+            Ok(CommandObject::Crob(Crob::trip_close(false, 500)))
+        );
+        let pulse = spec(Dnp3Command::Crob, Dnp3Op::Pulse, DataType::Bool, 1.0);
+        assert_eq!(
+            pulse.object(&Value::Bool(true)),
+            Ok(CommandObject::Crob(Crob::pulse(true, 1, 500, 0)))
+        );
+        assert!(latch.object(&Value::Float(0.5)).is_err());
+        assert_eq!(latch.mode(), CommandMode::SelectBeforeOperate);
+    }
+
+    #[test]
+    fn analog_outputs_are_unscaled_and_range_checked() {
+        let f = spec(Dnp3Command::AnalogOutput, Dnp3Op::Latch, DataType::F32, 1.0);
+        assert_eq!(
+            f.object(&Value::Float(12.5)),
+            Ok(CommandObject::Analog(AnalogOutput::F32(12.5)))
+        );
+        let i = spec(Dnp3Command::AnalogOutput, Dnp3Op::Latch, DataType::I16, 0.1);
+        assert_eq!(
+            i.object(&Value::Float(230.5)),
+            Ok(CommandObject::Analog(AnalogOutput::I16(2305)))
+        );
+        let e = i.object(&Value::Float(1e6)).unwrap_err();
+        assert!(e.contains("outside"), "{e}");
+        assert!(i.object(&Value::Str("x".into())).is_err());
+    }
+}

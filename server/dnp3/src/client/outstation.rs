@@ -192,6 +192,11 @@ impl Outstation {
                         if let Some(at) = self.sent_at.take() {
                             self.observe_round_trip(at.elapsed());
                         }
+                        // The outstation answers: connected (again, after
+                        // a response timeout).
+                        if !self.counters.connected.swap(true, Ordering::Relaxed) {
+                            self.publish_status();
+                        }
                         let now = self.now();
                         self.master.received(&buf[..n], now)
                     }
@@ -336,9 +341,6 @@ impl Outstation {
     /// Measurements into the tag database, in one batch split where a tag
     /// repeats, so every event of a burst reaches the subscribers.
     fn deliver(&mut self, ms: &[crate::objects::Measurement]) {
-        if !self.counters.connected.swap(true, Ordering::Relaxed) {
-            self.publish_status();
-        }
         let received = self.clock.now();
         let events = ms.iter().filter(|m| m.is_event).count() as u64;
         self.counters.events.fetch_add(events, Ordering::Relaxed);
