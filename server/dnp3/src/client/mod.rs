@@ -324,7 +324,14 @@ impl StatsSource for OutstationStats {
                 writes: get(&c.commands),
                 last_response_ms: get(&c.response_us) as f64 / 1000.0,
                 round_trip: c.round_trips.snapshot(),
-                state: if connected { "connected" } else { "stopped" }.to_string(),
+                // "connected"/"disconnected": the DNP3 states, apart from
+                // IEC 104's started/tested/stopped (`/metrics` tells them so).
+                state: if connected {
+                    "connected"
+                } else {
+                    "disconnected"
+                }
+                .to_string(),
                 events: get(&c.events),
                 interrogations: get(&c.integrity_polls),
                 writes_failed: get(&c.commands_failed),
