@@ -15,15 +15,20 @@
 //! unchecked length, and say what is wrong and where (octet offset, object
 //! group/variation, index).
 //!
-//! **Must not touch:** sockets, tokio, timers, tags, configuration, SQL,
-//! HTTP: the I/O shell (a later phase) feeds [`master::Master`] and carries
-//! out its actions.
+//! [`client`] is the I/O shell: one tokio task per configured outstation
+//! that connects over TCP, feeds [`master::Master`] and carries out its
+//! actions, with the samples, status tags, figures and commands through
+//! `gridscada-field` and the tag database.
+//!
+//! **Must not touch:** sockets, tokio, timers, tags or configuration
+//! outside [`client`]; SQL, HTTP.
 //!
 //! Why our own codec: the Rust DNP3 crate on crates.io (stepfunc `dnp3`)
 //! is under a non-commercial licence, and opendnp3's bindings need C++
 //! builds; the protocol is fixed-layout structures, a few hundred lines each.
 
 pub mod app;
+pub mod client;
 pub mod link;
 pub mod master;
 pub mod objects;
@@ -31,6 +36,7 @@ pub mod request;
 pub mod transport;
 
 pub use app::{Control, FunctionCode, Iin, ObjectHeader, Range};
+pub use client::{Dnp3Io, StartError};
 pub use link::{LinkError, LinkFrame, LinkFunction};
 pub use master::{Action, Clock, Master, MasterConfig};
 pub use objects::{

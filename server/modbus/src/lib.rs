@@ -109,7 +109,7 @@ fn transport_key(d: &DeviceConfig) -> Result<String, Error> {
             .as_ref()
             .map(|s| format!("rtu://{}", s.port.get_ref()))
             .ok_or_else(|| err("an rtu device needs a serial port")),
-        Protocol::Iec104 => Err(err("not a Modbus device")),
+        Protocol::Iec104 | Protocol::Dnp3 => Err(err("not a Modbus device")),
     }
 }
 
@@ -288,7 +288,7 @@ impl FieldIo {
             }
             let first = devs[0];
             let transport = match first.protocol {
-                Protocol::Tcp | Protocol::Iec104 => Transport::Tcp(TcpLine::new(
+                Protocol::Tcp | Protocol::Iec104 | Protocol::Dnp3 => Transport::Tcp(TcpLine::new(
                     first
                         .address
                         .as_ref()

@@ -12,6 +12,7 @@ use gridscada_tagdb::{Clock, Leadership, TagDb, TagWriter};
 pub(crate) struct Field {
     modbus: gridscada_modbus::FieldIo,
     iec104: gridscada_iec104::Iec104Io,
+    dnp3: gridscada_dnp3::Dnp3Io,
     writer: Arc<dyn TagWriter>,
     stats: StatsHandle,
 }
@@ -31,19 +32,31 @@ impl Field {
             leadership.clone(),
         )
         .context("starting Modbus field I/O")?;
-        let iec104 = gridscada_iec104::Iec104Io::start(plant, db, clock, leadership)
-            .context("starting the IEC 104 client")?;
+        let iec104 =
+            gridscada_iec104::Iec104Io::start(plant, db.clone(), clock.clone(), leadership.clone())
+                .context("starting the IEC 104 client")?;
+        let dnp3 = gridscada_dnp3::Dnp3Io::start(plant, db, clock, leadership)
+            .context("starting the DNP3 master")?;
         let writer: Arc<dyn TagWriter> = Arc::new(Router::new([
             (modbus.writer(), Router::tags_of(plant, |p| p.is_modbus())),
             (
                 iec104.writer(),
                 Router::tags_of(plant, |p| p == Protocol::Iec104),
             ),
+            (
+                dnp3.writer(),
+                Router::tags_of(plant, |p| p == Protocol::Dnp3),
+            ),
         ]));
-        let stats = StatsHandle::new(vec![modbus.stats_source(), iec104.stats_source()]);
+        let stats = StatsHandle::new(vec![
+            modbus.stats_source(),
+            iec104.stats_source(),
+            dnp3.stats_source(),
+        ]);
         Ok(Field {
             modbus,
             iec104,
+            dnp3,
             writer,
             stats,
         })
@@ -64,5 +77,6 @@ impl Field {
     pub(crate) async fn shutdown(self) {
         self.modbus.shutdown().await;
         self.iec104.shutdown().await;
+        self.dnp3.shutdown().await;
     }
 }

@@ -159,14 +159,57 @@ pub(super) struct StackMetrics {
 }
 
 impl StackMetrics {
-    /// The IEC 104 stations (one per device) and the IEC 104 server.
+    /// The IEC 104 stations (one per device), the DNP3 outstations and the
+    /// IEC 104 server.
     fn render_telecontrol(
         &self,
         out: &mut gridscada_web::metrics::Prom,
         poll: &gridscada_field::PollStats,
     ) {
         let now_ms = gridscada_tagdb::Timestamp::now_utc().as_millis();
-        for d in poll.devices.iter().filter(|d| !d.state.is_empty()) {
+        // DNP3 outstations: connected or disconnected.
+        for d in poll
+            .devices
+            .iter()
+            .filter(|d| matches!(d.state.as_str(), "connected" | "disconnected"))
+        {
+            let l = [("device", d.device.as_str())];
+            for (name, help, v) in [
+                (
+                    "gridscada_dnp3_requests_total",
+                    "Link frames sent to the outstation (requests and confirmations).",
+                    d.requests,
+                ),
+                (
+                    "gridscada_dnp3_events_total",
+                    "Event objects received (polled or unsolicited).",
+                    d.events,
+                ),
+                ("gridscada_dnp3_commands_total", "Commands sent.", d.writes),
+                (
+                    "gridscada_dnp3_commands_failed_total",
+                    "Commands refused by the outstation (status named) or not answered.",
+                    d.writes_failed,
+                ),
+                (
+                    "gridscada_dnp3_overflows_total",
+                    "Event buffer overflows the outstation reported (IIN2.3).",
+                    d.overflows,
+                ),
+                (
+                    "gridscada_dnp3_timeouts_total",
+                    "Requests without a response within the response timeout.",
+                    d.timeouts,
+                ),
+            ] {
+                out.counter(name, help, &l, v as f64);
+            }
+        }
+        for d in poll
+            .devices
+            .iter()
+            .filter(|d| matches!(d.state.as_str(), "started" | "tested" | "stopped"))
+        {
             let l = [("device", d.device.as_str())];
             for state in ["started", "tested", "stopped"] {
                 out.gauge(

@@ -1,5 +1,5 @@
 //! Devices: `[[device]]` in the tag files, its protocol and transport
-//! (Modbus over TCP or a serial line, IEC 60870-5-104 over TCP), its polling
+//! (Modbus over TCP or a serial line, IEC 60870-5-104 or DNP3 over TCP), its polling
 //! limits and its comm alarm.
 
 use serde::{Deserialize, Serialize};
@@ -14,6 +14,8 @@ pub enum Protocol {
     Rtu,
     /// IEC 60870-5-104 (`[device.iec104]`).
     Iec104,
+    /// DNP3 over TCP (`[device.dnp3]`).
+    Dnp3,
 }
 
 impl Protocol {
@@ -26,6 +28,7 @@ impl Protocol {
             Protocol::Tcp => "tcp",
             Protocol::Rtu => "rtu",
             Protocol::Iec104 => "iec104",
+            Protocol::Dnp3 => "dnp3",
         }
     }
 }
@@ -38,7 +41,7 @@ pub struct DeviceConfig {
     #[serde(default)]
     pub description: String,
     pub protocol: Protocol,
-    /// TCP (Modbus TCP, IEC 104): `host:port`.
+    /// TCP (Modbus TCP, IEC 104, DNP3): `host:port`.
     pub address: Option<Spanned<String>>,
     /// RTU: the serial line.
     pub serial: Option<SerialConfig>,
@@ -83,6 +86,9 @@ pub struct DeviceConfig {
     /// IEC 104 link settings, for protocol = "iec104".
     #[serde(default)]
     pub iec104: Option<super::Iec104DeviceConfig>,
+    /// DNP3 session settings, for protocol = "dnp3".
+    #[serde(default)]
+    pub dnp3: Option<super::Dnp3DeviceConfig>,
 }
 
 /// A device's communication-failure alarm (`[device.comm_alarm]`): active

@@ -7,7 +7,7 @@
 //! This file holds the main file and a tag file as a whole, and the small
 //! defaults their parts share; each part has its own file, all re-exported
 //! here: the server, storage, sessions and roles `server.rs`, devices
-//! `devices.rs`, IEC 104 links and points `iec104.rs`, tags `tags.rs`, a tag's alarms and history `alarms.rs`,
+//! `devices.rs`, IEC 104 links and points `iec104.rs`, DNP3 sessions and points `dnp3.rs`, tags `tags.rs`, a tag's alarms and history `alarms.rs`,
 //! panels `panels.rs`, the microgrid `microgrid.rs`, the MQTT Sparkplug B
 //! northbound `mqtt.rs`, the OPC UA server `opcua.rs`, the redundant pair
 //! `redundancy.rs`, alarm notification routes `notify.rs`.
@@ -17,6 +17,7 @@ use serde_spanned::Spanned;
 
 mod alarms;
 mod devices;
+mod dnp3;
 mod iec104;
 mod microgrid;
 mod mqtt;
@@ -31,6 +32,7 @@ mod tags;
 
 pub use alarms::*;
 pub use devices::*;
+pub use dnp3::*;
 pub use iec104::*;
 pub use microgrid::*;
 pub use mqtt::*;

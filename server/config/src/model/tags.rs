@@ -111,6 +111,9 @@ pub struct TagConfig {
     /// The IEC 104 point (IEC 104 devices).
     #[serde(default)]
     pub iec104: Option<Iec104TagConfig>,
+    /// The DNP3 point (DNP3 devices).
+    #[serde(default)]
+    pub dnp3: Option<Dnp3TagConfig>,
     /// Bit within a register (0 = least significant), for bool tags on registers.
     pub bit: Option<Spanned<u8>>,
     /// Wire type; `bool` by default for coils and discrete inputs, `u16` for registers.
@@ -173,11 +176,12 @@ impl TagConfig {
     }
     /// The wire type, with its default applied.
     pub fn data_type(&self) -> DataType {
-        match (&self.data_type, &self.iec104) {
-            (Some(t), _) => *t.get_ref(),
-            (None, Some(p)) => p.point.get_ref().default_type(),
-            (None, None) if self.is_bit() => DataType::Bool,
-            (None, None) => DataType::U16,
+        match (&self.data_type, &self.iec104, &self.dnp3) {
+            (Some(t), _, _) => *t.get_ref(),
+            (None, Some(p), _) => p.point.get_ref().default_type(),
+            (None, None, Some(p)) => p.point.get_ref().default_type(),
+            (None, None, None) if self.is_bit() => DataType::Bool,
+            (None, None, None) => DataType::U16,
         }
     }
     /// Registers (or bits) the tag occupies.

@@ -24,7 +24,7 @@ pub(super) fn check_device(cx: &mut Ctx<'_>, f: usize, d: &DeviceConfig) {
         }
     }
     match d.protocol {
-        Protocol::Tcp | Protocol::Iec104 => {
+        Protocol::Tcp | Protocol::Iec104 | Protocol::Dnp3 => {
             check_tcp_address(cx, f, d);
             if d.serial.is_some() {
                 cx.err(
@@ -178,6 +178,68 @@ fn check_tcp_address(cx: &mut Ctx<'_>, f: usize, d: &DeviceConfig) {
             format!("device '{name}': [device.iec104] is only for protocol = \"iec104\""),
         ),
         (_, None) => {}
+    }
+    match (d.protocol, &d.dnp3) {
+        (Protocol::Dnp3, Some(session)) => check_dnp3_session(cx, f, name, session),
+        (Protocol::Dnp3, None) => {}
+        (_, Some(session)) => cx.err(
+            f,
+            session.master_address.span(),
+            format!("device '{name}': [device.dnp3] is only for protocol = \"dnp3\""),
+        ),
+        (_, None) => {}
+    }
+}
+
+/// A DNP3 session's addresses, periods and timeouts.
+fn check_dnp3_session(cx: &mut Ctx<'_>, f: usize, name: &str, s: &Dnp3DeviceConfig) {
+    let (m, o) = (*s.master_address.get_ref(), *s.outstation_address.get_ref());
+    for (field, v) in [
+        ("master_address", &s.master_address),
+        ("outstation_address", &s.outstation_address),
+    ] {
+        if *v.get_ref() > 65519 {
+            cx.err(
+                f,
+                v.span(),
+                format!("device '{name}': {field} must be 0 to 65519 (65520 and above are reserved and broadcast addresses)"),
+            );
+        }
+    }
+    if m == o {
+        cx.err(
+            f,
+            s.outstation_address.span(),
+            format!("device '{name}': outstation_address {o} is the master_address too"),
+        );
+    }
+    for (field, v) in [
+        ("integrity_period_s", &s.integrity_period_s),
+        ("event_poll_period_s", &s.event_poll_period_s),
+    ] {
+        let p = *v.get_ref();
+        if !(p.is_finite() && (p == 0.0 || (0.1..=604_800.0).contains(&p))) {
+            cx.err(
+                f,
+                v.span(),
+                format!("device '{name}': {field} must be 0 (off) or 0.1 to 604800 seconds"),
+            );
+        }
+    }
+    if !(100..=600_000).contains(s.response_timeout_ms.get_ref()) {
+        cx.err(
+            f,
+            s.response_timeout_ms.span(),
+            format!("device '{name}': response_timeout_ms must be 100 to 600000"),
+        );
+    }
+    let st = *s.select_timeout_s.get_ref();
+    if !(st.is_finite() && (0.1..=600.0).contains(&st)) {
+        cx.err(
+            f,
+            s.select_timeout_s.span(),
+            format!("device '{name}': select_timeout_s must be 0.1 to 600 seconds"),
+        );
     }
 }
 

@@ -40,7 +40,7 @@ use microgrid::check_microgrid;
 use mqtt_host::check_mqtt_host;
 use notify::check_notify;
 use opcua::check_opcua;
-use overlaps::{check_ioa_reuse, check_overlaps};
+use overlaps::{check_dnp3_index_reuse, check_ioa_reuse, check_overlaps};
 use panels::check_panel;
 use tags::{check_tag, check_tag_name};
 
@@ -120,6 +120,7 @@ pub(crate) fn check(
     }
     check_overlaps(&mut cx, tags);
     check_ioa_reuse(&mut cx, tags);
+    check_dnp3_index_reuse(&mut cx, tags);
     check_time_tags(&mut cx, devices, tags, &device_by_name, &tag_by_name);
 
     let lookup = |name: &str| tag_by_name.get(name).map(|(_, t)| *t);

@@ -1,5 +1,6 @@
 //! Across tags: two tags on the same register (or bit) of one Modbus
-//! device, or on the same information object address of one IEC 104 device.
+//! device, on the same information object address of one IEC 104 device,
+//! or on the same point or command index of one DNP3 device.
 
 use std::collections::BTreeMap;
 
@@ -103,6 +104,56 @@ pub(super) fn check_ioa_reuse(cx: &mut Ctx<'_>, tags: &[(usize, TagConfig)]) {
                 }
                 None => {
                     seen.insert(key, (*f, t, ioa));
+                }
+            }
+        }
+    }
+}
+
+/// Two tags on the same point (type and index) of one DNP3 device, or on
+/// the same command index of one device: which tag a value or a command's
+/// echo belongs to would not be clear.
+pub(super) fn check_dnp3_index_reuse(cx: &mut Ctx<'_>, tags: &[(usize, TagConfig)]) {
+    /// Device, commanded or monitored, point type or command label, index.
+    type Key<'a> = (&'a str, bool, &'static str, u16);
+    type First<'a> = (usize, &'a TagConfig, &'a serde_spanned::Spanned<u16>);
+    let mut seen: BTreeMap<Key<'_>, First<'_>> = BTreeMap::new();
+    for (f, t) in tags {
+        let Some(p) = &t.dnp3 else { continue };
+        let command = p.command.as_ref().map(|c| {
+            (
+                c.get_ref().label(),
+                p.command_index.as_ref().unwrap_or(&p.index),
+            )
+        });
+        for (what, index, is_command) in
+            std::iter::once((p.point.get_ref().label(), &p.index, false))
+                .chain(command.map(|(l, i)| (l, i, true)))
+        {
+            let key = (
+                t.device.get_ref().as_str(),
+                is_command,
+                what,
+                *index.get_ref(),
+            );
+            match seen.get(&key) {
+                Some((pf, prev, prev_at)) => {
+                    let first = cx.place(*pf, prev_at.span());
+                    cx.err(
+                        *f,
+                        index.span(),
+                        format!(
+                            "tag '{}': {} {what} index {} of device '{}' is used by tag '{}' too (at {first})",
+                            t.name.get_ref(),
+                            if is_command { "command" } else { "point" },
+                            index.get_ref(),
+                            t.device.get_ref(),
+                            prev.name.get_ref()
+                        ),
+                    );
+                }
+                None => {
+                    seen.insert(key, (*f, t, index));
                 }
             }
         }

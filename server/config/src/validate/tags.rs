@@ -27,12 +27,29 @@ pub(super) fn check_tag_name(cx: &mut Ctx<'_>, f: usize, name: &Spanned<String>)
 pub(super) fn check_tag(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, device: Option<&DeviceConfig>) {
     // Where the tag is read: a Modbus register or an IEC 104 point, as its
     // device's protocol asks. An unknown device is judged by what the tag has.
-    let iec104 = match device {
-        Some(d) => d.protocol == Protocol::Iec104,
-        None => t.iec104.is_some(),
+    let protocol = match device {
+        Some(d) => Some(d.protocol),
+        None if t.iec104.is_some() => Some(Protocol::Iec104),
+        None if t.dnp3.is_some() => Some(Protocol::Dnp3),
+        None => None,
     };
-    if iec104 {
+    if protocol != Some(Protocol::Dnp3) {
+        if let Some(p) = &t.dnp3 {
+            cx.err(
+                f,
+                p.point.span(),
+                format!(
+                    "tag '{}': dnp3 is for tags of protocol = \"dnp3\" devices, and device '{}' is not one",
+                    t.name.get_ref(),
+                    t.device.get_ref()
+                ),
+            );
+        }
+    }
+    if protocol == Some(Protocol::Iec104) {
         check_iec104_point(cx, f, t, device);
+    } else if protocol == Some(Protocol::Dnp3) {
+        check_dnp3_point(cx, f, t, device);
     } else {
         check_modbus_register(cx, f, t, device);
     }
@@ -261,6 +278,148 @@ fn check_iec104_point(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, device: Option<
             p.qualifier.span(),
             format!("tag '{name}': qualifier {qualifier} is outside 0..={max} for this command"),
         );
+    }
+}
+
+/// A DNP3 tag's point: the point type and the tag's type, the command of
+/// a writable tag and the keys that go with it.
+fn check_dnp3_point(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, device: Option<&DeviceConfig>) {
+    let name = t.name.get_ref();
+    let ty = t.data_type();
+    let device_name = t.device.get_ref();
+    for (field, span) in [
+        ("kind", t.kind.as_ref().map(|k| k.span())),
+        ("address", t.address.as_ref().map(|a| a.span())),
+        ("bit", t.bit.as_ref().map(|b| b.span())),
+        ("length", t.length.as_ref().map(|l| l.span())),
+    ] {
+        if let Some(span) = span {
+            cx.err(
+                f,
+                span,
+                format!("tag '{name}': {field} is a Modbus setting; device '{device_name}' speaks DNP3 (use dnp3 = {{ point = …, index = … }})"),
+            );
+        }
+    }
+    if let Some(p) = &t.iec104 {
+        cx.err(
+            f,
+            p.ioa.span(),
+            format!("tag '{name}': iec104 is for tags of protocol = \"iec104\" devices; device '{device_name}' speaks DNP3"),
+        );
+    }
+    let Some(p) = &t.dnp3 else {
+        if device.is_some() {
+            cx.err(
+                f,
+                t.name.span(),
+                format!("tag '{name}': a tag of DNP3 device '{device_name}' needs dnp3 = {{ point = \"binary_input\", index = … }}"),
+            );
+        }
+        return;
+    };
+    let point = *p.point.get_ref();
+    if !point.carries(ty) {
+        let at = t
+            .data_type
+            .as_ref()
+            .map(|d| d.span())
+            .unwrap_or(p.point.span());
+        cx.err(
+            f,
+            at,
+            format!(
+                "tag '{name}': a DNP3 {} point cannot carry a {} value (use type = \"{}\")",
+                point.label(),
+                ty.label(),
+                point.default_type().label()
+            ),
+        );
+    }
+    let writable = *t.writable.get_ref();
+    match &p.command {
+        Some(c) if !writable => cx.err(
+            f,
+            c.span(),
+            format!(
+                "tag '{name}': command {} is set on a read-only tag (set writable = true and write_role)",
+                c.get_ref().label()
+            ),
+        ),
+        Some(c) if !c.get_ref().carries(ty) => cx.err(
+            f,
+            c.span(),
+            format!(
+                "tag '{name}': command {} cannot carry a {} value{}",
+                c.get_ref().label(),
+                ty.label(),
+                if *c.get_ref() == Dnp3Command::Crob {
+                    " (a CROB commands a bool tag)"
+                } else {
+                    ""
+                }
+            ),
+        ),
+        None if writable => cx.err(
+            f,
+            t.writable.span(),
+            format!("tag '{name}': a writable DNP3 tag needs command (crob or analog_output)"),
+        ),
+        _ => {}
+    }
+    let command = p.command.as_ref().map(|c| *c.get_ref());
+    if command.is_none() {
+        if let Some(at) = p.command_index.as_ref().map(|c| c.span()) {
+            cx.err(
+                f,
+                at,
+                format!("tag '{name}': command_index is for a tag with a command"),
+            );
+        }
+        if p.select {
+            cx.err(
+                f,
+                p.point.span(),
+                format!("tag '{name}': select is for a tag with a command"),
+            );
+        }
+    }
+    if command != Some(Dnp3Command::Crob) {
+        for (field, span) in [
+            ("op", p.op.as_ref().map(|o| o.span())),
+            ("on_ms", p.on_ms.as_ref().map(|o| o.span())),
+            ("off_ms", p.off_ms.as_ref().map(|o| o.span())),
+        ] {
+            if let Some(span) = span {
+                cx.err(
+                    f,
+                    span,
+                    format!("tag '{name}': {field} belongs to a CROB (command = \"crob\")"),
+                );
+            }
+        }
+    } else {
+        let op = p.op();
+        let allowed: &[&str] = match op {
+            Dnp3Op::Latch => &[],
+            Dnp3Op::Pulse => &["on_ms", "off_ms"],
+            Dnp3Op::TripClose => &["on_ms"],
+        };
+        for (field, span) in [
+            ("on_ms", p.on_ms.as_ref().map(|o| o.span())),
+            ("off_ms", p.off_ms.as_ref().map(|o| o.span())),
+        ] {
+            if let (Some(span), false) = (span, allowed.contains(&field)) {
+                cx.err(
+                    f,
+                    span,
+                    format!(
+                        "tag '{name}': {field} does not apply to op = \"{}\"",
+                        op.label()
+                    ),
+                );
+            }
+        }
     }
 }
 

@@ -769,3 +769,71 @@ fn iec104_server_points_are_checked() {
     }
     assert_eq!(got.len(), want.len(), "{}", got.join("\n"));
 }
+
+const OUTSTATION: &str = r#"[[device]]
+name = "OS"
+protocol = "dnp3"
+address = "127.0.0.1:20000"
+"#;
+
+#[test]
+fn a_dnp3_plant_loads() {
+    let tags = format!(
+        "{OUTSTATION}\n[device.dnp3]\nmaster_address = 1\noutstation_address = 10\nevent_poll_period_s = 0\ntime_sync = \"none\"\n\n\
+         [[tag]]\nname = \"OS.Q1\"\ndevice = \"OS\"\ntype = \"bool\"\nwritable = true\nwrite_role = \"operator\"\n\
+         dnp3 = {{ point = \"double_bit\", index = 0, command = \"crob\", command_index = 3, select = true, op = \"trip_close\", on_ms = 500 }}\n\n\
+         [[tag]]\nname = \"OS.P\"\ndevice = \"OS\"\nunits = \"kW\"\ndnp3 = {{ point = \"analog_input\", index = 0 }}\n\n\
+         [[tag]]\nname = \"OS.SP\"\ndevice = \"OS\"\nwritable = true\nwrite_role = \"operator\"\nmin = 0.0\nmax = 100.0\n\
+         dnp3 = {{ point = \"analog_output\", index = 0, command = \"analog_output\" }}\n\n\
+         [[tag]]\nname = \"OS.E\"\ndevice = \"OS\"\ndnp3 = {{ point = \"counter\", index = 0 }}\n"
+    );
+    assert_eq!(problems(MAIN, &tags), Vec::<String>::new());
+}
+
+#[test]
+fn dnp3_points_are_checked_against_their_tag_and_device() {
+    let tags = format!(
+        "{OUTSTATION}\n[device.dnp3]\noutstation_address = 1\nresponse_timeout_ms = 10\n\n\
+         [[tag]]\nname = \"OS.A\"\ndevice = \"OS\"\ntype = \"f32\"\ndnp3 = {{ point = \"binary_input\", index = 5 }}\n\n\
+         [[tag]]\nname = \"OS.B\"\ndevice = \"OS\"\ndnp3 = {{ point = \"binary_input\", index = 5, command = \"crob\" }}\n\n\
+         [[tag]]\nname = \"OS.C\"\ndevice = \"OS\"\nkind = \"coil\"\naddress = 3\n\n\
+         [[tag]]\nname = \"OS.D\"\ndevice = \"OS\"\nwritable = true\nwrite_role = \"operator\"\n\
+         dnp3 = {{ point = \"analog_output\", index = 1, command = \"analog_output\", op = \"pulse\" }}\n\n\
+         [[tag]]\nname = \"OS.F\"\ndevice = \"OS\"\nwritable = true\nwrite_role = \"operator\"\n\
+         dnp3 = {{ point = \"binary_output\", index = 2, command = \"crob\", on_ms = 100 }}\n\n\
+         [[tag]]\nname = \"OS.G\"\ndevice = \"OS\"\ndnp3 = {{ point = \"counter\", index = 2, command_index = 4 }}\n\n\
+         {DEVICE}\n[[tag]]\nname = \"D.X\"\ndevice = \"D1\"\nkind = \"coil\"\naddress = 0\ndnp3 = {{ point = \"binary_input\", index = 9 }}\n"
+    );
+    assert_problems(
+        MAIN,
+        &tags,
+        &[
+            "DIR/tags.toml:7:22: error: device 'OS': outstation_address 1 is the master_address too",
+            "DIR/tags.toml:8:23: error: device 'OS': response_timeout_ms must be 100 to 600000",
+            "DIR/tags.toml:13:8: error: tag 'OS.A': a DNP3 binary_input point cannot carry a f32 value (use type = \"bool\")",
+            "DIR/tags.toml:19:42: error: tag 'OS.B': point binary_input index 5 of device 'OS' is used by tag 'OS.A' too (at DIR/tags.toml:14:42)",
+            "DIR/tags.toml:19:55: error: tag 'OS.B': command crob is set on a read-only tag (set writable = true and write_role)",
+            "DIR/tags.toml:22:8: error: tag 'OS.C': a tag of DNP3 device 'OS' needs dnp3 = { point = \"binary_input\", index = … }",
+            "DIR/tags.toml:24:8: error: tag 'OS.C': kind is a Modbus setting; device 'OS' speaks DNP3 (use dnp3 = { point = …, index = … })",
+            "DIR/tags.toml:25:11: error: tag 'OS.C': address is a Modbus setting; device 'OS' speaks DNP3 (use dnp3 = { point = …, index = … })",
+            "DIR/tags.toml:32:78: error: tag 'OS.D': op belongs to a CROB (command = \"crob\")",
+            "DIR/tags.toml:39:72: error: tag 'OS.F': on_ms does not apply to op = \"latch\"",
+            "DIR/tags.toml:44:56: error: tag 'OS.G': command_index is for a tag with a command",
+            "DIR/tags.toml:56:18: error: tag 'D.X': dnp3 is for tags of protocol = \"dnp3\" devices, and device 'D1' is not one",
+        ],
+    );
+}
+
+#[test]
+fn a_dnp3_key_that_does_not_belong_is_located() {
+    let tags = format!(
+        "{OUTSTATION}\n[[tag]]\nname = \"OS.E\"\ndevice = \"OS\"\ndnp3 = {{ point = \"counter\", index = 1, colour = \"red\" }}\n"
+    );
+    assert_problems(
+        MAIN,
+        &tags,
+        &[
+            "DIR/tags.toml:9:40: error: tag 'OS.E': unknown field `colour`, expected one of `point`, `index`, `command`, `command_index`, `select`, `op`, `on_ms`, `off_ms`",
+        ],
+    );
+}

@@ -5,4 +5,5 @@
 
 mod fuzz;
 mod master;
+mod outstation;
 mod peers;
