@@ -113,6 +113,8 @@ fi
 step "installing Python test peers"
 limit 900 "$venv/bin/pip" install -q --disable-pip-version-check -r tests/requirements.txt
 export PATH="$venv/bin:$PATH"
+# The DNP3 master's test runs dnp3py's outstation with this python.
+export GRIDSCADA_DNP3PY="$venv/bin/python"
 
 # --- 3. PostgreSQL for the store tests ------------------------------------
 step "PostgreSQL"
