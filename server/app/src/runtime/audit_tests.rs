@@ -168,18 +168,27 @@ async fn postgres_down_during_fault_isolation_and_an_alarm_flood_loses_nothing()
     tokio::spawn(server);
     // An administrator logged in over HTTP before the outage.
     let password = "a-long-enough-password";
-    store
-        .create_user(&gridscada_store::NewUser {
-            name: "admin".into(),
-            role: Role::Administrator,
-            password_hash: gridscada_web::auth::hash_password(password.into())
-                .await
-                .unwrap(),
-            group: "administrator".into(),
-            created_at: clock.now(),
-        })
-        .await
-        .unwrap();
+    let admin = gridscada_store::NewUser {
+        name: "admin".into(),
+        role: Role::Administrator,
+        password_hash: gridscada_web::auth::hash_password(password.into())
+            .await
+            .unwrap(),
+        group: "administrator".into(),
+        created_at: clock.now(),
+    };
+    // The pool's short acquire timeout (for the outage below) can run out
+    // while the stack's start writes through the same pool on a loaded
+    // machine; setting up is not what this test is about, so it waits.
+    let setting_up = tokio::time::Instant::now();
+    while let Err(e) = store.create_user(&admin).await {
+        let busy = e.to_string().contains("pool timed out");
+        assert!(
+            busy && setting_up.elapsed() < Duration::from_secs(60),
+            "creating the administrator: {e}"
+        );
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
     let jar = dir.path().join("cookies.txt");
     let jar = jar.to_str().unwrap();
     let origin = format!("Origin: http://{http}");

@@ -6,4 +6,5 @@
 mod fuzz;
 mod master;
 mod outstation;
+mod outstation_py1815;
 mod peers;

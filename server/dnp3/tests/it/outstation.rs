@@ -56,15 +56,19 @@ asyncio.run(main(int(sys.argv[1])))
 "#;
 
 fn plant(port: u16) -> Plant {
-    let main = "tag_files = [\"tags.toml\"]\n".to_string();
-    let tags = format!(
+    plant_of(format!(
         "[[device]]\nname = \"OS\"\nprotocol = \"dnp3\"\naddress = \"127.0.0.1:{port}\"\n\n\
          [device.dnp3]\nevent_poll_period_s = 1\nresponse_timeout_ms = 2000\n\n\
          [[tag]]\nname = \"OS.B1\"\ndevice = \"OS\"\ndnp3 = {{ point = \"binary_input\", index = 1 }}\n\n\
          [[tag]]\nname = \"OS.P\"\ndevice = \"OS\"\nunits = \"kW\"\ndnp3 = {{ point = \"analog_input\", index = 0 }}\n\n\
          [[tag]]\nname = \"OS.Q\"\ndevice = \"OS\"\ntype = \"bool\"\nwritable = true\nwrite_role = \"operator\"\n\
          dnp3 = {{ point = \"binary_output\", index = 0, command = \"crob\", select = true }}\n"
-    );
+    ))
+}
+
+/// A plant of one tag file, `tags`.
+pub(crate) fn plant_of(tags: String) -> Plant {
+    let main = "tag_files = [\"tags.toml\"]\n".to_string();
     let read = move |p: &Path| -> std::io::Result<String> {
         if p.ends_with("tags.toml") {
             Ok(tags.clone())
@@ -78,7 +82,7 @@ fn plant(port: u16) -> Plant {
     }
 }
 
-fn tagdb(plant: &Plant) -> Arc<TagDb> {
+pub(crate) fn tagdb(plant: &Plant) -> Arc<TagDb> {
     let mut metas: Vec<TagMeta> = plant
         .tags
         .iter()
@@ -90,7 +94,7 @@ fn tagdb(plant: &Plant) -> Arc<TagDb> {
     Arc::new(TagDb::new(metas).expect("tag db"))
 }
 
-async fn eventually(what: &str, within: Duration, mut f: impl FnMut() -> bool) {
+pub(crate) async fn eventually(what: &str, within: Duration, mut f: impl FnMut() -> bool) {
     let start = tokio::time::Instant::now();
     while !f() {
         if start.elapsed() > within {
