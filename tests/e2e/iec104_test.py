@@ -382,7 +382,12 @@ HOSTILE_FROM = [None]  # when the hostile station began: its frames are meant to
 def control_centre(api, rtu, centre_port):
     """gridscada's [iec104_server] polled and commanded by a lib60870 client."""
     cl = c104.Client(tick_rate_ms=50, command_timeout_ms=10000)
-    conn = cl.add_connection(ip="127.0.0.1", port=centre_port, init=c104.Init.ALL)
+    # Started step by step below (STARTDT, then the interrogations and the
+    # clock sync), not by c104's Init.ALL: in one run (2026-11-29) that
+    # automatic start sent no STARTDT for 30 s and then an I-frame, which
+    # gridscada refuses and closes, as the standard asks of a controlled
+    # station.
+    conn = cl.add_connection(ip="127.0.0.1", port=centre_port, init=c104.Init.MUTED)
     st = conn.add_station(common_address=9)
     q1 = st.add_point(io_address=5001, type=c104.Type.M_DP_TB_1)
     volts = st.add_point(io_address=5002, type=c104.Type.M_ME_TF_1)
@@ -393,6 +398,14 @@ def control_centre(api, rtu, centre_port):
     sp_cmd = st.add_point(io_address=6003, type=c104.Type.C_SE_NC_1)
     cl.start()
     try:
+        connected = wait_for(lambda: conn.is_connected, 20)
+        started = connected and conn.unmute() and wait_for(lambda: conn.state == c104.ConnectionState.OPEN, 10)
+        gi = bool(started) and conn.interrogation(common_address=9)
+        ci = bool(started) and conn.counter_interrogation(common_address=9)
+        cs = bool(started) and conn.clock_sync(common_address=9)
+        check(bool(started) and gi and ci and cs,
+              "control centre: STARTDT, general and counter interrogation and clock sync confirmed",
+              f"connected={connected} state={conn.state} gi={gi} ci={ci} clock={cs}")
         ok = wait_for(lambda: conn.is_connected and volts.value is not None and abs(volts.value - 231.5) < 1e-3, 20)
         check(bool(ok), "control centre: connected, interrogated, the voltage is 231.5",
               f"connected={conn.is_connected} volts={volts.value}")
