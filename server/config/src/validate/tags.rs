@@ -2,6 +2,8 @@
 //! device, scaling, write access and limits, states and history logging
 //! (its alarms are in `alarms.rs`).
 
+use std::ops::Range;
+
 use gridscada_tagdb::ValueKind;
 use serde_spanned::Spanned;
 
@@ -216,49 +218,24 @@ fn check_iec104_point(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, device: Option<
         }
     }
     let point = *p.point.get_ref();
-    if !point.carries(ty) {
-        let at = t
-            .data_type
-            .as_ref()
-            .map(|d| d.span())
-            .unwrap_or(p.point.span());
-        cx.err(
-            f,
-            at,
-            format!(
-                "tag '{name}': a {} point cannot carry a {} value (use type = \"{}\")",
-                point.label(),
-                ty.label(),
-                point.default_type().label()
-            ),
-        );
-    }
-    let writable = *t.writable.get_ref();
-    match &p.command {
-        Some(c) if !writable => cx.err(
-            f,
-            c.span(),
-            format!(
-                "tag '{name}': command {} is set on a read-only tag (set writable = true and write_role)",
-                c.get_ref().label()
-            ),
-        ),
-        Some(c) if !c.get_ref().carries(ty) => cx.err(
-            f,
-            c.span(),
-            format!(
-                "tag '{name}': command {} cannot carry a {} value",
-                c.get_ref().label(),
-                ty.label()
-            ),
-        ),
-        None if writable => cx.err(
-            f,
-            t.writable.span(),
-            format!("tag '{name}': a writable IEC 104 tag needs command (C_SC, C_DC, C_RC, C_SE_NA, C_SE_NB, C_SE_NC or C_BO)"),
-        ),
-        _ => {}
-    }
+    check_point_and_command(
+        cx,
+        f,
+        t,
+        PointAndCommand {
+            point: format!("a {} point", point.label()),
+            point_carries: point.carries(ty),
+            point_span: p.point.span(),
+            default_type: point.default_type(),
+            command: p.command.as_ref().map(|c| CommandOfTag {
+                label: c.get_ref().label(),
+                carries: c.get_ref().carries(ty),
+                span: c.span(),
+                hint: "",
+            }),
+            command_needed: "a writable IEC 104 tag needs command (C_SC, C_DC, C_RC, C_SE_NA, C_SE_NB, C_SE_NC or C_BO)",
+        },
+    );
     if p.command.is_none() && (p.select || p.command_ioa.is_some()) {
         cx.err(
             f,
@@ -319,54 +296,28 @@ fn check_dnp3_point(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, device: Option<&D
         return;
     };
     let point = *p.point.get_ref();
-    if !point.carries(ty) {
-        let at = t
-            .data_type
-            .as_ref()
-            .map(|d| d.span())
-            .unwrap_or(p.point.span());
-        cx.err(
-            f,
-            at,
-            format!(
-                "tag '{name}': a DNP3 {} point cannot carry a {} value (use type = \"{}\")",
-                point.label(),
-                ty.label(),
-                point.default_type().label()
-            ),
-        );
-    }
-    let writable = *t.writable.get_ref();
-    match &p.command {
-        Some(c) if !writable => cx.err(
-            f,
-            c.span(),
-            format!(
-                "tag '{name}': command {} is set on a read-only tag (set writable = true and write_role)",
-                c.get_ref().label()
-            ),
-        ),
-        Some(c) if !c.get_ref().carries(ty) => cx.err(
-            f,
-            c.span(),
-            format!(
-                "tag '{name}': command {} cannot carry a {} value{}",
-                c.get_ref().label(),
-                ty.label(),
-                if *c.get_ref() == Dnp3Command::Crob {
+    check_point_and_command(
+        cx,
+        f,
+        t,
+        PointAndCommand {
+            point: format!("a DNP3 {} point", point.label()),
+            point_carries: point.carries(ty),
+            point_span: p.point.span(),
+            default_type: point.default_type(),
+            command: p.command.as_ref().map(|c| CommandOfTag {
+                label: c.get_ref().label(),
+                carries: c.get_ref().carries(ty),
+                span: c.span(),
+                hint: if *c.get_ref() == Dnp3Command::Crob {
                     " (a CROB commands a bool tag)"
                 } else {
                     ""
-                }
-            ),
-        ),
-        None if writable => cx.err(
-            f,
-            t.writable.span(),
-            format!("tag '{name}': a writable DNP3 tag needs command (crob or analog_output)"),
-        ),
-        _ => {}
-    }
+                },
+            }),
+            command_needed: "a writable DNP3 tag needs command (crob or analog_output)",
+        },
+    );
     let command = p.command.as_ref().map(|c| *c.get_ref());
     if command.is_none() {
         if let Some(at) = p.command_index.as_ref().map(|c| c.span()) {
@@ -420,6 +371,78 @@ fn check_dnp3_point(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, device: Option<&D
                 );
             }
         }
+    }
+}
+
+/// A telecontrol tag's point and command, as the checks that IEC 104 and
+/// DNP3 tags share see them.
+struct PointAndCommand {
+    /// "a M_ME_NC_1 point", "a DNP3 analog_input point".
+    point: String,
+    point_carries: bool,
+    point_span: Range<usize>,
+    default_type: DataType,
+    command: Option<CommandOfTag>,
+    /// The error of a writable tag without a command.
+    command_needed: &'static str,
+}
+
+struct CommandOfTag {
+    label: &'static str,
+    carries: bool,
+    span: Range<usize>,
+    /// Said after "cannot carry a … value".
+    hint: &'static str,
+}
+
+/// The point carries the tag's type; a command only on a writable tag, and
+/// one that carries its type; a writable tag has a command.
+fn check_point_and_command(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, p: PointAndCommand) {
+    let name = t.name.get_ref();
+    let ty = t.data_type();
+    if !p.point_carries {
+        let at = t
+            .data_type
+            .as_ref()
+            .map(|d| d.span())
+            .unwrap_or(p.point_span);
+        cx.err(
+            f,
+            at,
+            format!(
+                "tag '{name}': {} cannot carry a {} value (use type = \"{}\")",
+                p.point,
+                ty.label(),
+                p.default_type.label()
+            ),
+        );
+    }
+    let writable = *t.writable.get_ref();
+    match p.command {
+        Some(c) if !writable => cx.err(
+            f,
+            c.span,
+            format!(
+                "tag '{name}': command {} is set on a read-only tag (set writable = true and write_role)",
+                c.label
+            ),
+        ),
+        Some(c) if !c.carries => cx.err(
+            f,
+            c.span,
+            format!(
+                "tag '{name}': command {} cannot carry a {} value{}",
+                c.label,
+                ty.label(),
+                c.hint
+            ),
+        ),
+        None if writable => cx.err(
+            f,
+            t.writable.span(),
+            format!("tag '{name}': {}", p.command_needed),
+        ),
+        _ => {}
     }
 }
 
