@@ -665,7 +665,14 @@ impl Master {
                         let selected_at = f.sent_at;
                         self.start(Task::Command(c), Step::Operate { selected_at }, now, out);
                     }
-                    Ok(false) => out.push(outcome(c.id, Ok(()))),
+                    Ok(false) => {
+                        out.push(outcome(c.id, Ok(())));
+                        // The returned status confirms the command: fetch
+                        // its event now rather than at the next poll.
+                        if !self.unsolicited_enabled {
+                            self.enqueue(Task::EventPoll);
+                        }
+                    }
                     Err(e) => out.push(outcome(c.id, Err(e))),
                 }
             }

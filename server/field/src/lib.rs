@@ -4,7 +4,8 @@
 //! with the rest of the server: the names of a device's communication status
 //! tags, the device and link figures ([`PollStats`]) that the devices screen
 //! and `/metrics` show, the engineering write limits every write is checked
-//! against ([`check_limits`]), and the writer that sends each tag's write to
+//! against ([`check_limits`]), the returned status point that confirms a
+//! telecontrol command ([`ReturnedStatus`]), and the writer that sends each tag's write to
 //! the protocol its device speaks ([`Router`]).
 //!
 //! **Must not touch:** any protocol's framing or connections (each protocol
@@ -12,6 +13,7 @@
 //! [`gridscada_tagdb::TagWriter`] and [`StatsSource`]; `app` puts them
 //! together here.
 
+mod feedback;
 mod round_trip;
 
 use std::collections::HashMap;
@@ -22,6 +24,7 @@ use gridscada_tagdb::{
     TagDb, TagId, TagMeta, TagWriter, Value, ValueKind, WriteError, WriteFuture,
 };
 
+pub use feedback::{within_resolution, ReturnedStatus};
 pub use round_trip::{RoundTripHistogram, RoundTrips, ROUND_TRIP_BOUNDS};
 
 /// Names of a device's communication status tags.

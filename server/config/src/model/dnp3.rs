@@ -42,6 +42,10 @@ pub struct Dnp3DeviceConfig {
     /// time, then write it) or `none`.
     #[serde(default)]
     pub time_sync: Dnp3TimeSync,
+    /// How long a command's returned status point may take to show the
+    /// commanded value after the outstation's SUCCESS, seconds.
+    #[serde(default = "default_command_timeout")]
+    pub command_timeout_s: Spanned<f64>,
 }
 
 impl Default for Dnp3DeviceConfig {
@@ -55,6 +59,7 @@ impl Default for Dnp3DeviceConfig {
             response_timeout_ms: default_response_timeout(),
             select_timeout_s: default_select_timeout(),
             time_sync: Dnp3TimeSync::Lan,
+            command_timeout_s: default_command_timeout(),
         }
     }
 }
@@ -78,6 +83,9 @@ fn default_response_timeout() -> Spanned<u64> {
     Spanned::new(0..0, 5000)
 }
 fn default_select_timeout() -> Spanned<f64> {
+    Spanned::new(0..0, 10.0)
+}
+fn default_command_timeout() -> Spanned<f64> {
     Spanned::new(0..0, 10.0)
 }
 

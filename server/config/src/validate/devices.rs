@@ -233,13 +233,18 @@ fn check_dnp3_session(cx: &mut Ctx<'_>, f: usize, name: &str, s: &Dnp3DeviceConf
             format!("device '{name}': response_timeout_ms must be 100 to 600000"),
         );
     }
-    let st = *s.select_timeout_s.get_ref();
-    if !(st.is_finite() && (0.1..=600.0).contains(&st)) {
-        cx.err(
-            f,
-            s.select_timeout_s.span(),
-            format!("device '{name}': select_timeout_s must be 0.1 to 600 seconds"),
-        );
+    for (field, v, lo) in [
+        ("select_timeout_s", &s.select_timeout_s, 0.1),
+        ("command_timeout_s", &s.command_timeout_s, 1.0),
+    ] {
+        let t = *v.get_ref();
+        if !(t.is_finite() && (lo..=600.0).contains(&t)) {
+            cx.err(
+                f,
+                v.span(),
+                format!("device '{name}': {field} must be {lo} to 600 seconds"),
+            );
+        }
     }
 }
 

@@ -17,11 +17,14 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use gridscada_config::{
-    DataType, Dnp3Command, Dnp3DeviceConfig, Dnp3Op, Dnp3TimeSync, Plant, Protocol,
+    DataType, Dnp3Command, Dnp3DeviceConfig, Dnp3Op, Dnp3Point, Dnp3TimeSync, Plant, Protocol,
 };
-use gridscada_field::{check_limits, DeviceStats, LinkStats, PollStats, RoundTrips, StatsSource};
+use gridscada_field::{
+    check_limits, within_resolution, DeviceStats, LinkStats, PollStats, ReturnedStatus, RoundTrips,
+    StatsSource,
+};
 use gridscada_tagdb::{
-    Clock, Leadership, Sample, TagDb, TagWriter, Value, WriteError, WriteFuture,
+    Clock, Leadership, Sample, TagDb, TagId, TagWriter, Value, WriteError, WriteFuture,
 };
 use parking_lot::Mutex;
 use tokio::sync::{mpsc, oneshot, watch};
@@ -65,6 +68,8 @@ pub(crate) struct Counters {
 #[derive(Debug, Clone)]
 pub(crate) struct CommandSpec {
     pub command: Dnp3Command,
+    /// The tag's own point, which returns the commanded state.
+    pub point: Dnp3Point,
     pub index: u16,
     pub select: bool,
     pub op: Dnp3Op,
@@ -82,6 +87,29 @@ impl CommandSpec {
         } else {
             CommandMode::DirectOperate
         }
+    }
+
+    /// Whether the outstation's SUCCESS is to be followed by the tag's own
+    /// point showing the commanded value. Not for a pulse on a binary
+    /// output's own status, which is over before it is read back.
+    pub fn awaits_returned_status(&self) -> bool {
+        !(self.command == Dnp3Command::Crob
+            && self.op == Dnp3Op::Pulse
+            && self.point == Dnp3Point::BinaryOutput)
+    }
+
+    /// Whether the returned point's value `got` shows the command took:
+    /// the written state, or the written set point within what the output
+    /// object carries (one raw step for integer outputs).
+    pub fn confirms(&self, written: &Value, got: &Value) -> bool {
+        let resolution = match (self.command, self.data_type) {
+            (Dnp3Command::Crob, _) => 0.0,
+            (Dnp3Command::AnalogOutput, DataType::F32 | DataType::F64) => written
+                .as_f64()
+                .map_or(1e-9, |w| (w.abs() * 1e-6).max(1e-9)),
+            (Dnp3Command::AnalogOutput, _) => self.scale.abs(),
+        };
+        within_resolution(written, got, resolution)
     }
 
     /// The command object that sets the tag to `value`.
@@ -141,8 +169,12 @@ pub(crate) struct CommandRequest {
 
 struct Target {
     outstation: usize,
+    /// The outstation's device name, for the failed write.
+    device: String,
+    id: TagId,
     spec: CommandSpec,
     limits: (Option<f64>, Option<f64>),
+    command_timeout: Duration,
 }
 
 struct Shared {
@@ -211,8 +243,11 @@ impl Dnp3Io {
                         Arc::<str>::from(tname.as_str()),
                         Target {
                             outstation: index,
+                            device: name.clone(),
+                            id,
                             spec: CommandSpec {
                                 command: *c.get_ref(),
+                                point: *p.point.get_ref(),
                                 index: p.command_index(),
                                 select: p.select,
                                 op: p.op(),
@@ -223,6 +258,9 @@ impl Dnp3Io {
                                 offset: t.offset,
                             },
                             limits: plant.write_limits(tname),
+                            command_timeout: Duration::from_secs_f64(
+                                session.command_timeout_s.get_ref().max(0.001),
+                            ),
                         },
                     );
                 }
@@ -380,6 +418,7 @@ impl TagWriter for Dnp3Writer {
                     value: value.to_string(),
                     reason,
                 })?;
+            let returned = ReturnedStatus::watch(&shared.db, target.id);
             let (reply, rx) = oneshot::channel();
             shared.outstations[target.outstation]
                 .send(CommandRequest {
@@ -391,9 +430,21 @@ impl TagWriter for Dnp3Writer {
                 })
                 .await
                 .map_err(|_| WriteError::Closed)?;
-            // The outstation echoed the command with status SUCCESS.
+            // The outstation echoed the command with status SUCCESS; its
+            // point must now show the commanded value.
             rx.await.map_err(|_| WriteError::Closed)??;
-            Ok(Sample::good(value, shared.clock.now()))
+            if !target.spec.awaits_returned_status() {
+                return Ok(Sample::good(value, shared.clock.now()));
+            }
+            returned
+                .confirmed(
+                    target.command_timeout,
+                    name,
+                    &target.device,
+                    &value,
+                    |got| target.spec.confirms(&value, got),
+                )
+                .await
         })
     }
 }
@@ -405,6 +456,7 @@ mod tests {
     fn spec(command: Dnp3Command, op: Dnp3Op, data_type: DataType, scale: f64) -> CommandSpec {
         CommandSpec {
             command,
+            point: Dnp3Point::BinaryOutput,
             index: 0,
             select: true,
             op,

@@ -386,6 +386,42 @@ fn select_before_operate() {
 }
 
 #[test]
+fn without_unsolicited_an_operated_control_fetches_its_returned_status() {
+    let mut o = Outstation::connect(MasterConfig {
+        enable_unsolicited: false,
+        ..no_periodic()
+    });
+    let (f, s, _) = o.request();
+    assert_eq!(f, FunctionCode::DisableUnsolicited);
+    o.respond(s, false, Iin::default(), "");
+    let (f, s, _) = o.request();
+    assert_eq!(f, FunctionCode::Read, "integrity poll");
+    o.respond(s, false, Iin::default(), "");
+    o.nothing_sent();
+    let crob = Crob::latch(true);
+    let a = o.master.command(
+        Command {
+            id: 9,
+            index: 0,
+            object: CommandObject::Crob(crob),
+            mode: CommandMode::DirectOperate,
+        },
+        o.clock,
+    );
+    o.actions.extend(a);
+    let (f, s, _) = o.request();
+    assert_eq!(f, FunctionCode::DirectOperate);
+    o.respond(s, false, Iin::default(), &crob_echo(0, crob, 0));
+    assert_eq!(o.outcomes(), vec![(9, Ok(()))]);
+    // The output's status event is read now, not at the next poll.
+    let (f, s, apdu) = o.request();
+    assert_eq!((f, apdu.len()), (FunctionCode::Read, 11), "event poll");
+    o.respond(s, false, Iin::default(), "0B 01 17 01 00 81");
+    assert_eq!(o.values(), vec![(0, Value::Binary(true))]);
+    o.nothing_sent();
+}
+
+#[test]
 fn select_with_a_bad_echo_or_status_fails() {
     let mut o = Outstation::connect(no_periodic());
     o.startup();

@@ -23,14 +23,24 @@ def say(*a):
     print(*a, flush=True)
 
 class AcceptAll:
+    # Output 0 switches a breaker whose position is binary input 2: it
+    # follows the command (LATCH_ON, PULSE_ON and CLOSE close it), which is
+    # what confirms the command. (Not the output's own status: dnp3py sends
+    # output status events as g2, binary input events.)
+    def __init__(self):
+        self.db = None
+    def follow(self, index, code):
+        self.db.update_binary_input(2, value=int(code) in (1, 3, 0x41))
     def select_binary_output(self, index, code, count, on_time, off_time, *a, **k):
         say("SELECT", index, int(code))
         return CommandResult.success()
     def operate_binary_output(self, index, code, count, on_time, off_time, *a, **k):
         say("OPERATE", index, int(code))
+        self.follow(index, code)
         return CommandResult.success()
     def direct_operate_binary_output(self, index, code, count, on_time, off_time, *a, **k):
         say("DIRECT", index, int(code))
+        self.follow(index, code)
         return CommandResult.success()
     def select_analog_output(self, index, value, *a, **k):
         return CommandResult.success()
@@ -47,8 +57,10 @@ async def main(port):
     db.add_binary_output(0)
     db.update_binary_input(1, value=True)
     db.update_analog_input(0, value=42)
+    handler = AcceptAll()
+    handler.db = db
     o = Outstation(database=db, config=OutstationConfig(address=1024, master_address=1),
-                   handler=AcceptAll())
+                   handler=handler)
     say("LISTENING")
     await OutstationTcpRunner(outstation=o, host="127.0.0.1", port=port).run()
 
@@ -62,7 +74,7 @@ fn plant(port: u16) -> Plant {
          [[tag]]\nname = \"OS.B1\"\ndevice = \"OS\"\ndnp3 = {{ point = \"binary_input\", index = 1 }}\n\n\
          [[tag]]\nname = \"OS.P\"\ndevice = \"OS\"\nunits = \"kW\"\ndnp3 = {{ point = \"analog_input\", index = 0 }}\n\n\
          [[tag]]\nname = \"OS.Q\"\ndevice = \"OS\"\ntype = \"bool\"\nwritable = true\nwrite_role = \"operator\"\n\
-         dnp3 = {{ point = \"binary_output\", index = 0, command = \"crob\", select = true }}\n"
+         dnp3 = {{ point = \"binary_input\", index = 2, command = \"crob\", command_index = 0, select = true }}\n"
     ))
 }
 
@@ -155,8 +167,10 @@ async fn dnp3py_outstation_values_and_a_crob_with_select_before_operate() {
     );
 
     let writer = io.writer();
+    // Confirmed by the SUCCESS echoes and then by the output's status.
     let written = writer.write("OS.Q", Value::Bool(true)).await;
     assert!(written.is_ok(), "{written:?}");
+    assert_eq!(good("OS.Q").map(|s| s.value), Some(Value::Bool(true)));
     // A read-only tag is refused before anything goes out.
     assert!(writer.write("OS.P", Value::Float(1.0)).await.is_err());
 

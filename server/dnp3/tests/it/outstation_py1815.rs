@@ -32,20 +32,26 @@ def say(*a):
     print(*a, flush=True)
 
 class Points:
-    # Class 0: two binary inputs (both off) and 300 analog inputs (1000 + index),
+    # Class 0: two binary inputs (off at first; input 0 is the position of
+    # the breaker that output 0 closes) and 300 analog inputs (1000 + index),
     # in blocks of 50, so the integrity response needs several fragments.
+    def __init__(self):
+        self.breaker_closed = False
     def read(self, headers):
         return b"".join(self.read_blocks(headers))
     def read_blocks(self, headers):
         if not any(h.group == 60 and h.variation == 1 for h in headers):
             return []
-        blocks = [binary_range(0, [BinaryPoint(False), BinaryPoint(False)])]
+        blocks = [binary_range(0, [BinaryPoint(self.breaker_closed), BinaryPoint(False)])]
         for start in range(0, 300, 50):
             blocks.append(analog_range(start, [AnalogPoint(1000 + i) for i in range(start, start + 50)]))
         return blocks
 
 class Controls:
-    # Output 0 may be operated; output 1 is refused (not authorized).
+    # Output 0 may be operated: the breaker closes and input 0 reports it
+    # (an event, sent unsolicited). Output 1 is refused (not authorized).
+    def __init__(self, points, events):
+        self.points, self.events, self.server = points, events, None
     def answer(self, controls):
         return [CommandStatus.SUCCESS if c.index == 0 else CommandStatus.NOT_AUTHORIZED for c in controls]
     def select(self, controls):
@@ -53,14 +59,21 @@ class Controls:
         return self.answer(controls)
     def operate(self, controls):
         say("OPERATE", *[c.index for c in controls])
+        if any(c.index == 0 for c in controls):
+            self.points.breaker_closed = True
+            self.events.record_binary(0, BinaryPoint(True), event_class=EventClass.CLASS_1)
+            self.server.notify()
         return self.answer(controls)
 
 async def main(port):
     events = EventBuffers()
-    session = Session(Points(), control_provider=Controls(), events=events,
+    points = Points()
+    controls = Controls(points, events)
+    session = Session(points, control_provider=controls, events=events,
                       outstation_address=1024, master_address=1, max_response=600,
                       need_time=True, time_sink=lambda ms: say("TIME", ms), unsolicited=True)
     server = OutstationServer(session, bind=f"127.0.0.1:{port}")
+    controls.server = server
     await server.start()
     say("LISTENING")
     loop = asyncio.get_running_loop()
@@ -149,7 +162,7 @@ async fn py1815_unsolicited_events_with_their_time_fragments_time_sync_and_a_ref
          [[tag]]\nname = \"OS.B1\"\ndevice = \"OS\"\ndnp3 = {{ point = \"binary_input\", index = 1 }}\n\n\
          [[tag]]\nname = \"OS.A299\"\ndevice = \"OS\"\ndnp3 = {{ point = \"analog_input\", index = 299 }}\n\n\
          [[tag]]\nname = \"OS.Q0\"\ndevice = \"OS\"\ntype = \"bool\"\nwritable = true\nwrite_role = \"operator\"\n\
-         dnp3 = {{ point = \"binary_output\", index = 0, command = \"crob\", select = true }}\n\n\
+         dnp3 = {{ point = \"binary_input\", index = 0, command = \"crob\", command_index = 0, select = true }}\n\n\
          [[tag]]\nname = \"OS.Q1\"\ndevice = \"OS\"\ntype = \"bool\"\nwritable = true\nwrite_role = \"operator\"\n\
          dnp3 = {{ point = \"binary_output\", index = 1, command = \"crob\", select = true }}\n"
     ));
@@ -210,6 +223,11 @@ async fn py1815_unsolicited_events_with_their_time_fragments_time_sync_and_a_ref
     let writer = io.writer();
     let operated = writer.write("OS.Q0", Value::Bool(true)).await;
     assert!(operated.is_ok(), "{operated:?}");
+    assert_eq!(
+        good("OS.Q0").map(|s| s.value),
+        Some(Value::Bool(true)),
+        "the breaker's position confirmed the close"
+    );
     let refused = writer.write("OS.Q1", Value::Bool(true)).await;
     let reason = format!(
         "{:?}",

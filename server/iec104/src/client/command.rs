@@ -6,6 +6,7 @@
 use std::time::Instant;
 
 use gridscada_config::{DataType, Iec104Command};
+use gridscada_field::within_resolution;
 use gridscada_tagdb::Value;
 
 use crate::{normalized_from_f64, Asdu, Cause, Element, TypeId};
@@ -128,23 +129,19 @@ impl CommandSpec {
     pub fn confirms(&self, written: &Value, got: &Value) -> bool {
         match self.command {
             Iec104Command::C_SC | Iec104Command::C_DC | Iec104Command::C_BO => {
-                match (written.as_f64(), got.as_f64()) {
-                    (Some(w), Some(g)) => w == g,
-                    _ => false,
-                }
+                within_resolution(written, got, 0.0)
             }
             // A step command moves the position by one: ACT_TERM confirms it.
             Iec104Command::C_RC => true,
             Iec104Command::C_SE_NA | Iec104Command::C_SE_NB | Iec104Command::C_SE_NC => {
-                let (Some(w), Some(g)) = (written.as_f64(), got.as_f64()) else {
-                    return false;
-                };
                 let resolution = match self.command {
                     Iec104Command::C_SE_NA => self.scale.abs() / 32768.0,
                     Iec104Command::C_SE_NB => self.scale.abs(),
-                    _ => (w.abs() * 1e-6).max(1e-9),
+                    _ => written
+                        .as_f64()
+                        .map_or(1e-9, |w| (w.abs() * 1e-6).max(1e-9)),
                 };
-                (w - g).abs() <= resolution
+                within_resolution(written, got, resolution)
             }
         }
     }

@@ -17,10 +17,10 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use gridscada_config::{Iec104DeviceConfig, Plant, Protocol};
-use gridscada_field::{check_limits, DeviceStats, LinkStats, PollStats, RoundTrips, StatsSource};
-use gridscada_tagdb::{
-    Clock, Leadership, Sample, TagDb, TagId, TagWriter, Value, WriteError, WriteFuture,
+use gridscada_field::{
+    check_limits, DeviceStats, LinkStats, PollStats, ReturnedStatus, RoundTrips, StatsSource,
 };
+use gridscada_tagdb::{Clock, Leadership, TagDb, TagId, TagWriter, Value, WriteError, WriteFuture};
 use parking_lot::Mutex;
 use tokio::sync::{mpsc, oneshot, watch};
 use tokio::task::JoinHandle;
@@ -322,9 +322,7 @@ impl TagWriter for Iec104Writer {
                     value: value.to_string(),
                     reason,
                 })?;
-            // Watch the tag before the command goes out, so a spontaneous
-            // return that beats the ACT_TERM is not missed.
-            let mut feedback = shared.db.subscribe(&[target.id]);
+            let returned = ReturnedStatus::watch(&shared.db, target.id);
             let (reply, rx) = oneshot::channel();
             shared.stations[target.station]
                 .send(CommandRequest {
@@ -336,37 +334,15 @@ impl TagWriter for Iec104Writer {
                 .await
                 .map_err(|_| WriteError::Closed)?;
             rx.await.map_err(|_| WriteError::Closed)??;
-            // The station completed the command; its returned status point
-            // (the tag's own monitored point) must now show the value.
-            let deadline = tokio::time::Instant::now() + target.command_timeout;
-            loop {
-                if let Some(s) = shared.db.get(target.id) {
-                    if s.quality.is_good() && target.spec.confirms(&value, &s.value) {
-                        return Ok(s);
-                    }
-                }
-                // A moving breaker reports intermediate first: wait on.
-                match tokio::time::timeout_at(deadline, feedback.recv()).await {
-                    Ok(Some(_)) => continue,
-                    Ok(None) => return Err(WriteError::Closed),
-                    Err(_) => {
-                        let now: Option<Sample> = shared.db.get(target.id);
-                        return Err(WriteError::Mismatch {
-                            tag: name.to_string(),
-                            written: value.to_string(),
-                            read_back: now.map_or("nothing".to_string(), |s| {
-                                format!(
-                                    "{} ({}), {:.0} s after station {} completed the command",
-                                    s.value,
-                                    s.quality,
-                                    target.command_timeout.as_secs_f64(),
-                                    target.device
-                                )
-                            }),
-                        });
-                    }
-                }
-            }
+            returned
+                .confirmed(
+                    target.command_timeout,
+                    name,
+                    &target.device,
+                    &value,
+                    |got| target.spec.confirms(&value, got),
+                )
+                .await
         })
     }
 }
