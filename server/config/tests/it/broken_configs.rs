@@ -793,7 +793,7 @@ fn a_dnp3_plant_loads() {
 #[test]
 fn dnp3_points_are_checked_against_their_tag_and_device() {
     let tags = format!(
-        "{OUTSTATION}\n[device.dnp3]\noutstation_address = 1\nresponse_timeout_ms = 10\n\n\
+        "{OUTSTATION}\n[device.dnp3]\noutstation_address = 1\nresponse_timeout_ms = 10\ncommand_timeout_s = 0.5\n\n\
          [[tag]]\nname = \"OS.A\"\ndevice = \"OS\"\ntype = \"f32\"\ndnp3 = {{ point = \"binary_input\", index = 5 }}\n\n\
          [[tag]]\nname = \"OS.B\"\ndevice = \"OS\"\ndnp3 = {{ point = \"binary_input\", index = 5, command = \"crob\" }}\n\n\
          [[tag]]\nname = \"OS.C\"\ndevice = \"OS\"\nkind = \"coil\"\naddress = 3\n\n\
@@ -810,16 +810,17 @@ fn dnp3_points_are_checked_against_their_tag_and_device() {
         &[
             "DIR/tags.toml:7:22: error: device 'OS': outstation_address 1 is the master_address too",
             "DIR/tags.toml:8:23: error: device 'OS': response_timeout_ms must be 100 to 600000",
-            "DIR/tags.toml:13:8: error: tag 'OS.A': a DNP3 binary_input point cannot carry a f32 value (use type = \"bool\")",
-            "DIR/tags.toml:19:42: error: tag 'OS.B': point binary_input index 5 of device 'OS' is used by tag 'OS.A' too (at DIR/tags.toml:14:42)",
-            "DIR/tags.toml:19:55: error: tag 'OS.B': command crob is set on a read-only tag (set writable = true and write_role)",
-            "DIR/tags.toml:22:8: error: tag 'OS.C': a tag of DNP3 device 'OS' needs dnp3 = { point = \"binary_input\", index = … }",
-            "DIR/tags.toml:24:8: error: tag 'OS.C': kind is a Modbus setting; device 'OS' speaks DNP3 (use dnp3 = { point = …, index = … })",
-            "DIR/tags.toml:25:11: error: tag 'OS.C': address is a Modbus setting; device 'OS' speaks DNP3 (use dnp3 = { point = …, index = … })",
-            "DIR/tags.toml:32:78: error: tag 'OS.D': op belongs to a CROB (command = \"crob\")",
-            "DIR/tags.toml:39:72: error: tag 'OS.F': on_ms does not apply to op = \"latch\"",
-            "DIR/tags.toml:44:56: error: tag 'OS.G': command_index is for a tag with a command",
-            "DIR/tags.toml:56:18: error: tag 'D.X': dnp3 is for tags of protocol = \"dnp3\" devices, and device 'D1' is not one",
+            "DIR/tags.toml:9:21: error: device 'OS': command_timeout_s must be 1 to 600 seconds",
+            "DIR/tags.toml:14:8: error: tag 'OS.A': a DNP3 binary_input point cannot carry a f32 value (use type = \"bool\")",
+            "DIR/tags.toml:20:42: error: tag 'OS.B': point binary_input index 5 of device 'OS' is used by tag 'OS.A' too (at DIR/tags.toml:15:42)",
+            "DIR/tags.toml:20:55: error: tag 'OS.B': command crob is set on a read-only tag (set writable = true and write_role)",
+            "DIR/tags.toml:23:8: error: tag 'OS.C': a tag of DNP3 device 'OS' needs dnp3 = { point = \"binary_input\", index = … }",
+            "DIR/tags.toml:25:8: error: tag 'OS.C': kind is a Modbus setting; device 'OS' speaks DNP3 (use dnp3 = { point = …, index = … })",
+            "DIR/tags.toml:26:11: error: tag 'OS.C': address is a Modbus setting; device 'OS' speaks DNP3 (use dnp3 = { point = …, index = … })",
+            "DIR/tags.toml:33:78: error: tag 'OS.D': op belongs to a CROB (command = \"crob\")",
+            "DIR/tags.toml:40:72: error: tag 'OS.F': on_ms does not apply to op = \"latch\"",
+            "DIR/tags.toml:45:56: error: tag 'OS.G': command_index is for a tag with a command",
+            "DIR/tags.toml:57:18: error: tag 'D.X': dnp3 is for tags of protocol = \"dnp3\" devices, and device 'D1' is not one",
         ],
     );
 }
