@@ -107,6 +107,10 @@ fn main() {
                     println!("   report: {t}");
                 }
                 Action::Timer(_) => {}
+                Action::Disconnect(reason) => {
+                    println!("   disconnect: {reason}");
+                    return;
+                }
             }
         }
         if start.elapsed() > Duration::from_secs(2) && !m.is_busy() {

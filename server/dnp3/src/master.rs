@@ -174,7 +174,16 @@ pub enum Action {
     Report(Report),
     /// Call [`Master::tick`] at this instant (the earliest deadline).
     Timer(Instant),
+    /// Close the connection (and reconnect later): the outstation sent
+    /// [`MALFORMED_IN_A_ROW`] malformed frames or fragments in a row.
+    Disconnect(String),
 }
+
+/// Malformed link frames, segments or fragments in a row after which the
+/// connection is closed. Over TCP nothing corrupts a frame on the way, so
+/// a run of them is a broken or hostile peer; one is discarded and counted
+/// as the standard's link layer does.
+pub const MALFORMED_IN_A_ROW: u32 = 3;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Task {
@@ -261,6 +270,8 @@ pub struct Master {
     /// IIN bits whose procedure the outstation refused (restart clear, time
     /// sync): not acted on again until the outstation clears them.
     refused_bits: Iin,
+    /// Malformed input since the last well-formed response.
+    malformed_run: u32,
 }
 
 impl Master {
@@ -281,6 +292,7 @@ impl Master {
             last_unsolicited: None,
             unsolicited_enabled: false,
             refused_bits: Iin::default(),
+            malformed_run: 0,
         }
     }
 
@@ -342,6 +354,7 @@ impl Master {
         self.reassembler.reset();
         self.next_integrity = None;
         self.next_events = None;
+        self.malformed_run = 0;
         out
     }
 
@@ -390,9 +403,7 @@ impl Master {
                 Err(e) => {
                     let n = e.discard().clamp(1, self.rx.len());
                     self.rx.drain(..n);
-                    out.push(Action::Report(Report::Malformed(format!(
-                        "link layer: {e}"
-                    ))));
+                    self.malformed(format!("link layer: {e}"), &mut out);
                 }
             }
         }
@@ -595,7 +606,7 @@ impl Master {
         match self.reassembler.push(data) {
             Ok(Some(fragment)) => self.fragment(&fragment, now, out),
             Ok(None) => {}
-            Err(e) => out.push(Action::Report(Report::Malformed(format!("transport: {e}")))),
+            Err(e) => self.malformed(format!("transport: {e}"), out),
         }
     }
 
@@ -603,9 +614,7 @@ impl Master {
         let header = match ResponseHeader::decode(fragment) {
             Ok(h) => h,
             Err(e) => {
-                out.push(Action::Report(Report::Malformed(format!(
-                    "application layer: {e}"
-                ))));
+                self.malformed(format!("application layer: {e}"), out);
                 return;
             }
         };
@@ -660,6 +669,9 @@ impl Master {
                 self.in_flight = None;
                 self.iin_changes(header.iin, out);
                 let result = self.command_response(&c, &f, header.iin, &objects, now);
+                if result.is_ok() {
+                    self.malformed_run = 0;
+                }
                 match result {
                     Ok(true) => {
                         let selected_at = f.sent_at;
@@ -807,12 +819,25 @@ impl Master {
         }
     }
 
+    /// Malformed input: reported, and the connection closed after a run.
+    fn malformed(&mut self, reason: String, out: &mut Vec<Action>) {
+        self.malformed_run += 1;
+        out.push(Action::Report(Report::Malformed(reason.clone())));
+        if self.malformed_run >= MALFORMED_IN_A_ROW {
+            self.malformed_run = 0;
+            out.push(Action::Disconnect(format!(
+                "{MALFORMED_IN_A_ROW} malformed frames in a row from the outstation (last: {reason})"
+            )));
+        }
+    }
+
     fn deliver(&mut self, objects: &objects::Objects, out: &mut Vec<Action>) {
         for n in &objects.notes {
             out.push(Action::Report(Report::Note(n.clone())));
         }
-        if let Some(e) = &objects.error {
-            out.push(Action::Report(Report::Malformed(format!("objects: {e}"))));
+        match &objects.error {
+            Some(e) => self.malformed(format!("objects: {e}"), out),
+            None => self.malformed_run = 0,
         }
         if !objects.measurements.is_empty() {
             out.push(Action::Measurements(objects.measurements.clone()));

@@ -299,6 +299,7 @@ impl Outstation {
                 Action::Report(r) => self.report(r),
                 // The loop asks the master for its next deadline.
                 Action::Timer(_) => {}
+                Action::Disconnect(reason) => return Err(reason),
             }
         }
         Ok(())

@@ -96,8 +96,8 @@ impl Outstation {
         assert!(r.is_empty(), "nothing expected, got {r:02X?}");
     }
 
-    /// Send a fragment to the master through transport and link.
-    fn send(&mut self, apdu: &[u8]) {
+    /// A fragment as the outstation's link frames.
+    fn wire(&mut self, apdu: &[u8]) -> Vec<u8> {
         let mut bytes = Vec::new();
         for seg in transport::segment(apdu, &mut self.tseq) {
             let f = LinkFrame {
@@ -106,8 +106,27 @@ impl Outstation {
             };
             bytes.extend(f.encode().unwrap());
         }
-        let a = self.master.received(&bytes, self.clock);
+        bytes
+    }
+
+    /// Octets to the master.
+    fn feed(&mut self, bytes: &[u8]) {
+        let a = self.master.received(bytes, self.clock);
         self.actions.extend(a);
+    }
+
+    /// Send a fragment to the master through transport and link.
+    fn send(&mut self, apdu: &[u8]) {
+        let bytes = self.wire(apdu);
+        self.feed(&bytes);
+    }
+
+    /// The connection closes the master asked for, with their reasons.
+    fn disconnects(&mut self) -> Vec<String> {
+        self.take(|a| match a {
+            Action::Disconnect(r) => Some(r.clone()),
+            _ => None,
+        })
     }
 
     /// A response with `seq`, IIN, CON and objects.
@@ -594,6 +613,58 @@ fn periodic_polls_and_multi_fragment_responses() {
     o.advance(Duration::from_secs(50));
     let (f, _, apdu) = o.request();
     assert_eq!((f, apdu.len()), (FunctionCode::Read, 14), "integrity poll");
+}
+
+#[test]
+fn a_run_of_malformed_frames_closes_the_connection() {
+    let mut o = Outstation::connect(no_periodic());
+    o.startup();
+    // A frame whose data CRC is wrong: discarded and reported.
+    let bad_crc = |o: &mut Outstation| {
+        let mut b = o.wire(&hex("F0 82 00 00"));
+        let n = b.len();
+        b[n - 3] ^= 0xFF;
+        o.feed(&b);
+    };
+    bad_crc(&mut o);
+    bad_crc(&mut o);
+    assert_eq!(o.reports().len(), 2);
+    assert!(
+        o.disconnects().is_empty(),
+        "two are discarded, the connection kept"
+    );
+    // A well-formed response ends the run.
+    o.send(&hex("F1 82 00 00"));
+    o.requests();
+    bad_crc(&mut o);
+    bad_crc(&mut o);
+    assert!(o.disconnects().is_empty());
+    bad_crc(&mut o);
+    let closed = o.disconnects();
+    assert!(
+        matches!(&closed[..], [r] if r.contains("3 malformed frames in a row") && r.contains("link layer")),
+        "{closed:?}"
+    );
+    assert!(o
+        .reports()
+        .iter()
+        .all(|r| matches!(r, Report::Malformed(_))));
+
+    // Fragments whose objects are cut short (two binary events announced,
+    // one present) are malformed too.
+    let mut o = Outstation::connect(no_periodic());
+    o.startup();
+    for seq in 1..=3u8 {
+        o.send(&hex(&format!(
+            "{:02X} 82 00 00 02 01 00 00 01 81",
+            0xF0 | seq
+        )));
+    }
+    let closed = o.disconnects();
+    assert!(
+        matches!(&closed[..], [r] if r.contains("objects")),
+        "{closed:?}"
+    );
 }
 
 #[test]
