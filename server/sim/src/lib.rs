@@ -22,6 +22,7 @@ mod plant;
 mod profile;
 pub mod scenario;
 mod server;
+mod station;
 
 use std::collections::HashMap;
 use std::net::SocketAddr;
@@ -115,6 +116,7 @@ pub struct Simulator {
     addresses: HashMap<String, SocketAddr>,
     shutdown: watch::Sender<bool>,
     tasks: Vec<JoinHandle<()>>,
+    stations: Vec<station::Station>,
 }
 
 impl std::fmt::Debug for Simulator {
@@ -140,12 +142,18 @@ impl Simulator {
     /// Points every simulated device of `plant` at the address its gateway
     /// actually listens on (for [`BindMode::Ephemeral`]).
     pub fn patch_plant(&self, plant: &mut Plant) {
+        let patch = |addr: &mut Spanned<String>| {
+            if let Some(actual) = self.addresses.get(addr.get_ref()) {
+                let span = addr.span();
+                *addr = Spanned::new(span, actual.to_string());
+            }
+        };
         for d in &mut plant.devices {
             if let Some(addr) = &mut d.address {
-                if let Some(actual) = self.addresses.get(addr.get_ref()) {
-                    let span = addr.span();
-                    *addr = Spanned::new(span, actual.to_string());
-                }
+                patch(addr);
+            }
+            if let Some(link) = &mut d.iec104 {
+                link.redundant_addresses.iter_mut().for_each(patch);
             }
         }
     }
@@ -155,6 +163,9 @@ impl Simulator {
         let _ = self.shutdown.send(true);
         for t in self.tasks.drain(..) {
             let _ = t.await;
+        }
+        for s in self.stations.drain(..) {
+            s.shutdown().await;
         }
     }
 }
@@ -193,6 +204,7 @@ pub async fn start_with(
         );
     }
     let gateways = sim.gateways.clone();
+    let station_specs = sim.stations.clone();
     let device_count = sim.devices.len();
     let shared = Arc::new(Shared {
         plant: Mutex::new(sim),
@@ -204,18 +216,19 @@ pub async fn start_with(
     let mut listeners = vec![];
     let mut addresses = HashMap::new();
     for g in &gateways {
-        let listener = match bind {
-            BindMode::Configured => bind_configured(&g.address).await?,
-            BindMode::Ephemeral => TcpListener::bind(("127.0.0.1", 0))
-                .await
-                .map_err(|source| Error::Bind {
-                    address: "127.0.0.1:0".into(),
-                    source,
-                })?,
-        };
-        let actual = listener.local_addr()?;
-        addresses.insert(g.address.clone(), actual);
+        let listener = bind_one(bind, &g.address).await?;
+        addresses.insert(g.address.clone(), listener.local_addr()?);
         listeners.push((g.clone(), listener));
+    }
+    let mut station_listeners = vec![];
+    for s in &station_specs {
+        let mut ls = vec![];
+        for address in std::iter::once(&s.address).chain(&s.redundant) {
+            let listener = bind_one(bind, address).await?;
+            addresses.insert(address.clone(), listener.local_addr()?);
+            ls.push(listener);
+        }
+        station_listeners.push(ls);
     }
 
     let (tx, rx) = watch::channel(false);
@@ -232,6 +245,18 @@ pub async fn start_with(
             rx.clone(),
         )));
     }
+    let mut stations = vec![];
+    for (i, (spec, ls)) in station_specs.iter().zip(station_listeners).enumerate() {
+        stations.push(station::Station::start(
+            shared.clone(),
+            i,
+            plant,
+            &spec.name,
+            ls,
+            STATION_REPORT_PERIOD,
+            rx.clone(),
+        )?);
+    }
     tasks.push(tokio::spawn(step_loop(shared.clone(), options.tick, rx)));
 
     Ok(Simulator {
@@ -239,7 +264,29 @@ pub async fn start_with(
         addresses,
         shutdown: tx,
         tasks,
+        stations,
     })
+}
+
+/// How often (plant time) a simulated telecontrol station looks for
+/// changed values to report spontaneously: an RTU reports a breaker's move
+/// within milliseconds, not at a scan.
+const STATION_REPORT_PERIOD: Duration = Duration::from_millis(20);
+
+/// One listener: on its configured address, or on an ephemeral port of
+/// loopback.
+async fn bind_one(bind: BindMode, address: &str) -> Result<TcpListener, Error> {
+    match bind {
+        BindMode::Configured => bind_configured(address).await,
+        BindMode::Ephemeral => {
+            TcpListener::bind(("127.0.0.1", 0))
+                .await
+                .map_err(|source| Error::Bind {
+                    address: "127.0.0.1:0".into(),
+                    source,
+                })
+        }
+    }
 }
 
 async fn bind_configured(address: &str) -> Result<TcpListener, Error> {

@@ -85,6 +85,28 @@ pub(crate) struct Device {
     pub image: RegisterImage,
 }
 
+/// A simulated IEC 60870-5-104 station (a `protocol = "iec104"` device):
+/// its tags are driven by the models and its commands go to them by tag
+/// name, not through a register image.
+#[derive(Debug, Clone)]
+pub(crate) struct StationSpec {
+    pub name: String,
+    /// The configured `host:port`, and the redundancy group's other
+    /// addresses (served by the same station).
+    pub address: String,
+    pub redundant: Vec<String>,
+    pub points: Vec<StationPoint>,
+}
+
+/// One tag of a simulated station.
+#[derive(Debug, Clone)]
+pub(crate) struct StationPoint {
+    pub tag: String,
+    /// The model output it shows; a command tag shows its command's state.
+    pub source: Option<Source>,
+    pub target: Option<Target>,
+}
+
 /// One listening address and the devices behind it.
 #[derive(Debug, Clone)]
 pub(crate) struct GatewaySpec {
@@ -97,6 +119,7 @@ pub(crate) struct GatewaySpec {
 pub(crate) struct Layout {
     pub devices: Vec<Device>,
     pub gateways: Vec<GatewaySpec>,
+    pub stations: Vec<StationSpec>,
     pub outputs: Vec<(Binding, Source)>,
     pub inputs: Vec<(Binding, Target)>,
     /// Tags on simulated devices that no model drives (they read 0).
@@ -131,9 +154,12 @@ fn kind_index(k: RegisterKind) -> usize {
 }
 
 pub(crate) fn build(plant: &Plant) -> Result<Layout, Error> {
-    // Devices: every Modbus TCP device with an address.
+    // Devices: every Modbus TCP device with an address, and every IEC 104
+    // station.
     let mut devices = vec![];
     let mut index: HashMap<&str, usize> = HashMap::new();
+    let mut stations: Vec<StationSpec> = vec![];
+    let mut station_index: HashMap<&str, usize> = HashMap::new();
     let mut unserved = vec![];
     for d in &plant.devices {
         let name = d.name.get_ref();
@@ -142,7 +168,38 @@ pub(crate) fn build(plant: &Plant) -> Result<Layout, Error> {
                 index.insert(name.as_str(), devices.len());
                 devices.push((d, addr.get_ref().clone()));
             }
-            _ => unserved.push(format!("device '{name}' (not Modbus TCP)")),
+            (Protocol::Iec104, Some(addr)) => {
+                station_index.insert(name.as_str(), stations.len());
+                stations.push(StationSpec {
+                    name: name.clone(),
+                    address: addr.get_ref().clone(),
+                    redundant: d
+                        .iec104
+                        .as_ref()
+                        .map(|c| {
+                            c.redundant_addresses
+                                .iter()
+                                .map(|a| a.get_ref().clone())
+                                .collect()
+                        })
+                        .unwrap_or_default(),
+                    points: vec![],
+                });
+            }
+            _ => unserved.push(format!("device '{name}' (not Modbus TCP or IEC 104)")),
+        }
+    }
+    // Tags of the stations: tag name -> (station, point).
+    let mut station_tags: HashMap<&str, (usize, usize)> = HashMap::new();
+    for t in &plant.tags {
+        if let Some(&si) = station_index.get(t.device.get_ref().as_str()) {
+            let points = &mut stations[si].points;
+            station_tags.insert(t.name.get_ref().as_str(), (si, points.len()));
+            points.push(StationPoint {
+                tag: t.name.get_ref().clone(),
+                source: None,
+                target: None,
+            });
         }
     }
 
@@ -171,6 +228,9 @@ pub(crate) fn build(plant: &Plant) -> Result<Layout, Error> {
     let mut out = |name: &str, src: Source, used: &mut Vec<String>| {
         if let Some(b) = bindings.get(name) {
             outputs.push((b.clone(), src));
+            used.push(name.to_string());
+        } else if let Some(&(si, pi)) = station_tags.get(name) {
+            stations[si].points[pi].source = Some(src);
             used.push(name.to_string());
         }
     };
@@ -320,6 +380,10 @@ pub(crate) fn build(plant: &Plant) -> Result<Layout, Error> {
 
     // Commands: must sit on a table the master can write.
     let mut command = |name: &str, target: Target| -> Result<(), Error> {
+        if let Some(&(si, pi)) = station_tags.get(name) {
+            stations[si].points[pi].target = Some(target);
+            return Ok(());
+        }
         let Some(b) = bindings.get(name) else {
             return Ok(());
         };
@@ -359,12 +423,16 @@ pub(crate) fn build(plant: &Plant) -> Result<Layout, Error> {
 
     // Panel and unit signals that the configuration has but no served device carries.
     for name in &used_names {
-        if !bindings.contains_key(name.as_str()) && plant.tag(name).is_some() {
+        if !bindings.contains_key(name.as_str())
+            && !station_tags.contains_key(name.as_str())
+            && plant.tag(name).is_some()
+        {
             unserved.push(format!("tag '{name}' (its device is not simulated)"));
         }
     }
     let mut unmodelled: Vec<String> = bindings
         .keys()
+        .chain(station_tags.keys())
         .filter(|n| !used_names.iter().any(|u| u == *n))
         .map(|n| n.to_string())
         .collect();
@@ -420,6 +488,7 @@ pub(crate) fn build(plant: &Plant) -> Result<Layout, Error> {
     Ok(Layout {
         devices: out_devices,
         gateways,
+        stations,
         outputs,
         inputs,
         unmodelled,

@@ -13,7 +13,9 @@ use serde::Serialize;
 use tokio_modbus::{ExceptionCode, Request, Response};
 
 use crate::codec::Binding;
-use crate::map::{self, Device, GatewaySpec, LoadOut, PanelOut, Source, Target, UnitOut};
+use crate::map::{
+    self, Device, GatewaySpec, LoadOut, PanelOut, Source, StationSpec, Target, UnitOut,
+};
 use crate::microgrid::{BalanceCounters, Microgrid, UnitCounters, UnitState};
 use crate::panel::{AnalyzerReading, FaultKind, PanelModel, TripRecord, ZoneLoad};
 use crate::{Error, SimOptions};
@@ -21,6 +23,9 @@ use crate::{Error, SimOptions};
 pub(crate) struct PlantSim {
     pub devices: Vec<Device>,
     pub gateways: Vec<GatewaySpec>,
+    pub stations: Vec<StationSpec>,
+    /// Each station's point values, parallel to its `points`.
+    station_values: Vec<Vec<f64>>,
     pub panels: Vec<PanelModel>,
     /// Panel prefixes, parallel to `panels`.
     pub panel_prefixes: Vec<String>,
@@ -52,9 +57,16 @@ impl PlantSim {
             .microgrid
             .as_ref()
             .map(|mg| Microgrid::new(mg, opts.microgrid.clone(), now));
+        let station_values = layout
+            .stations
+            .iter()
+            .map(|s| vec![0.0; s.points.len()])
+            .collect();
         let mut sim = PlantSim {
             devices: layout.devices,
             gateways: layout.gateways,
+            stations: layout.stations,
+            station_values,
             panels,
             panel_prefixes: plant
                 .panels
@@ -77,15 +89,53 @@ impl PlantSim {
     /// master reads back what the plant is doing.
     fn init_commands(&mut self) {
         for (b, target) in &self.inputs {
-            let v = match *target {
-                Target::ElcbReset(p) => bool_f(self.panels[p].reset_coil()),
-                Target::Mccb(p) => bool_f(self.panels[p].mccb.cmd),
-                Target::Zone(p, z) => bool_f(self.panels[p].zone[z - 1].cmd),
-                Target::Setpoint(u) => self.unit(u).map(|u| u.setpoint_kw).unwrap_or(0.0),
-                Target::RunCmd(u) => bool_f(self.unit(u).is_some_and(|u| u.run_cmd)),
-            };
+            let v = self.command_state(*target);
             write_value(&mut self.devices[b.device].image, b, v);
         }
+    }
+
+    /// What a command output is set to now.
+    fn command_state(&self, target: Target) -> f64 {
+        match target {
+            Target::ElcbReset(p) => bool_f(self.panels[p].reset_coil()),
+            Target::Mccb(p) => bool_f(self.panels[p].mccb.cmd),
+            Target::Zone(p, z) => bool_f(self.panels[p].zone[z - 1].cmd),
+            Target::Setpoint(u) => self.unit(u).map(|u| u.setpoint_kw).unwrap_or(0.0),
+            Target::RunCmd(u) => bool_f(self.unit(u).is_some_and(|u| u.run_cmd)),
+        }
+    }
+
+    /// A station's point values (engineering units), parallel to its
+    /// points.
+    pub fn station_values(&self, station: usize) -> &[f64] {
+        self.station_values
+            .get(station)
+            .map(Vec::as_slice)
+            .unwrap_or(&[])
+    }
+
+    /// A command to a station's tag at plant time `now`.
+    pub fn station_command(
+        &mut self,
+        station: usize,
+        tag: &str,
+        value: f64,
+        now: Timestamp,
+    ) -> Result<(), String> {
+        self.advance_to(now);
+        let target = self
+            .stations
+            .get(station)
+            .and_then(|s| s.points.iter().find(|p| p.tag == tag))
+            .ok_or_else(|| format!("no tag '{tag}' on this station"))?
+            .target
+            .ok_or_else(|| format!("tag '{tag}' is not a command the plant model takes"))?;
+        if !value.is_finite() {
+            return Err(format!("{value} is not a value for '{tag}'"));
+        }
+        self.command(target, value);
+        self.publish();
+        Ok(())
     }
 
     fn unit(&self, i: usize) -> Option<&crate::microgrid::Unit> {
@@ -110,58 +160,30 @@ impl PlantSim {
         self.publish();
     }
 
-    /// Encodes every model output into its device image.
+    /// Encodes every model output into its device image, and sets every
+    /// station's point values.
     fn publish(&mut self) {
         let t = self.now;
         let readings: Vec<AnalyzerReading> = self.panels.iter().map(|p| p.analyzer(t)).collect();
         for (b, src) in &self.outputs {
-            let v = match *src {
-                Source::Panel(pi, o) => {
-                    let p = &self.panels[pi];
-                    let a = &readings[pi];
-                    match o {
-                        PanelOut::ElcbClosed => bool_f(p.elcb_closed),
-                        PanelOut::MccbClosed => bool_f(p.mccb.closed),
-                        PanelOut::ZoneClosed(z) => bool_f(p.zone[z - 1].closed),
-                        PanelOut::ZoneEnergised(z) => bool_f(p.zone_energised(z)),
-                        PanelOut::DoorOpen => bool_f(p.door_open),
-                        PanelOut::V(ph) => a.v[ph],
-                        PanelOut::I(ph) => a.i[ph],
-                        PanelOut::P => a.p_kw,
-                        PanelOut::Q => a.q_kvar,
-                        PanelOut::Pf => a.pf,
-                        PanelOut::Hz => a.hz,
-                        PanelOut::Kwh => a.kwh,
+            if let Some(v) = output_value(&self.panels, self.microgrid.as_ref(), &readings, *src) {
+                write_value(&mut self.devices[b.device].image, b, v);
+            }
+        }
+        for si in 0..self.stations.len() {
+            for pi in 0..self.stations[si].points.len() {
+                let point = &self.stations[si].points[pi];
+                let v = match (point.source, point.target) {
+                    (Some(src), _) => {
+                        output_value(&self.panels, self.microgrid.as_ref(), &readings, src)
                     }
+                    (None, Some(target)) => Some(self.command_state(target)),
+                    (None, None) => None,
+                };
+                if let Some(v) = v {
+                    self.station_values[si][pi] = v;
                 }
-                Source::Unit(ui, o) => {
-                    let Some(mg) = &self.microgrid else { continue };
-                    let u = &mg.units[ui];
-                    match o {
-                        UnitOut::P => u.p_kw,
-                        UnitOut::V => mg.v,
-                        UnitOut::I => mg.current(u.p_kw),
-                        UnitOut::Available => u.available_kw,
-                        UnitOut::SocKwh => u.soc_kwh,
-                        UnitOut::SocPct => soc_pct(u),
-                        UnitOut::Running => bool_f(u.state == UnitState::Running),
-                        UnitOut::State => u.state as u8 as f64,
-                        UnitOut::Irradiance => mg.irradiance_w_m2,
-                        UnitOut::WindSpeed => mg.wind_speed_m_s,
-                        UnitOut::FuelRate => u.fuel_rate_lph,
-                    }
-                }
-                Source::Load(o) => {
-                    let Some(mg) = &self.microgrid else { continue };
-                    match o {
-                        LoadOut::P => mg.demand_kw,
-                        LoadOut::Q => mg.load_q_kvar(),
-                        LoadOut::V => mg.v,
-                        LoadOut::Hz => mg.hz,
-                    }
-                }
-            };
-            write_value(&mut self.devices[b.device].image, b, v);
+            }
         }
     }
 
@@ -329,6 +351,61 @@ impl PlantSim {
     pub fn after_change(&mut self) {
         self.publish();
     }
+}
+
+/// The value of one model output at the panels' analyser `readings`.
+fn output_value(
+    panels: &[PanelModel],
+    microgrid: Option<&Microgrid>,
+    readings: &[AnalyzerReading],
+    src: Source,
+) -> Option<f64> {
+    Some(match src {
+        Source::Panel(pi, o) => {
+            let p = &panels[pi];
+            let a = &readings[pi];
+            match o {
+                PanelOut::ElcbClosed => bool_f(p.elcb_closed),
+                PanelOut::MccbClosed => bool_f(p.mccb.closed),
+                PanelOut::ZoneClosed(z) => bool_f(p.zone[z - 1].closed),
+                PanelOut::ZoneEnergised(z) => bool_f(p.zone_energised(z)),
+                PanelOut::DoorOpen => bool_f(p.door_open),
+                PanelOut::V(ph) => a.v[ph],
+                PanelOut::I(ph) => a.i[ph],
+                PanelOut::P => a.p_kw,
+                PanelOut::Q => a.q_kvar,
+                PanelOut::Pf => a.pf,
+                PanelOut::Hz => a.hz,
+                PanelOut::Kwh => a.kwh,
+            }
+        }
+        Source::Unit(ui, o) => {
+            let mg = microgrid?;
+            let u = &mg.units[ui];
+            match o {
+                UnitOut::P => u.p_kw,
+                UnitOut::V => mg.v,
+                UnitOut::I => mg.current(u.p_kw),
+                UnitOut::Available => u.available_kw,
+                UnitOut::SocKwh => u.soc_kwh,
+                UnitOut::SocPct => soc_pct(u),
+                UnitOut::Running => bool_f(u.state == UnitState::Running),
+                UnitOut::State => u.state as u8 as f64,
+                UnitOut::Irradiance => mg.irradiance_w_m2,
+                UnitOut::WindSpeed => mg.wind_speed_m_s,
+                UnitOut::FuelRate => u.fuel_rate_lph,
+            }
+        }
+        Source::Load(o) => {
+            let mg = microgrid?;
+            match o {
+                LoadOut::P => mg.demand_kw,
+                LoadOut::Q => mg.load_q_kvar(),
+                LoadOut::V => mg.v,
+                LoadOut::Hz => mg.hz,
+            }
+        }
+    })
 }
 
 fn soc_pct(u: &crate::microgrid::Unit) -> f64 {

@@ -69,11 +69,35 @@ pub(super) fn check_dwell_vs_elcb_latency<'t, 'd>(
     let Some(dev) = device(dev_name) else {
         return;
     };
-    let scan_ms = tag
-        .scan_ms
-        .as_ref()
-        .map_or(*dev.scan_ms.get_ref(), |s| *s.get_ref());
-    let timeout_ms = *dev.timeout_ms.get_ref();
+    // How late the master may learn of a trip: a Modbus scan and its
+    // timeout; a DNP3 event poll and its response timeout; an IEC 104
+    // station, or a DNP3 outstation with unsolicited responses, reports a
+    // change when it happens.
+    let (scan_ms, timeout_ms, read) = match dev.protocol {
+        Protocol::Iec104 => return,
+        Protocol::Dnp3 => {
+            let d = dev.dnp3.clone().unwrap_or_default();
+            if d.unsolicited {
+                return;
+            }
+            let poll_s = match *d.event_poll_period_s.get_ref() {
+                p if p > 0.0 => p,
+                _ => *d.integrity_period_s.get_ref(),
+            };
+            (
+                (poll_s * 1000.0).round() as u64,
+                *d.response_timeout_ms.get_ref(),
+                "polled for events",
+            )
+        }
+        Protocol::Tcp | Protocol::Rtu => (
+            tag.scan_ms
+                .as_ref()
+                .map_or(*dev.scan_ms.get_ref(), |s| *s.get_ref()),
+            *dev.timeout_ms.get_ref(),
+            "read",
+        ),
+    };
     let latest_ms = scan_ms.saturating_add(timeout_ms);
     if dwell * 1000.0 > latest_ms as f64 {
         return;
@@ -89,7 +113,7 @@ pub(super) fn check_dwell_vs_elcb_latency<'t, 'd>(
         span,
         format!(
             "{owner}: dwell_s = {dwell} s is too short to attribute a trip: the ELCB status \
-             ({dev_name}) is read every {scan_ms} ms with a {timeout_ms} ms timeout; dwell_s must \
+             ({dev_name}) is {read} every {scan_ms} ms with a {timeout_ms} ms timeout; dwell_s must \
              exceed {} s",
             latest_ms as f64 / 1000.0
         ),

@@ -317,6 +317,52 @@ fn the_demo_plant_is_valid() {
 }
 
 #[test]
+fn the_telecontrol_test_plant_is_valid() {
+    let dir =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/plants/telecontrol");
+    let plant = load_path(&dir).unwrap_or_else(|d| panic!("{d:?}"));
+    assert_eq!(plant.panels.len(), 1);
+}
+
+#[test]
+fn panel_dwell_against_a_dnp3_outstation_depends_on_how_events_come() {
+    let main = "tag_files = [\"tags.toml\"]\n\n[[panel]]\nid = \"p1\"\nname = \"Panel\"\nkind = \"service\"\nprefix = \"P1\"\nzones = 1\ndwell_s = 1.0\n";
+    let mut tags = String::from(
+        "[[device]]\nname = \"P1.OS\"\nprotocol = \"dnp3\"\naddress = \"127.0.0.1:20000\"\n\n\
+         [device.dnp3]\nunsolicited = false\nevent_poll_period_s = 2\nresponse_timeout_ms = 500\n",
+    );
+    for (i, (name, writable)) in [
+        ("P1.ELCB.Closed", false),
+        ("P1.MCCB.Closed", false),
+        ("P1.Zone1.Closed", false),
+        ("P1.ELCB.Reset", true),
+        ("P1.MCCB.Cmd", true),
+        ("P1.Zone1.Cmd", true),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let command = if writable { ", command = \"crob\"" } else { "" };
+        let write = if writable {
+            "writable = true\nwrite_role = \"operator\"\n"
+        } else {
+            ""
+        };
+        tags.push_str(&format!(
+            "\n[[tag]]\nname = \"{name}\"\ndevice = \"P1.OS\"\ntype = \"bool\"\n{write}dnp3 = {{ point = \"binary_input\", index = {i}{command} }}\n"
+        ));
+    }
+    assert_problems(
+        main,
+        &tags,
+        &["DIR/gridscada.toml:9:11: error: panel 'p1': dwell_s = 1 s is too short to attribute a trip: the ELCB status (P1.OS) is polled for events every 2000 ms with a 500 ms timeout; dwell_s must exceed 2.5 s"],
+    );
+    // With unsolicited responses the outstation reports the trip at once.
+    let unsolicited = tags.replace("unsolicited = false", "unsolicited = true");
+    assert_problems(main, &unsolicited, &[]);
+}
+
+#[test]
 fn panel_dwell_shorter_than_the_elcb_status_latency() {
     let main = "tag_files = [\"tags.toml\"]\n\n[[panel]]\nid = \"ss1\"\nname = \"Panel\"\nkind = \"service\"\nprefix = \"SS1\"\nzones = 1\ndwell_s = 0.3\n";
     let tags = r#"[[device]]

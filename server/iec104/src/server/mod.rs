@@ -88,6 +88,26 @@ impl Iec104Server {
         plant: &Plant,
         ctx: ServerContext,
     ) -> Result<Iec104Server, String> {
+        let listen: SocketAddr = cfg.listen.get_ref().parse().map_err(|_| {
+            format!(
+                "[iec104_server] listen: '{}' is not an address",
+                cfg.listen.get_ref()
+            )
+        })?;
+        let listener = TcpListener::bind(listen)
+            .await
+            .map_err(|e| format!("[iec104_server] cannot listen on {listen}: {e}"))?;
+        Iec104Server::start_on(listener, cfg, plant, ctx)
+    }
+
+    /// Serves on `listener` (bound by the caller; `cfg.listen` is not
+    /// used), e.g. the simulator's station on its own address.
+    pub fn start_on(
+        listener: TcpListener,
+        cfg: &Iec104ServerConfig,
+        plant: &Plant,
+        ctx: ServerContext,
+    ) -> Result<Iec104Server, String> {
         let mut exports = Vec::new();
         let (mut by_ioa, mut by_command_ioa, mut by_id) =
             (HashMap::new(), HashMap::new(), HashMap::new());
@@ -128,15 +148,6 @@ impl Iec104Server {
                 select: p.select,
             });
         }
-        let listen: SocketAddr = cfg.listen.get_ref().parse().map_err(|_| {
-            format!(
-                "[iec104_server] listen: '{}' is not an address",
-                cfg.listen.get_ref()
-            )
-        })?;
-        let listener = TcpListener::bind(listen)
-            .await
-            .map_err(|e| format!("[iec104_server] cannot listen on {listen}: {e}"))?;
         let local_addr = listener.local_addr().map_err(|e| e.to_string())?;
         let allowed: Vec<IpAddr> = cfg
             .allowed_clients
