@@ -20,8 +20,13 @@
 //! actions, with the samples, status tags, figures and commands through
 //! `gridscada-field` and the tag database.
 //!
+//! The other side, for gridscada's simulated outstations: [`outstation`]
+//! is an outstation's procedures, pure (static and event objects, class
+//! reads, confirmations, unsolicited responses, multi-fragment responses,
+//! select-before-operate), and [`server`] its I/O shell over a tag database.
+//!
 //! **Must not touch:** sockets, tokio, timers, tags or configuration
-//! outside [`client`]; SQL, HTTP.
+//! outside [`client`] and [`server`]; SQL, HTTP.
 //!
 //! Why our own codec: the Rust DNP3 crate on crates.io (stepfunc `dnp3`)
 //! is under a non-commercial licence, and opendnp3's bindings need C++
@@ -32,7 +37,9 @@ pub mod client;
 pub mod link;
 pub mod master;
 pub mod objects;
+pub mod outstation;
 pub mod request;
+pub mod server;
 pub mod transport;
 
 pub use app::{Control, FunctionCode, Iin, ObjectHeader, Range};

@@ -4,14 +4,14 @@
 //! devices, built from the plant configuration: substation panels (ELCB,
 //! main MCCB, zone MCBs behind an I/O gateway, and a power analyzer) and
 //! microgrid units (PV, wind, storage, diesel with their inner-loop
-//! controllers, and the load meter); and the IEC 104 stations of
-//! `protocol = "iec104"` devices, whose points the same models drive
-//! (`station.rs`). A [`SimHandle`] injects faults (zone faults, unit
+//! controllers, and the load meter); and the IEC 104 stations and DNP3
+//! outstations of `protocol = "iec104"` and `"dnp3"` devices, whose points
+//! the same models drive (`station.rs`). A [`SimHandle`] injects faults (zone faults, unit
 //! trips, communication faults of Modbus devices) and sets plant inputs; it
 //! is the interface the HTTP admin routes and scenario replay use.
 //!
 //! **Must not touch:** the server's tag database, the poller or the control
-//! loops. The simulator is only reachable over Modbus or IEC 104 and
+//! loops. The simulator is only reachable over Modbus, IEC 104 or DNP3 and
 //! through its handle.
 //! Register maps: `docs/REGISTER_MAPS.md`.
 

@@ -85,9 +85,9 @@ pub(crate) struct Device {
     pub image: RegisterImage,
 }
 
-/// A simulated IEC 60870-5-104 station (a `protocol = "iec104"` device):
-/// its tags are driven by the models and its commands go to them by tag
-/// name, not through a register image.
+/// A simulated telecontrol station (a `protocol = "iec104"` or `"dnp3"`
+/// device): its tags are driven by the models and its commands go to them
+/// by tag name, not through a register image.
 #[derive(Debug, Clone)]
 pub(crate) struct StationSpec {
     pub name: String,
@@ -168,7 +168,7 @@ pub(crate) fn build(plant: &Plant) -> Result<Layout, Error> {
                 index.insert(name.as_str(), devices.len());
                 devices.push((d, addr.get_ref().clone()));
             }
-            (Protocol::Iec104, Some(addr)) => {
+            (Protocol::Iec104 | Protocol::Dnp3, Some(addr)) => {
                 station_index.insert(name.as_str(), stations.len());
                 stations.push(StationSpec {
                     name: name.clone(),
@@ -186,7 +186,7 @@ pub(crate) fn build(plant: &Plant) -> Result<Layout, Error> {
                     points: vec![],
                 });
             }
-            _ => unserved.push(format!("device '{name}' (not Modbus TCP or IEC 104)")),
+            _ => unserved.push(format!("device '{name}' (serial, or without an address)")),
         }
     }
     // Tags of the stations: tag name -> (station, point).

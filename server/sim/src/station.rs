@@ -1,9 +1,12 @@
-//! The I/O shell of a simulated IEC 60870-5-104 station (a `protocol =
-//! "iec104"` device): gridscada's own controlled station
-//! (`gridscada_iec104::Iec104Server`) over a point database of the
-//! station's own, which the plant models fill, so the station answers
-//! interrogations, sends spontaneous data with the plant's time tags, and
-//! takes select-before-operate and direct commands as an RTU would.
+//! The I/O shell of a simulated telecontrol station: an IEC 60870-5-104
+//! RTU (a `protocol = "iec104"` device, served by gridscada's own
+//! controlled station, `gridscada_iec104::Iec104Server`) or a DNP3
+//! outstation (`protocol = "dnp3"`, served by
+//! `gridscada_dnp3::server::Dnp3Outstation`), over a point database of the
+//! station's own which the plant models fill. The station answers
+//! interrogations and integrity polls, reports changes with the plant's
+//! time (spontaneous data, unsolicited responses and events), and takes
+//! select-before-operate and direct commands as an RTU would.
 //!
 //! Owns that point database, its refresh from the models, the translation
 //! between engineering values and the raw values the master scales back
@@ -15,8 +18,12 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use gridscada_config::{
-    Iec104DeviceConfig, Iec104ExportConfig, Iec104Point, Iec104ServerConfig, Plant, Role, TagConfig,
+    DataType, Dnp3Command, Dnp3Point, Iec104DeviceConfig, Iec104ExportConfig, Iec104Point,
+    Iec104ServerConfig, Plant, Protocol, Role, TagConfig,
 };
+use gridscada_dnp3::objects::MeasurementKind;
+use gridscada_dnp3::outstation::{OutstationConfig, Point};
+use gridscada_dnp3::server::{Dnp3Outstation, ServedControl, ServedDatabase, ServedPoint};
 use gridscada_iec104::{Iec104Server, ServerContext, ServerCounters};
 use gridscada_store::command::CommandAudit;
 use gridscada_store::NewEvent;
@@ -39,21 +46,38 @@ struct Encoding {
 }
 
 impl Encoding {
-    fn of(tag: &TagConfig, point: Iec104Point) -> Encoding {
-        let kind = match point {
-            Iec104Point::M_SP => ValueKind::Bool,
-            Iec104Point::M_DP if tag.value_kind() == ValueKind::Bool => ValueKind::Bool,
-            Iec104Point::M_DP | Iec104Point::M_ST | Iec104Point::M_BO | Iec104Point::M_IT => {
-                ValueKind::Int
-            }
-            Iec104Point::M_ME_NA | Iec104Point::M_ME_NB | Iec104Point::M_ME_NC => ValueKind::Float,
+    /// How `tag`'s point is sent: binaries as bools (a double point of a
+    /// bool tag too), counters and step positions as integers, measurands
+    /// as floats; `None` when the tag has no point of the station's
+    /// protocol.
+    fn of(tag: &TagConfig, protocol: Protocol) -> Option<Encoding> {
+        let bool_tag = tag.value_kind() == ValueKind::Bool;
+        let kind = match protocol {
+            Protocol::Dnp3 => match *tag.dnp3.as_ref()?.point.get_ref() {
+                Dnp3Point::BinaryInput | Dnp3Point::BinaryOutput => ValueKind::Bool,
+                Dnp3Point::DoubleBit if bool_tag => ValueKind::Bool,
+                Dnp3Point::DoubleBit | Dnp3Point::Counter | Dnp3Point::FrozenCounter => {
+                    ValueKind::Int
+                }
+                Dnp3Point::AnalogInput | Dnp3Point::AnalogOutput => ValueKind::Float,
+            },
+            _ => match *tag.iec104.as_ref()?.point.get_ref() {
+                Iec104Point::M_SP => ValueKind::Bool,
+                Iec104Point::M_DP if bool_tag => ValueKind::Bool,
+                Iec104Point::M_DP | Iec104Point::M_ST | Iec104Point::M_BO | Iec104Point::M_IT => {
+                    ValueKind::Int
+                }
+                Iec104Point::M_ME_NA | Iec104Point::M_ME_NB | Iec104Point::M_ME_NC => {
+                    ValueKind::Float
+                }
+            },
         };
         let scale = *tag.scale.get_ref();
-        Encoding {
+        Some(Encoding {
             kind,
             scale: if scale == 0.0 { 1.0 } else { scale },
             offset: tag.offset,
-        }
+        })
     }
 
     /// The value the station sends for engineering value `v`.
@@ -75,6 +99,12 @@ struct Points {
 }
 
 impl Points {
+    fn encoding_of(&self, tag: &str) -> Option<Encoding> {
+        let id = self.db.id(tag)?;
+        let i = self.ids.iter().position(|x| *x == id)?;
+        self.encodings.get(i).copied()
+    }
+
     /// Sets every point from the models' values, stamped with plant time.
     fn refresh(&self, shared: &Shared, station: usize) {
         let (values, now) = shared.with_plant(|p| (p.station_values(station).to_vec(), p.now()));
@@ -103,12 +133,15 @@ struct StationWriter {
     shared: Arc<Shared>,
     station: usize,
     points: Arc<Points>,
+    /// DNP3's analog outputs carry the raw value (`(v - offset) / scale`);
+    /// IEC 104's set points the engineering value.
+    raw_set_points: bool,
 }
 
 impl TagWriter for StationWriter {
     fn write<'a>(&'a self, name: &'a str, value: Value) -> WriteFuture<'a> {
         Box::pin(async move {
-            let v = match &value {
+            let mut v = match &value {
                 Value::Bool(b) => f64::from(u8::from(*b)),
                 other => other.as_f64().ok_or_else(|| WriteError::BadValue {
                     tag: name.to_string(),
@@ -116,6 +149,11 @@ impl TagWriter for StationWriter {
                     reason: "not a number".into(),
                 })?,
             };
+            if self.raw_set_points && !matches!(value, Value::Bool(_)) {
+                if let Some(e) = self.points.encoding_of(name) {
+                    v = v * e.scale + e.offset;
+                }
+            }
             let now = self.shared.clock.now();
             self.shared
                 .plant
@@ -144,11 +182,16 @@ impl CommandAudit for NoAudit {
     }
 }
 
-/// A running simulated station: one controlled station per address of
-/// its redundancy group, over the same points.
+/// A running simulated station: one server per address (an IEC 104
+/// station's redundancy group), over the same points.
 pub(crate) struct Station {
-    servers: Vec<Iec104Server>,
+    servers: Vec<Server>,
     refresh: tokio::task::JoinHandle<()>,
+}
+
+enum Server {
+    Iec104(Iec104Server),
+    Dnp3(Dnp3Outstation),
 }
 
 impl Station {
@@ -179,69 +222,77 @@ impl Station {
                 })
                 .collect::<Result<_, _>>()?
         };
+        let device_config = plant
+            .devices
+            .iter()
+            .find(|d| d.name.get_ref() == device)
+            .ok_or_else(|| Error::Config(format!("no device '{device}'")))?;
+        let protocol = device_config.protocol;
         let mut metas = Vec::new();
         let mut encodings = Vec::new();
-        let mut exports = Vec::new();
         for t in &tags {
-            let Some(c) = &t.iec104 else {
-                return Err(Error::Config(format!(
-                    "tag '{}' of IEC 104 device '{device}' has no iec104 point",
+            let e = Encoding::of(t, protocol).ok_or_else(|| {
+                Error::Config(format!(
+                    "tag '{}' of device '{device}' has no point of its protocol",
                     t.name.get_ref()
-                )));
-            };
-            let e = Encoding::of(t, *c.point.get_ref());
+                ))
+            })?;
             metas.push(TagMeta::new(t.name.get_ref().as_str(), e.kind));
             encodings.push(e);
-            exports.push(Iec104ExportConfig {
-                tag: t.name.clone(),
-                ioa: c.ioa.clone(),
-                point: c.point.clone(),
-                deadband: Spanned::new(0..0, 0.0),
-                cyclic_s: Spanned::new(0..0, 0.0),
-                command: c.command.clone(),
-                command_ioa: c.command_ioa.clone(),
-                select: c.select,
-            });
         }
         let db = Arc::new(
             TagDb::new(metas).map_err(|e| Error::Config(format!("station '{device}': {e}")))?,
         );
-        let ids = tags
+        let ids: Vec<TagId> = tags
             .iter()
             .map(|t| db.id(t.name.get_ref()).expect("just added"))
             .collect();
         let points = Arc::new(Points {
             db: Arc::clone(&db),
-            ids,
+            ids: ids.clone(),
             encodings,
         });
         points.refresh(&shared, index);
 
-        let link = plant
-            .devices
-            .iter()
-            .find(|d| d.name.get_ref() == device)
-            .and_then(|d| d.iec104.clone())
-            .unwrap_or_default();
-        let cfg = station_config(&link, exports);
         let writer: Arc<dyn TagWriter> = Arc::new(StationWriter {
             shared: Arc::clone(&shared),
             station: index,
             points: Arc::clone(&points),
+            raw_set_points: protocol == Protocol::Dnp3,
         });
         let mut servers = Vec::new();
-        for listener in listeners {
-            let ctx = ServerContext {
-                db: Arc::clone(&db),
-                writer: Arc::clone(&writer),
-                audit: Arc::new(NoAudit),
-                clock: Arc::clone(&shared.clock),
-                counters: Arc::new(ServerCounters::default()),
-            };
-            servers.push(
-                Iec104Server::start_on(listener, &cfg, plant, ctx)
-                    .map_err(|e| Error::Config(format!("station '{device}': {e}")))?,
-            );
+        if protocol == Protocol::Dnp3 {
+            let session = device_config.dnp3.clone().unwrap_or_default();
+            let served = dnp3_database(&tags, &ids);
+            for listener in listeners {
+                servers.push(Server::Dnp3(Dnp3Outstation::start_on(
+                    listener,
+                    OutstationConfig {
+                        address: *session.outstation_address.get_ref(),
+                        master_address: *session.master_address.get_ref(),
+                        ..OutstationConfig::default()
+                    },
+                    served.clone(),
+                    Arc::clone(&db),
+                    Arc::clone(&writer),
+                )));
+            }
+        } else {
+            let link = device_config.iec104.clone().unwrap_or_default();
+            let cfg = station_config(&link, iec104_exports(&tags));
+            for listener in listeners {
+                let ctx = ServerContext {
+                    db: Arc::clone(&db),
+                    writer: Arc::clone(&writer),
+                    audit: Arc::new(NoAudit),
+                    clock: Arc::clone(&shared.clock),
+                    counters: Arc::new(ServerCounters::default()),
+                };
+                servers.push(Server::Iec104(
+                    Iec104Server::start_on(listener, &cfg, plant, ctx)
+                        .map_err(|e| Error::Config(format!("station '{device}': {e}")))?,
+                ));
+            }
         }
         let refresh = tokio::spawn(async move {
             loop {
@@ -258,9 +309,72 @@ impl Station {
     pub(crate) async fn shutdown(self) {
         self.refresh.abort();
         for s in self.servers {
-            s.shutdown().await;
+            match s {
+                Server::Iec104(s) => s.shutdown().await,
+                Server::Dnp3(s) => s.shutdown().await,
+            }
         }
     }
+}
+
+/// The exported points of an IEC 104 station: each tag's point as the
+/// master expects it.
+fn iec104_exports(tags: &[&TagConfig]) -> Vec<Iec104ExportConfig> {
+    tags.iter()
+        .filter_map(|t| {
+            let c = t.iec104.as_ref()?;
+            Some(Iec104ExportConfig {
+                tag: t.name.clone(),
+                ioa: c.ioa.clone(),
+                point: c.point.clone(),
+                deadband: Spanned::new(0..0, 0.0),
+                cyclic_s: Spanned::new(0..0, 0.0),
+                command: c.command.clone(),
+                command_ioa: c.command_ioa.clone(),
+                select: c.select,
+            })
+        })
+        .collect()
+}
+
+/// The points and controls of a DNP3 outstation: each tag's point and
+/// index, analogs of integer tags sent as integers, and its control
+/// (CROB or analog output block) on its command index.
+fn dnp3_database(tags: &[&TagConfig], ids: &[TagId]) -> ServedDatabase {
+    let mut db = ServedDatabase::default();
+    for (t, id) in tags.iter().zip(ids) {
+        let Some(c) = &t.dnp3 else { continue };
+        let kind = match *c.point.get_ref() {
+            Dnp3Point::BinaryInput => MeasurementKind::Binary,
+            Dnp3Point::DoubleBit => MeasurementKind::DoubleBit,
+            Dnp3Point::BinaryOutput => MeasurementKind::BinaryOutputStatus,
+            Dnp3Point::Counter => MeasurementKind::Counter,
+            Dnp3Point::FrozenCounter => MeasurementKind::FrozenCounter,
+            Dnp3Point::AnalogInput => MeasurementKind::Analog,
+            Dnp3Point::AnalogOutput => MeasurementKind::AnalogOutputStatus,
+        };
+        db.points.push(ServedPoint {
+            id: *id,
+            point: Point {
+                kind,
+                index: *c.index.get_ref(),
+                integer: !matches!(t.data_type(), DataType::F32 | DataType::F64),
+            },
+        });
+        let control = ServedControl {
+            tag: t.name.get_ref().clone(),
+        };
+        match c.command.as_ref().map(|c| *c.get_ref()) {
+            Some(Dnp3Command::Crob) => {
+                db.crobs.insert(c.command_index(), control);
+            }
+            Some(Dnp3Command::AnalogOutput) => {
+                db.analog_outputs.insert(c.command_index(), control);
+            }
+            None => {}
+        }
+    }
+    db
 }
 
 /// The controlled station's settings from the master's view of the device:

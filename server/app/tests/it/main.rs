@@ -10,7 +10,7 @@ mod alarms_end_to_end;
 mod cli;
 mod dispatch_full_stack;
 mod fault_isolation_full_stack;
-mod fault_isolation_iec104;
+mod fault_isolation_telecontrol;
 mod field_faults;
 mod own_plant;
 mod pair_database_restart;

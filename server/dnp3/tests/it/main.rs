@@ -6,5 +6,6 @@
 mod fuzz;
 mod master;
 mod outstation;
+mod outstation_machine;
 mod outstation_py1815;
 mod peers;

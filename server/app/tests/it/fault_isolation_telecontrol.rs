@@ -1,20 +1,22 @@
-//! Fault isolation over IEC 60870-5-104: the test plant
+//! Fault isolation over telecontrol: the test plant
 //! `tests/plants/telecontrol` puts panel FX's breakers, ELCB and analyser
-//! on a substation RTU reached over IEC 104 (two addresses, positions as
-//! double points, breaker commands as double commands with
-//! select-before-operate). The simulator serves that RTU as a controlled
-//! station driven by the panel model; gridscada's controlling station
-//! (`Iec104Io`) fills the tag database from its interrogation and
-//! spontaneous data and carries the sequence's commands, each confirmed by
-//! ACT_CON, ACT_TERM and the returned status. The outcome must be the one
-//! the Modbus path gives (`fault_isolation_full_stack`): the faulty zone
-//! isolated, the healthy ones back, two ELCB trips and one re-energisation.
+//! on a substation RTU reached over IEC 60870-5-104 (two addresses,
+//! positions as double points, breaker commands as double commands with
+//! select-before-operate), and panel FY's on a DNP3 outstation (positions
+//! as double-bit inputs, CROBs with select-before-operate, unsolicited
+//! events). The simulator serves both, driven by the panel models;
+//! gridscada's IEC 104 controlling station (`Iec104Io`) and DNP3 master
+//! (`Dnp3Io`) fill the tag database and carry the sequence's commands, each
+//! confirmed by the station (ACT_CON and ACT_TERM; the echo's SUCCESS) and
+//! by the returned status. The outcome must be the one the Modbus path
+//! gives (`fault_isolation_full_stack`): the faulty zone isolated, the
+//! healthy ones back, two ELCB trips and one re-energisation.
 
 use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use gridscada_config::Plant;
+use gridscada_config::{Plant, Protocol};
 use gridscada_control::fault_isolation::{
     self, PanelCommand, PanelCommandKind, PanelNotice, PanelStatus,
 };
@@ -26,6 +28,17 @@ const WAIT: Duration = Duration::from_secs(45);
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_permanent_fault_is_isolated_over_iec104_as_over_modbus() {
+    isolate_a_permanent_fault("fx", Protocol::Iec104).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_permanent_fault_is_isolated_over_dnp3_as_over_modbus() {
+    isolate_a_permanent_fault("fy", Protocol::Dnp3).await;
+}
+
+/// Panel `id`, whose I/O is on a device speaking `protocol`: zone 2 faulty,
+/// isolated; repaired and reset, back.
+async fn isolate_a_permanent_fault(id: &str, protocol: Protocol) {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/plants/telecontrol");
     let mut plant: Plant = gridscada_config::load_path(&dir)
         .unwrap_or_else(|d| panic!("test plant in {}: {d:?}", dir.display()));
@@ -38,12 +51,15 @@ async fn a_permanent_fault_is_isolated_over_iec104_as_over_modbus() {
 
     let mut tags: Vec<_> = plant.tag_metas().collect();
     tags.extend(gridscada_field::device_status_tags(&plant));
-    let panel = plant.panels[0].clone();
+    let panel = plant
+        .panels
+        .iter()
+        .find(|p| p.id.get_ref() == id)
+        .expect("panel of the test plant")
+        .clone();
     tags.extend(fault_isolation::panel_tags(&panel));
     let db = Arc::new(TagDb::new(tags).expect("tag database"));
-    let io =
-        gridscada_iec104::Iec104Io::start(&plant, db.clone(), clock.clone(), Leadership::sole())
-            .expect("IEC 104 controlling station starts");
+    let io = Field::start(protocol, &plant, db.clone(), clock.clone());
 
     let notices = Arc::new(Mutex::new(Vec::new()));
     let (notices_tx, mut notices_rx) = mpsc::channel::<PanelNotice>(1024);
@@ -77,26 +93,28 @@ async fn a_permanent_fault_is_isolated_over_iec104_as_over_modbus() {
             })
             .collect()
     };
-    let snap = || sim.snapshot().panel("fx").expect("panel fx").clone();
+    let snap = || {
+        sim.snapshot()
+            .panel(id)
+            .expect("panel of the plant")
+            .clone()
+    };
     let context = || format!("{:#?}\n{:#?}", status.borrow().clone(), events());
     // Everything read over IEC 104, Good, and on.
-    until(
-        "the panel read over IEC 104, every breaker closed",
-        &context,
-        || {
-            let st = status.borrow();
-            st.comm_ok && st.step == "idle" && st.breakers.values().all(|b| b.good && b.closed)
-        },
-    )
+    until("the panel read, every breaker closed", &context, || {
+        let st = status.borrow();
+        st.comm_ok && st.step == "idle" && st.breakers.values().all(|b| b.good && b.closed)
+    })
     .await;
-    let p_kw = db.get_by_name("FX.PA.P_kW").expect("analyser power");
+    let p_kw = db
+        .get_by_name(&format!("{}.PA.P_kW", panel.prefix.get_ref()))
+        .expect("analyser power");
     assert!(p_kw.quality.is_good(), "{p_kw:?}");
 
     // A permanent fault on zone 2: the ELCB trips, the sequence opens
     // every zone, recloses, tries each zone in turn and isolates zone 2.
     let trips_before = snap().elcb_trips;
-    sim.inject_zone_fault("fx", 2, FaultKind::Permanent)
-        .unwrap();
+    sim.inject_zone_fault(id, 2, FaultKind::Permanent).unwrap();
     until("the sequence to end", &context, || {
         let st = status.borrow();
         st.last_sequence.trips >= 1 && matches!(st.step.as_str(), "idle" | "isolated" | "lockout")
@@ -142,8 +160,8 @@ async fn a_permanent_fault_is_isolated_over_iec104_as_over_modbus() {
     .await;
     assert_eq!(snap().elcb_trips - trips_before, 2, "{ctx}");
 
-    // Repaired and reset: zone 2 closes again over IEC 104.
-    sim.repair_zone("fx", 2).unwrap();
+    // Repaired and reset: zone 2 closes again.
+    sim.repair_zone(id, 2).unwrap();
     let (reply, rx) = oneshot::channel();
     commands
         .send(PanelCommand {
@@ -170,11 +188,46 @@ async fn a_permanent_fault_is_isolated_over_iec104_as_over_modbus() {
     })
     .await;
     println!(
-        "over IEC 104: zone 2 isolated, restore {restore_s:.2} s (bound {:.1} s), {} switching operations",
+        "panel {id} over {protocol:?}: zone 2 isolated, restore {restore_s:.2} s (bound {:.1} s), {} switching operations",
         m.bound_s, m.switching_ops
     );
     io.shutdown().await;
     simulator.shutdown().await;
+}
+
+/// The master of the panel's device.
+enum Field {
+    Iec104(gridscada_iec104::Iec104Io),
+    Dnp3(gridscada_dnp3::Dnp3Io),
+}
+
+impl Field {
+    fn start(protocol: Protocol, plant: &Plant, db: Arc<TagDb>, clock: Arc<dyn Clock>) -> Field {
+        match protocol {
+            Protocol::Iec104 => Field::Iec104(
+                gridscada_iec104::Iec104Io::start(plant, db, clock, Leadership::sole())
+                    .expect("IEC 104 controlling station starts"),
+            ),
+            _ => Field::Dnp3(
+                gridscada_dnp3::Dnp3Io::start(plant, db, clock, Leadership::sole())
+                    .expect("DNP3 master starts"),
+            ),
+        }
+    }
+
+    fn writer(&self) -> Arc<dyn gridscada_tagdb::TagWriter> {
+        match self {
+            Field::Iec104(io) => io.writer(),
+            Field::Dnp3(io) => io.writer(),
+        }
+    }
+
+    async fn shutdown(self) {
+        match self {
+            Field::Iec104(io) => io.shutdown().await,
+            Field::Dnp3(io) => io.shutdown().await,
+        }
+    }
 }
 
 /// Waits (wall time, bounded) until `cond` holds; `context` says what the
