@@ -315,9 +315,9 @@ impl Outstation {
                 if frame.function == LinkFunction::ConfirmedUserData {
                     self.send_link(LinkFunction::Ack, out);
                 }
-                match self.reassembler.push(&frame.data) {
-                    Ok(Some(fragment)) => self.request(&fragment, now, out),
-                    Ok(None) | Err(_) => {}
+                // A segment out of sequence is dropped; the master asks again.
+                if let Ok(Some(fragment)) = self.reassembler.push(&frame.data) {
+                    self.request(&fragment, now, out);
                 }
             }
             LinkFunction::RequestLinkStatus => self.send_link(LinkFunction::LinkStatus, out),

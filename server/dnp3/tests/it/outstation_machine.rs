@@ -77,12 +77,12 @@ impl Pair {
     fn connect(&mut self) {
         self.os.connected();
         let a = self.master.connected(self.clock());
-        self.from_master(a);
+        self.carry_master(a);
     }
 
     /// Everything the master does, carried to the outstation and back
     /// until both are quiet.
-    fn from_master(&mut self, actions: Vec<Action>) {
+    fn carry_master(&mut self, actions: Vec<Action>) {
         let mut to_os: Vec<Vec<u8>> = Vec::new();
         for a in actions {
             match a {
@@ -99,16 +99,16 @@ impl Pair {
         }
         for b in to_os {
             let a = self.os.received(&b, self.now);
-            self.from_outstation(a);
+            self.carry_outstation(a);
         }
     }
 
-    fn from_outstation(&mut self, actions: Vec<OutstationAction>) {
+    fn carry_outstation(&mut self, actions: Vec<OutstationAction>) {
         for a in actions {
             match a {
                 OutstationAction::Send(b) => {
                     let a = self.master.received(&b, self.clock());
-                    self.from_master(a);
+                    self.carry_master(a);
                 }
                 OutstationAction::Operate {
                     seq,
@@ -119,7 +119,7 @@ impl Pair {
                     self.operated.extend(commands.iter().copied());
                     let statuses = vec![self.field_status; commands.len()];
                     let a = self.os.operated(seq, &commands, &statuses, respond);
-                    self.from_outstation(a);
+                    self.carry_outstation(a);
                 }
                 OutstationAction::TimeSet(_) | OutstationAction::Timer(_) => {}
             }
@@ -128,7 +128,7 @@ impl Pair {
 
     fn update(&mut self, kind: MeasurementKind, index: u16, value: PointValue, time_ms: u64) {
         let a = self.os.update(kind, index, value, true, time_ms, self.now);
-        self.from_outstation(a);
+        self.carry_outstation(a);
     }
 
     fn command(&mut self, id: u64, index: u16, object: CommandObject, mode: CommandMode) {
@@ -141,7 +141,7 @@ impl Pair {
             },
             self.clock(),
         );
-        self.from_master(a);
+        self.carry_master(a);
     }
 }
 
