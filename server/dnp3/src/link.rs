@@ -271,6 +271,25 @@ pub fn frame_len(length: u8) -> usize {
     HEADER_LEN + data + 2 * data.div_ceil(BLOCK)
 }
 
+/// Takes the next frame off the front of `rx` (octets as they arrived):
+/// `Some(Ok(frame))`; `Some(Err(e))` after dropping the octets that are
+/// wrong, so the stream resynchronises; `None` while `rx` holds no whole
+/// frame yet.
+pub fn take_frame(rx: &mut Vec<u8>) -> Option<Result<LinkFrame, LinkError>> {
+    match decode(rx) {
+        Ok(None) => None,
+        Ok(Some((frame, n))) => {
+            rx.drain(..n);
+            Some(Ok(frame))
+        }
+        Err(e) => {
+            let n = e.discard().clamp(1, rx.len());
+            rx.drain(..n);
+            Some(Err(e))
+        }
+    }
+}
+
 /// Decode the frame at the start of `buf`: `Ok(None)` when more octets are
 /// needed, else the frame and the octets it took; on `Err`, drop
 /// [`LinkError::discard`] octets and decode again.

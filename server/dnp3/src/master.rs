@@ -393,18 +393,10 @@ impl Master {
     pub fn received(&mut self, octets: &[u8], now: Clock) -> Vec<Action> {
         let mut out = Vec::new();
         self.rx.extend_from_slice(octets);
-        loop {
-            match link::decode(&self.rx) {
-                Ok(None) => break,
-                Ok(Some((frame, n))) => {
-                    self.rx.drain(..n);
-                    self.link_frame(frame, now, &mut out);
-                }
-                Err(e) => {
-                    let n = e.discard().clamp(1, self.rx.len());
-                    self.rx.drain(..n);
-                    self.malformed(format!("link layer: {e}"), &mut out);
-                }
+        while let Some(frame) = link::take_frame(&mut self.rx) {
+            match frame {
+                Ok(frame) => self.link_frame(frame, now, &mut out),
+                Err(e) => self.malformed(format!("link layer: {e}"), &mut out),
             }
         }
         self.pump(now, &mut out);

@@ -269,17 +269,10 @@ impl Outstation {
     pub fn received(&mut self, octets: &[u8], now: Instant) -> Vec<OutstationAction> {
         let mut out = Vec::new();
         self.rx.extend_from_slice(octets);
-        loop {
-            match link::decode(&self.rx) {
-                Ok(None) => break,
-                Ok(Some((frame, n))) => {
-                    self.rx.drain(..n);
-                    self.link_frame(frame, now, &mut out);
-                }
-                Err(e) => {
-                    let n = e.discard().clamp(1, self.rx.len());
-                    self.rx.drain(..n);
-                }
+        // Malformed frames are dropped: the master asks again.
+        while let Some(frame) = link::take_frame(&mut self.rx) {
+            if let Ok(frame) = frame {
+                self.link_frame(frame, now, &mut out);
             }
         }
         out

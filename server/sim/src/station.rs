@@ -21,7 +21,6 @@ use gridscada_config::{
     DataType, Dnp3Command, Dnp3Point, Iec104DeviceConfig, Iec104ExportConfig, Iec104Point,
     Iec104ServerConfig, Plant, Protocol, Role, TagConfig,
 };
-use gridscada_dnp3::objects::MeasurementKind;
 use gridscada_dnp3::outstation::{OutstationConfig, Point};
 use gridscada_dnp3::server::{Dnp3Outstation, ServedControl, ServedDatabase, ServedPoint};
 use gridscada_iec104::{Iec104Server, ServerContext, ServerCounters};
@@ -344,15 +343,7 @@ fn dnp3_database(tags: &[&TagConfig], ids: &[TagId]) -> ServedDatabase {
     let mut db = ServedDatabase::default();
     for (t, id) in tags.iter().zip(ids) {
         let Some(c) = &t.dnp3 else { continue };
-        let kind = match *c.point.get_ref() {
-            Dnp3Point::BinaryInput => MeasurementKind::Binary,
-            Dnp3Point::DoubleBit => MeasurementKind::DoubleBit,
-            Dnp3Point::BinaryOutput => MeasurementKind::BinaryOutputStatus,
-            Dnp3Point::Counter => MeasurementKind::Counter,
-            Dnp3Point::FrozenCounter => MeasurementKind::FrozenCounter,
-            Dnp3Point::AnalogInput => MeasurementKind::Analog,
-            Dnp3Point::AnalogOutput => MeasurementKind::AnalogOutputStatus,
-        };
+        let kind = gridscada_dnp3::client::kind_of(*c.point.get_ref());
         db.points.push(ServedPoint {
             id: *id,
             point: Point {

@@ -33,6 +33,7 @@ use tokio::task::JoinHandle;
 use crate::master::{CommandMode, MasterConfig};
 use crate::objects::{AnalogOutput, CommandObject, Crob};
 use outstation::{Outstation, Settings};
+pub use points::kind_of;
 use points::{PointMap, PointTag};
 
 /// Why the master cannot start.

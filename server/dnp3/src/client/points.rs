@@ -31,7 +31,7 @@ impl PointTag {
 }
 
 /// The measurement kind a configured point type arrives as.
-pub(crate) fn kind_of(point: Dnp3Point) -> MeasurementKind {
+pub fn kind_of(point: Dnp3Point) -> MeasurementKind {
     match point {
         Dnp3Point::BinaryInput => MeasurementKind::Binary,
         Dnp3Point::DoubleBit => MeasurementKind::DoubleBit,
