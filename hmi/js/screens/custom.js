@@ -4,7 +4,7 @@
 
 import { get, qs, enc } from '../api.js';
 import { h, replace, s } from '../dom.js';
-import { fmtValue, qualityOf, roleAtLeast, showSample } from '../format.js';
+import { fmtTime, fmtValue, qualityOf, roleAtLeast, showSample } from '../format.js';
 import { Binder } from '../ui.js';
 import { TrendChart, PEN_COLORS } from '../components/chart.js';
 import { singleLine } from '../components/singleline.js';
@@ -20,6 +20,21 @@ function place(node, e) {
   node.style.width = `${e.w}px`;
   node.style.height = `${e.h}px`;
   return node;
+}
+
+/**
+ * The time of a tag's sample, to the millisecond (the device's time stamp
+ * where it sends one), the date in the tooltip.
+ */
+function timeOf(binder, tag) {
+  const t = h('span', { class: 'el-time' });
+  binder.on(tag, (smp) => {
+    const ts = smp && smp.timestamp;
+    const full = ts ? fmtTime(ts, true) : '';
+    t.textContent = full ? full.slice(11) : '';
+    t.title = full ? `time of the value: ${full}` : 'no value yet';
+  });
+  return t;
 }
 
 /** An element's label: always a span (empty and hidden without text). */
@@ -56,7 +71,9 @@ export function drawElement(e, i, live) {
     case 'breaker': {
       const sym = h('span', { class: 'el-breaker-symbol', 'aria-hidden': 'true' });
       const st = h('span', { class: 'bk-text' });
-      box.append(sym, h('span', { class: 'el-breaker-text' }, label(e.label), st));
+      const text = h('span', { class: 'el-breaker-text' }, label(e.label), st);
+      if (e.time) text.append(timeOf(binder, e.tag));
+      box.append(sym, text);
       binder.on(e.tag, (smp, connected) => {
         const q = qualityOf(smp, connected);
         const known = q.usable && typeof smp.value === 'boolean';
@@ -73,6 +90,7 @@ export function drawElement(e, i, live) {
       box.append(label(e.label), v);
       const meta = live.tags.get(e.tag);
       binder.show(v, e.tag, { units: e.units ?? (meta ? meta.units : ''), digits: e.digits ?? undefined, kind: meta ? meta.kind : undefined });
+      if (e.time) box.append(timeOf(binder, e.tag));
       break;
     }
     case 'bar': {

@@ -355,6 +355,11 @@ export default {
           } })));
       }
       if (e.type === 'value') rows.push(numberField('Decimals', e.digits ?? '', (v) => { e.digits = v; }, 'prop-digits', true), text('units', 'Units (blank: the tag\'s)'));
+      if (e.type === 'value' || e.type === 'breaker') {
+        const c = checkbox(e.time, (v) => { if (v) e.time = true; else delete e.time; });
+        c.id = 'prop-time';
+        rows.push(h('label', { class: 'field field-inline' }, c, 'Show the time stamp (to the millisecond)'));
+      }
       if (e.type === 'bar') rows.push(numberField('Min', e.min, (v) => { e.min = v; }, 'prop-min'), numberField('Max', e.max, (v) => { e.max = v; }, 'prop-max'));
       if (e.type === 'multistate') {
         rows.push(textField('States (value=label, one per line)', (e.states || []).map((x) => `${x.value}=${x.label}`).join('\n'), (v) => {

@@ -87,6 +87,11 @@ pub enum ElementKind {
         tag: String,
         #[serde(default)]
         label: String,
+        /// Show the time of the position (the device's own time stamp
+        /// where it sends one: an RTU's sequence-of-events record), to the
+        /// millisecond.
+        #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+        time: bool,
     },
     Value {
         tag: String,
@@ -96,6 +101,9 @@ pub enum ElementKind {
         digits: Option<i64>,
         #[serde(default, skip_serializing_if = "Option::is_none")]
         units: Option<String>,
+        /// Show the time of the value, as for a breaker.
+        #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+        time: bool,
     },
     Bar {
         tag: String,
