@@ -35,6 +35,7 @@ import json
 import os
 import queue
 import random
+import shutil
 import signal
 import socket
 import subprocess
@@ -75,6 +76,16 @@ def note(what):
     print(f"     {what}", flush=True)
 
 
+def die_with_parent():
+    """For Popen's preexec_fn: the child gets SIGTERM when this test dies,
+    however it dies (Linux)."""
+    try:
+        import ctypes
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except Exception:
+        pass
+
+
 def free_port():
     s = socket.socket()
     s.bind(("127.0.0.1", 0))
@@ -100,7 +111,7 @@ def wait_for(cond, timeout, step=0.1):
 # stdout.
 
 DNP3PY = r'''
-import asyncio, sys
+import asyncio, os, sys
 from dnp3.core.timestamp import DNP3Timestamp
 from dnp3.database import AnalogInputConfig, BinaryInputConfig, BinaryOutputConfig, Database, EventClass
 from dnp3.outstation import Outstation, OutstationConfig, OutstationTcpRunner
@@ -139,8 +150,8 @@ async def commands():
     loop = asyncio.get_running_loop()
     while True:
         line = await loop.run_in_executor(None, sys.stdin.readline)
-        if not line:
-            return
+        if not line:  # the test is gone
+            os._exit(0)
         w = line.split()
         if w[0] == "COUNTER":
             db.update_counter(0, value=int(w[1]), timestamp=DNP3Timestamp(int(w[2])))
@@ -264,7 +275,8 @@ class Peer:
     def start(self):
         self.err = open(os.path.join(self.tmp, f"{self.name}.stderr"), "a")
         self.proc = subprocess.Popen([sys.executable, self.path, str(self.port)], stdin=subprocess.PIPE,
-                                     stdout=subprocess.PIPE, stderr=self.err, text=True, bufsize=1)
+                                     stdout=subprocess.PIPE, stderr=self.err, text=True, bufsize=1,
+                                     preexec_fn=die_with_parent)
         proc = self.proc
 
         def read():
@@ -397,12 +409,14 @@ class Hostile:
                 if len(data) < 3:
                     continue
                 seq, function = data[1] & 0x0F, data[2]
+                # A READ of class 0 (g60v1) is an integrity poll.
+                class0 = function == 1 and b"\x3c\x01" in data[3:]
                 mode = self.mode
                 self.requests.append((mode, function))
                 if function == 0:  # CONFIRM
                     continue
                 try:
-                    out = self.answer(mode, seq, function)
+                    out = self.answer(mode, seq, function, class0)
                     c.sendall(out)
                     self.sent[mode] = self.sent.get(mode, 0) + 1
                     self.octets[mode] = self.octets.get(mode, 0) + len(out)
@@ -411,15 +425,15 @@ class Hostile:
             if buf and buf[:2] != b"\x05\x64":
                 buf = b""
 
-    def answer(self, mode, seq, function):
-        body = GOOD_CLASS0 if function == 1 else b""
+    def answer(self, mode, seq, function, class0):
+        body = GOOD_CLASS0 if class0 else b""
         if mode == "crc":
             return link_frame(response(seq, body), corrupt=True)
         if mode == "fir_no_fin":
             # The first of two transport segments; the second never comes.
             return link_frame(response(seq, body, transport=0x40))
         if mode == "short_objects":
-            return link_frame(response(seq, SHORT_CLASS0 if function == 1 else b""))
+            return link_frame(response(seq, SHORT_CLASS0 if class0 else b""))
         if mode == "garbage":
             rnd = random.Random(len(self.requests))
             junk = bytes(rnd.choice([b for b in range(256) if b != 0x05]) for _ in range(64))
@@ -678,7 +692,8 @@ def main():
     cap = os.path.join(tmp, "dnp3.pcapng")
     tshark = subprocess.Popen(
         ["tshark", "-q", "-i", "lo", "-f", f"tcp port {p1} or tcp port {p2} or tcp port {ph}", "-w", cap],
-        stdout=subprocess.DEVNULL, stderr=open(os.path.join(tmp, "tshark.log"), "w"))
+        stdout=subprocess.DEVNULL, stderr=open(os.path.join(tmp, "tshark.log"), "w"),
+        preexec_fn=die_with_parent)
     wait_for(lambda: os.path.exists(cap), 10)
     time.sleep(1)
     peers = []
@@ -695,7 +710,8 @@ def main():
         data = os.path.join(tmp, "data")
         log = open(log_path, "w")
         proc = subprocess.Popen([BIN, "demo", "--config", plant, "--http", f"127.0.0.1:{http_port}",
-                                 "--data", data], stdout=log, stderr=subprocess.STDOUT)
+                                 "--data", data], stdout=log, stderr=subprocess.STDOUT,
+                                preexec_fn=die_with_parent)
         run(f"http://127.0.0.1:{http_port}", data, proc, os1, os2, hostile, log_path)
     except Exception as e:  # a broken harness is a failure, not a traceback
         import traceback
@@ -732,6 +748,8 @@ def main():
             except OSError:
                 pass
             print(f"(everything is in {tmp})")
+        else:
+            shutil.rmtree(tmp, ignore_errors=True)
     print(f"{PASSED} passed, {FAILED} failed ({time.time() - STARTED:.0f} s)")
     sys.exit(1 if FAILED else 0)
 
@@ -794,7 +812,7 @@ def run(base, data, proc, os1, os2, hostile, log_path):
           f"{status} {body}")
     note(f"the write's answer shows OS1.Q1.Closed = {body.get('value')!r} at {body.get('timestamp')}")
     t0 = time.time()
-    back = wait_for(lambda: good(api, "OS1.Q1.Closed", True), 8)
+    back = wait_for(lambda: good(api, "OS1.Q1.Closed", True), 3)
     note(f"OS1.Q1.Closed reads True after {time.time() - t0:.1f} s: {back is not None} ({quality(api, 'OS1.Q1.Closed')})")
     check(good(api, "OS1.Alarm", False) is not None, "dnp3py: binary input 0 is untouched by the command to output 0",
           quality(api, "OS1.Alarm"))
@@ -925,10 +943,11 @@ def hostile_cases(api, hostile):
               f"{last_error()} / answers sent {hostile.sent.get(mode)}")
         # Let it run for a while: the other devices go on meanwhile. The
         # device's connected flag, sampled.
-        seen = []
+        seen, tag_seen = [], []
         end = time.time() + 3
         while time.time() < end:
             seen.append(bool((api.device("HB")[0] or {}).get("connected")))
+            tag_seen.append((api.tag("HB.Comm.Connected") or {}).get("value"))
             time.sleep(0.2)
         check(api.healthz() == 200, f"hostile ({what}): gridscada goes on, /healthz answers 200")
         stamp = int(time.time() * 1000) - 100
@@ -944,7 +963,8 @@ def hostile_cases(api, hostile):
              f"reconnects={hostile.accepts - accepts0}; answers sent={hostile.sent.get(mode)} "
              f"({hostile.octets.get(mode)} octets); "
              f"metrics garbage={metric_garbage()}; connected sampled: {seen.count(True)} true, "
-             f"{seen.count(False)} false")
+             f"{seen.count(False)} false; HB.Comm.Connected sampled: {tag_seen.count(True)} true, "
+             f"{tag_seen.count(False)} false")
         if mode in ("crc", "garbage", "short_objects"):
             check(g1 > g0, f"hostile ({what}): counted in the devices API's garbage_bytes ({g0} -> {g1})")
         if mode in ("crc", "fir_no_fin", "garbage"):
@@ -956,15 +976,23 @@ def hostile_cases(api, hostile):
     check(metric_garbage() == garbage() > 0, "/metrics: HB's gridscada_link_garbage_bytes_total = the devices API's",
           f"{metric_garbage()} vs {garbage()}")
 
-    # Recovery: the outstation answers correctly again, on the same
-    # connection: HB.A0 comes back Good.
+    # Recovery. The outstation answers correctly again on the same
+    # connection: the event polls (every second) are answered, but today the
+    # integrity poll that timed out is not asked again before
+    # integrity_period_s (3600 s), so HB.A0 stays Bad: recorded, not checked
+    # (a product bug, see the report of this test's first runs).
     hostile.mode = "good"
+    n = len(hostile.requests)
+    t = wait_for(lambda: good(api, "HB.A0", 5.0), 4)
+    note(f"good again on the same connection, 4 s: HB.A0 {quality(api, 'HB.A0')}; "
+         f"requests since: {[f for _, f in hostile.requests[n:]]}")
+    # After a reconnect the startup's integrity poll brings it back.
+    hostile.drop_connections()
     t = wait_for(lambda: good(api, "HB.A0", 5.0), 10)
-    note(f"good again on the same connection: HB.A0 {quality(api, 'HB.A0')} after the last hostile case")
-    if t is None:
-        hostile.drop_connections()
-        t = wait_for(lambda: good(api, "HB.A0", 5.0), 10)
-    check(t is not None, "hostile outstation answers correctly again: HB.A0 is Good again", quality(api, "HB.A0"))
+    check(t is not None, "hostile outstation correct again, after a reconnect: HB.A0 is Good again",
+          quality(api, "HB.A0"))
+    check(api.healthz() == 200 and good(api, "OS2.Volts") is not None and good(api, "OS1.Remote") is not None,
+          "after the hostile cases: /healthz 200, OS1 and OS2 Good")
 
 
 def wire_check(cap, ports, hostile_port):
@@ -988,6 +1016,22 @@ def wire_check(cap, ports, hostile_port):
         per_port[p] = len(r.stdout.splitlines())
     check(all(n > 10 for n in per_port.values()), "tshark: both outstations' sessions are in the capture",
           str(per_port))
+    # On dnp3py's port: each of its two starts answered with IIN1.7 and was
+    # followed by gridscada's WRITE g80v1 (index 7 cleared); the breaker's
+    # SELECT then OPERATE of a CROB (g12v1).
+    def fields(port, flt, *names):
+        r = subprocess.run(["tshark", "-r", cap, *decode, "-Y", f"dnp3 && {flt}", "-T", "fields",
+                            *[a for n in names for a in ("-e", n)]], capture_output=True, text=True, timeout=60)
+        return [l.split("\t") for l in r.stdout.splitlines()]
+    p1 = ports[0]
+    restarts = fields(p1, f"tcp.srcport == {p1} && dnp3.al.iin.rst == 1", "frame.number")
+    clears = fields(p1, f"tcp.dstport == {p1} && dnp3.al.func == 2 && dnp3.al.obj == 0x5001", "frame.number")
+    check(len(restarts) >= 2 and len(clears) == 2,
+          "tshark: dnp3py's two starts set IIN1.7, each cleared by a WRITE of g80v1",
+          f"responses with IIN1.7: {len(restarts)}, WRITE g80v1: {len(clears)}")
+    crob = [f for f, o in fields(p1, f"tcp.dstport == {p1} && dnp3.al.func", "dnp3.al.func", "dnp3.al.obj")
+            if o == "0x0c01"]
+    check(crob == ["3", "4"], "tshark: the breaker's CROB (g12v1) went out as SELECT, then OPERATE", str(crob))
     # What tshark thinks of the hostile answers (for the record).
     hb = subprocess.run(["tshark", "-r", cap, *decode, "-Y",
                          f"tcp.srcport == {hostile_port} && (_ws.malformed || _ws.expert.severity >= warning)"],
