@@ -8,19 +8,22 @@ gridscada runs `demo --config` on a plant of three DNP3 devices:
 - OS1, dnp3py 0.6.0's outstation (event polls every second, no unsolicited
   responses: its TCP runner sends none): binary inputs, an analog input, a
   counter whose events carry the outstation's time (g22v5), a breaker
-  (binary output status + CROB with select-before-operate), an analog
-  output with engineering limits (g41, direct operate);
+  (binary output status + CROB with select-before-operate), a pump whose
+  direct-operate CROB is refused (HARDWARE_ERROR), an analog output with
+  engineering limits (g41, direct operate); it is stopped and started again
+  (IIN1.7 device restart);
 - OS2, py1815 0.3.0's outstation (unsolicited responses only, no event
   polls): a double-bit input (g3v2, encoded here: py1815 has no encoder for
-  it), binary inputs whose events carry the outstation's time (g2v3 + g51
-  in polls, g2v2 unsolicited), an analog input, a counter, binary outputs
+  it), binary inputs and an analog input whose events come unsolicited with
+  the outstation's time (g2v2, g32v3), a counter, binary outputs
   (g10v2 + CROB, one of them refused NOT_AUTHORIZED), an analog output
   (g40 + g41);
 - HB, a hostile outstation written here: it answers gridscada's requests
   with (a) link frames whose user data CRC is wrong, (b1) a transport
   segment with FIR and no FIN that is never continued, (b2) an object header
   claiming more objects than the fragment holds, (c) garbage octets; then
-  (d) correct answers again.
+  correct answers again. See hostile_cases for what gridscada does with
+  each, and what is left unchecked as a product bug.
 
 The checks read what reaches gridscada's API (values, quality, timestamps,
 the audited write, the event log, the devices API, /metrics), what the
@@ -134,8 +137,9 @@ class Handler:
         db.update_binary_output(index, value=int(code) == 3)
         return CommandResult.success()
     def direct_operate_binary_output(self, index, code, count, on_time, off_time, *a, **k):
+        # Output 1 (a pump) has failed: refused.
         say("DIRECT", index, int(code))
-        return CommandResult.success()
+        return CommandResult.hardware_error() if index == 1 else CommandResult.success()
     def select_analog_output(self, index, value, *a, **k):
         say("SELECT_AO", index, value)
         return CommandResult.success()
@@ -173,12 +177,14 @@ async def main(port):
     # g2v1 (binary INPUT events) with the output's index, which would set
     # binary input 0.
     db.add_binary_output(0, BinaryOutputConfig(event_class=EventClass.NONE))
+    db.add_binary_output(1, BinaryOutputConfig(event_class=EventClass.NONE))
     db.add_analog_output(0)
     db.update_binary_input(0, value=False)
     db.update_binary_input(1, value=True)
     db.update_analog_input(0, value=42)
     db.update_counter(0, value=7)
     db.update_binary_output(0, value=False)
+    db.update_binary_output(1, value=False)
     db.update_analog_output(0, value=10)
     o = Outstation(database=db, config=OutstationConfig(address=1024, master_address=1),
                    handler=Handler())
@@ -579,6 +585,14 @@ states = {{ false = "OPEN", true = "CLOSED" }}
 dnp3 = {{ point = "binary_output", index = 0, command = "crob", select = true }}
 
 [[tag]]
+name = "OS1.Pump"
+device = "OS1"
+type = "bool"
+writable = true
+write_role = "operator"
+dnp3 = {{ point = "binary_output", index = 1, command = "crob" }}
+
+[[tag]]
 name = "OS1.Setpoint"
 device = "OS1"
 units = "kW"
@@ -769,7 +783,7 @@ def run(base, data, proc, os1, os2, hostile, log_path):
     # -- The integrity poll brings every point, Good.
     expected = {
         "OS1.Alarm": False, "OS1.Remote": True, "OS1.Power": 42.0, "OS1.Energy": 7,
-        "OS1.Q1.Closed": False, "OS1.Setpoint": 10.0,
+        "OS1.Q1.Closed": False, "OS1.Pump": False, "OS1.Setpoint": 10.0,
         "OS2.Breaker": True, "OS2.Trip": False, "OS2.Volts": 1234.0, "OS2.Count": 555,
         "OS2.Q0": False, "OS2.Q1": False, "OS2.Limit": 20,
         "HB.A0": 5.0,
@@ -832,6 +846,11 @@ def run(base, data, proc, os1, os2, hostile, log_path):
     check(status == 200 and wait_for(lambda: os1.said("DIRECT_AO 0 125.5"), 5),
           "dnp3py: a set point (g41, direct operate) is confirmed and reached the outstation",
           f"{status} {body} {os1.said('DIRECT_AO')}")
+    status, body = api.call("POST", "/api/tags/OS1.Pump/write", {"value": True})
+    msg = json.dumps(body)
+    wait_for(lambda: os1.said("DIRECT 1"), 3)
+    check(status == 502 and "HARDWARE_ERROR" in msg and os1.said("DIRECT 1 3") and not os1.said("SELECT 1"),
+          "dnp3py: a direct operate the outstation refuses fails, naming HARDWARE_ERROR", f"{status} {msg}")
     n = len(os1.lines)
     status, body = api.call("POST", "/api/tags/OS1.Setpoint/write", {"value": 900})
     time.sleep(0.3)
@@ -874,8 +893,10 @@ def run(base, data, proc, os1, os2, hostile, log_path):
     dev1, link1 = api.device("OS1")
     dev2, _ = api.device("OS2")
     check(dev1 and dev1.get("protocol") == "dnp3" and dev1.get("connected") and dev1.get("requests", 0) > 0
-          and (dev1.get("telecontrol") or {}).get("events", 0) > 0 and (dev1.get("telecontrol") or {}).get("commands", 0) >= 2,
-          "devices API: OS1 is a connected dnp3 device with requests, events and commands counted", json.dumps(dev1))
+          and (dev1.get("telecontrol") or {}).get("events", 0) > 0 and (dev1.get("telecontrol") or {}).get("commands", 0) >= 3
+          and (dev1.get("telecontrol") or {}).get("commands_failed", 0) >= 1,
+          "devices API: OS1 is a connected dnp3 device with requests, events, commands and a failed one counted",
+          json.dumps(dev1))
     check(dev2 and dev2.get("connected") and (dev2.get("telecontrol") or {}).get("commands_failed", 0) >= 1,
           "devices API: OS2 counts its refused command", json.dumps(dev2))
     m = api.metrics()
@@ -1058,7 +1079,7 @@ def wire_check(cap, ports, hostile_port):
           str(per_port))
     # On dnp3py's port: each of its two starts answered with IIN1.7 and was
     # followed by gridscada's WRITE g80v1 (index 7 cleared); the breaker's
-    # SELECT then OPERATE of a CROB (g12v1).
+    # SELECT then OPERATE of a CROB (g12v1), then the pump's DIRECT_OPERATE.
     def fields(port, flt, *names):
         r = subprocess.run(["tshark", "-r", cap, *decode, "-Y", f"dnp3 && {flt}", "-T", "fields",
                             *[a for n in names for a in ("-e", n)]], capture_output=True, text=True, timeout=60)
@@ -1071,7 +1092,8 @@ def wire_check(cap, ports, hostile_port):
           f"responses with IIN1.7: {len(restarts)}, WRITE g80v1: {len(clears)}")
     crob = [f for f, o in fields(p1, f"tcp.dstport == {p1} && dnp3.al.func", "dnp3.al.func", "dnp3.al.obj")
             if o == "0x0c01"]
-    check(crob == ["3", "4"], "tshark: the breaker's CROB (g12v1) went out as SELECT, then OPERATE", str(crob))
+    check(crob == ["3", "4", "5"],
+          "tshark: the CROBs (g12v1) went out as SELECT, OPERATE (the breaker), DIRECT_OPERATE (the pump)", str(crob))
     # What tshark thinks of the hostile answers (for the record).
     hb = subprocess.run(["tshark", "-r", cap, *decode, "-Y",
                          f"tcp.srcport == {hostile_port} && (_ws.malformed || _ws.expert.severity >= warning)"],
