@@ -60,6 +60,9 @@ pub struct MasterConfig {
     pub select_timeout: Duration,
     /// The largest fragment reassembled.
     pub max_fragment: usize,
+    /// How long after a failed integrity poll (no response, or a
+    /// malformed one) it is tried again.
+    pub integrity_retry: Duration,
 }
 
 impl Default for MasterConfig {
@@ -75,6 +78,7 @@ impl Default for MasterConfig {
             time_sync: true,
             select_timeout: Duration::from_secs(10),
             max_fragment: transport::DEFAULT_MAX_FRAGMENT,
+            integrity_retry: Duration::from_secs(5),
         }
     }
 }
@@ -272,6 +276,12 @@ pub struct Master {
     refused_bits: Iin,
     /// Malformed input since the last well-formed response.
     malformed_run: u32,
+    /// Octets discarded as malformed, since the master was made.
+    discarded_octets: u64,
+    /// Link frames from the outstation to us, since the master was made.
+    frames_heard: u64,
+    /// When a failed integrity poll is tried again.
+    integrity_retry_at: Option<Instant>,
 }
 
 impl Master {
@@ -293,6 +303,9 @@ impl Master {
             unsolicited_enabled: false,
             refused_bits: Iin::default(),
             malformed_run: 0,
+            discarded_octets: 0,
+            frames_heard: 0,
+            integrity_retry_at: None,
         }
     }
 
@@ -303,6 +316,18 @@ impl Master {
     /// The outstation's last IIN.
     pub fn iin(&self) -> Iin {
         self.iin
+    }
+
+    /// Octets discarded as malformed (frames with a bad CRC or length,
+    /// garbage, segments out of sequence, fragments that do not parse).
+    pub fn discarded_octets(&self) -> u64 {
+        self.discarded_octets
+    }
+
+    /// Well-formed link frames from the outstation to us: whether it
+    /// answers, as opposed to anything arriving on the connection.
+    pub fn frames_heard(&self) -> u64 {
+        self.frames_heard
     }
 
     pub fn is_connected(&self) -> bool {
@@ -355,6 +380,7 @@ impl Master {
         self.next_integrity = None;
         self.next_events = None;
         self.malformed_run = 0;
+        self.integrity_retry_at = None;
         out
     }
 
@@ -396,7 +422,10 @@ impl Master {
         while let Some(frame) = link::take_frame(&mut self.rx) {
             match frame {
                 Ok(frame) => self.link_frame(frame, now, &mut out),
-                Err(e) => self.malformed(format!("link layer: {e}"), &mut out),
+                Err(e) => {
+                    let octets = e.discard().max(1);
+                    self.malformed(format!("link layer: {e}"), octets, &mut out)
+                }
             }
         }
         self.pump(now, &mut out);
@@ -419,15 +448,24 @@ impl Master {
                             after,
                         }),
                     )),
-                    t => out.push(Action::Report(Report::ResponseTimeout {
-                        function: f.function,
-                        task: t.name(),
-                        after,
-                    })),
+                    t => {
+                        if t == Task::Integrity {
+                            self.integrity_retry_at = Some(now.mono + self.cfg.integrity_retry);
+                        }
+                        out.push(Action::Report(Report::ResponseTimeout {
+                            function: f.function,
+                            task: t.name(),
+                            after,
+                        }))
+                    }
                 }
             }
         }
         if self.connected {
+            if self.integrity_retry_at.is_some_and(|at| now.mono >= at) {
+                self.integrity_retry_at = None;
+                self.enqueue(Task::Integrity);
+            }
             if let (Some(at), Some(p)) = (self.next_integrity, self.cfg.integrity_period) {
                 if now.mono >= at {
                     self.enqueue(Task::Integrity);
@@ -451,6 +489,7 @@ impl Master {
             self.in_flight.as_ref().map(|f| f.deadline),
             self.next_integrity,
             self.next_events,
+            self.integrity_retry_at,
         ]
         .into_iter()
         .flatten()
@@ -576,6 +615,7 @@ impl Master {
             ))));
             return;
         }
+        self.frames_heard += 1;
         match frame.function {
             LinkFunction::UnconfirmedUserData => self.segment(&frame.data, now, out),
             LinkFunction::ConfirmedUserData => {
@@ -598,7 +638,7 @@ impl Master {
         match self.reassembler.push(data) {
             Ok(Some(fragment)) => self.fragment(&fragment, now, out),
             Ok(None) => {}
-            Err(e) => self.malformed(format!("transport: {e}"), out),
+            Err(e) => self.malformed(format!("transport: {e}"), data.len(), out),
         }
     }
 
@@ -606,10 +646,21 @@ impl Master {
         let header = match ResponseHeader::decode(fragment) {
             Ok(h) => h,
             Err(e) => {
-                self.malformed(format!("application layer: {e}"), out);
+                self.malformed(format!("application layer: {e}"), fragment.len(), out);
                 return;
             }
         };
+        // The whole fragment is parsed before any of it is used or
+        // confirmed: a fragment that does not parse is malformed, its
+        // values dropped and not confirmed (the outstation sends it again).
+        let objects = objects::parse(&fragment[ResponseHeader::LEN..], ResponseHeader::LEN);
+        if let Some(e) = &objects.error {
+            self.malformed(format!("objects: {e}"), fragment.len(), out);
+            if header.function == FunctionCode::Response {
+                self.response_failed(now, out);
+            }
+            return;
+        }
         let unsolicited = header.function == FunctionCode::UnsolicitedResponse;
         if unsolicited {
             if header.control.con {
@@ -623,7 +674,6 @@ impl Master {
                 return;
             }
             self.last_unsolicited = Some(fragment.to_vec());
-            let objects = objects::parse(&fragment[ResponseHeader::LEN..], ResponseHeader::LEN);
             self.deliver(&objects, out);
             self.iin_changes(header.iin, out);
             return;
@@ -652,7 +702,6 @@ impl Master {
         if header.control.con {
             self.send_apdu(&request::confirm(header.control.seq, false), out);
         }
-        let objects = objects::parse(&fragment[ResponseHeader::LEN..], ResponseHeader::LEN);
         let refused = header
             .iin
             .any(Iin::NO_FUNC_CODE_SUPPORT | Iin::OBJECT_UNKNOWN | Iin::PARAMETER_ERROR);
@@ -709,6 +758,7 @@ impl Master {
                     match task {
                         Task::EnableUnsolicited => self.unsolicited_enabled = true,
                         Task::DisableUnsolicited => self.unsolicited_enabled = false,
+                        Task::Integrity => self.integrity_retry_at = None,
                         _ => {}
                     }
                     match f.step {
@@ -811,8 +861,30 @@ impl Master {
         }
     }
 
-    /// Malformed input: reported, and the connection closed after a run.
-    fn malformed(&mut self, reason: String, out: &mut Vec<Action>) {
+    /// The response in flight was malformed: the request has failed; a
+    /// failed integrity poll is tried again after `integrity_retry`.
+    fn response_failed(&mut self, now: Clock, out: &mut Vec<Action>) {
+        let Some(f) = self.in_flight.take() else {
+            return;
+        };
+        self.reassembler.reset();
+        match f.task {
+            Task::Command(c) => out.push(outcome(
+                c.id,
+                Err(CommandError::Malformed {
+                    stage: f.function,
+                    reason: "the response does not parse".into(),
+                }),
+            )),
+            Task::Integrity => self.integrity_retry_at = Some(now.mono + self.cfg.integrity_retry),
+            _ => {}
+        }
+    }
+
+    /// Malformed input (`octets` of it): reported, and the connection
+    /// closed after a run.
+    fn malformed(&mut self, reason: String, octets: usize, out: &mut Vec<Action>) {
+        self.discarded_octets += octets as u64;
         self.malformed_run += 1;
         out.push(Action::Report(Report::Malformed(reason.clone())));
         if self.malformed_run >= MALFORMED_IN_A_ROW {
@@ -827,10 +899,7 @@ impl Master {
         for n in &objects.notes {
             out.push(Action::Report(Report::Note(n.clone())));
         }
-        match &objects.error {
-            Some(e) => self.malformed(format!("objects: {e}"), out),
-            None => self.malformed_run = 0,
-        }
+        self.malformed_run = 0;
         if !objects.measurements.is_empty() {
             out.push(Action::Measurements(objects.measurements.clone()));
         }

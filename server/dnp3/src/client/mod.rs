@@ -59,6 +59,7 @@ pub(crate) struct Counters {
     pub overflows: AtomicU64,
     pub connects: AtomicU64,
     pub disconnects: AtomicU64,
+    /// Octets discarded as malformed.
     pub malformed: AtomicU64,
     pub round_trips: RoundTrips,
     pub response_us: AtomicU64,

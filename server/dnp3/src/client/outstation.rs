@@ -120,6 +120,8 @@ impl Outstation {
             match stream {
                 Ok(stream) => {
                     self.backoff = Duration::from_millis(250);
+                    // The reason of the last failure no longer holds.
+                    self.counters.last_error.lock().clear();
                     let _ = stream.set_nodelay(true);
                     self.counters.connects.fetch_add(1, Ordering::Relaxed);
                     tracing::info!(outstation = %self.s.name, address = %self.s.address, "DNP3 connected");
@@ -189,16 +191,24 @@ impl Outstation {
                     Ok(0) => return End::Lost("the outstation closed the connection".into()),
                     Err(e) => return End::Lost(format!("read failed: {e}")),
                     Ok(n) => {
-                        if let Some(at) = self.sent_at.take() {
-                            self.observe_round_trip(at.elapsed());
-                        }
-                        // The outstation answers: connected (again, after
-                        // a response timeout).
-                        if !self.counters.connected.swap(true, Ordering::Relaxed) {
-                            self.publish_status();
-                        }
                         let now = self.now();
-                        self.master.received(&buf[..n], now)
+                        let heard = self.master.frames_heard();
+                        let actions = self.master.received(&buf[..n], now);
+                        self.counters
+                            .malformed
+                            .store(self.master.discarded_octets(), Ordering::Relaxed);
+                        // A well-formed frame from the outstation: it answers,
+                        // connected (again, after a response timeout).
+                        // Garbage on the connection is not an answer.
+                        if self.master.frames_heard() > heard {
+                            if let Some(at) = self.sent_at.take() {
+                                self.observe_round_trip(at.elapsed());
+                            }
+                            if !self.counters.connected.swap(true, Ordering::Relaxed) {
+                                self.publish_status();
+                            }
+                        }
+                        actions
                     }
                 },
                 Some(c) = self.commands.recv() => self.begin_command(c),
@@ -325,10 +335,8 @@ impl Outstation {
                 self.counters.overflows.fetch_add(1, Ordering::Relaxed);
                 tracing::warn!(outstation = %self.s.name, "{r}");
             }
-            Report::Malformed(_) => {
-                self.counters.malformed.fetch_add(1, Ordering::Relaxed);
-                self.set_error(&r.to_string());
-            }
+            // Counted in octets where they are read (`discarded_octets`).
+            Report::Malformed(_) => self.set_error(&r.to_string()),
             Report::Refused { .. } => self.set_error(&r.to_string()),
             Report::DeviceRestart | Report::TimeSynced { .. } => {
                 tracing::info!(outstation = %self.s.name, "{r}")

@@ -668,6 +668,67 @@ fn a_run_of_malformed_frames_closes_the_connection() {
 }
 
 #[test]
+fn a_failed_integrity_poll_is_tried_again() {
+    let mut o = Outstation::connect(MasterConfig {
+        enable_unsolicited: false,
+        ..no_periodic()
+    });
+    let (f, s, _) = o.request();
+    assert_eq!(f, FunctionCode::DisableUnsolicited);
+    o.respond(s, false, Iin::default(), "");
+    let (f, _, apdu) = o.request();
+    assert_eq!((f, apdu.len()), (FunctionCode::Read, 14), "integrity poll");
+    // No answer: after the response timeout and the retry delay, again.
+    o.advance(Duration::from_secs(5));
+    assert!(matches!(&o.reports()[..], [Report::ResponseTimeout { .. }]));
+    o.nothing_sent();
+    o.advance(Duration::from_secs(5));
+    let (f, s, apdu) = o.request();
+    assert_eq!(
+        (f, apdu.len()),
+        (FunctionCode::Read, 14),
+        "integrity poll again"
+    );
+    // Answered with objects cut short (two binaries announced, one
+    // there): malformed, nothing of it used or confirmed, tried again.
+    let before = o.master.discarded_octets();
+    o.respond(s, true, Iin::default(), "01 02 00 00 01 81");
+    assert!(
+        o.values().is_empty(),
+        "nothing of a malformed response is used"
+    );
+    o.nothing_sent();
+    assert!(o.master.discarded_octets() > before);
+    o.advance(Duration::from_secs(5));
+    let (f, s, apdu) = o.request();
+    assert_eq!(
+        (f, apdu.len()),
+        (FunctionCode::Read, 14),
+        "integrity poll once more"
+    );
+    o.respond(s, false, Iin::default(), "01 02 00 00 01 81 01");
+    assert_eq!(
+        o.values(),
+        vec![(0, Value::Binary(true)), (1, Value::Binary(false))]
+    );
+    // Done: no more retries.
+    o.advance(Duration::from_secs(30));
+    o.nothing_sent();
+}
+
+#[test]
+fn garbage_is_not_the_outstation_answering() {
+    let mut o = Outstation::connect(no_periodic());
+    o.startup();
+    let heard = o.master.frames_heard();
+    o.feed(&hex("00 11 22 33 44 55"));
+    assert_eq!(o.master.frames_heard(), heard);
+    assert_eq!(o.master.discarded_octets(), 6);
+    o.send(&hex("F0 82 00 00"));
+    assert_eq!(o.master.frames_heard(), heard + 1);
+}
+
+#[test]
 fn link_services_and_garbage() {
     let mut o = Outstation::connect(no_periodic());
     o.requests();
