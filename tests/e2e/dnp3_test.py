@@ -127,14 +127,17 @@ def say(*a):
 db = Database()
 
 class Handler:
-    # Output 0 (the breaker) is selected and operated and reads back its
-    # position; analog output 0 takes any value.
+    # Output 0 (the breaker) is selected and operated; its position is
+    # binary input 2, which follows. Analog output 0 takes any value, and
+    # analog input 1 returns it. (The returned status confirms a command.)
     def select_binary_output(self, index, code, count, on_time, off_time, *a, **k):
         say("SELECT", index, int(code))
         return CommandResult.success()
     def operate_binary_output(self, index, code, count, on_time, off_time, *a, **k):
         say("OPERATE", index, int(code))
         db.update_binary_output(index, value=int(code) == 3)
+        if index == 0:
+            db.update_binary_input(2, value=int(code) == 3)
         return CommandResult.success()
     def direct_operate_binary_output(self, index, code, count, on_time, off_time, *a, **k):
         # Output 1 (a pump) has failed: refused.
@@ -149,6 +152,7 @@ class Handler:
     def direct_operate_analog_output(self, index, value, *a, **k):
         say("DIRECT_AO", index, value)
         db.update_analog_output(index, value=value)
+        db.update_analog_input(1, value=value)
         return CommandResult.success()
 
 async def commands():
@@ -169,9 +173,10 @@ async def commands():
             say("BINARY", w[1], w[2])
 
 async def main(port):
-    for i in range(2):
+    for i in range(3):
         db.add_binary_input(i, BinaryInputConfig())
     db.add_analog_input(0, AnalogInputConfig())
+    db.add_analog_input(1, AnalogInputConfig())
     db.add_counter(0)
     # No events for the output: dnp3py 0.6.0 sends binary output events as
     # g2v1 (binary INPUT events) with the output's index, which would set
@@ -181,7 +186,9 @@ async def main(port):
     db.add_analog_output(0)
     db.update_binary_input(0, value=False)
     db.update_binary_input(1, value=True)
+    db.update_binary_input(2, value=False)
     db.update_analog_input(0, value=42)
+    db.update_analog_input(1, value=10)
     db.update_counter(0, value=7)
     db.update_binary_output(0, value=False)
     db.update_binary_output(1, value=False)
@@ -206,6 +213,8 @@ def say(*a):
     print(*a, flush=True)
 
 state = {"outputs": [False, False], "ao": 20.0, "dbi": 2}
+EVENTS = EventBuffers()
+SERVER = []
 
 class Points:
     # Class 0: a double-bit input (g3v2: py1815 has no encoder for it, the
@@ -219,8 +228,11 @@ class Points:
         bo = bytes([10, 2, 0, 0, 1]) + b"".join(
             encode_binary_output_status(state=s) for s in state["outputs"])
         ao = bytes([40, 1, 0, 0, 0]) + encode_analog_output_status(state["ao"], 1)
-        return (dbi + binary_range(0, [BinaryPoint(False), BinaryPoint(False)])
-                + analog_range(0, [AnalogPoint(1234)]) + counter_range(0, [CounterPoint(555)])
+        # Binary input 2 is output 0's breaker position; analog input 1
+        # returns analog output 0's value: they confirm the commands.
+        return (dbi + binary_range(0, [BinaryPoint(False), BinaryPoint(False), BinaryPoint(state["outputs"][0])])
+                + analog_range(0, [AnalogPoint(1234), AnalogPoint(state["ao"])])
+                + counter_range(0, [CounterPoint(555)])
                 + bo + ao)
 
 class Controls:
@@ -233,14 +245,28 @@ class Controls:
         return self.answer(controls)
     def operate(self, controls):
         say("OPERATE", *[f"g{c.group}:{c.index}" for c in controls])
-        return self.answer(controls)
+        statuses = self.answer(controls)
+        for c, st in zip(controls, statuses):
+            if st != CommandStatus.SUCCESS or c.index != 0:
+                continue
+            if c.group == 12:
+                on = (c.command.control_code & 0x0F) in (1, 3) or (c.command.control_code >> 6) == 1
+                state["outputs"][0] = on
+                EVENTS.record_binary(2, BinaryPoint(on), event_class=EventClass.CLASS_1)
+            elif c.group == 41:
+                state["ao"] = float(c.command.value)
+                EVENTS.record_analog(1, AnalogPoint(state["ao"]), event_class=EventClass.CLASS_2)
+        if SERVER:
+            SERVER[0].notify()
+        return statuses
 
 async def main(port):
-    events = EventBuffers()
+    events = EVENTS
     session = Session(Points(), control_provider=Controls(), events=events,
                       outstation_address=1024, master_address=1,
                       need_time=True, time_sink=lambda ms: say("TIME", ms), unsolicited=True)
     server = OutstationServer(session, bind=f"127.0.0.1:{port}")
+    SERVER.append(server)
     await server.start()
     say("LISTENING")
     loop = asyncio.get_running_loop()
@@ -369,6 +395,8 @@ class Hostile:
         self.sock = socket.socket()
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         self.sock.bind(("127.0.0.1", port))
+        # Port 0: the kernel's choice, bound at once (no race for it).
+        self.port = self.sock.getsockname()[1]
         self.sock.listen(4)
         self.sock.settimeout(0.5)
         self.running = True
@@ -582,7 +610,7 @@ type = "bool"
 writable = true
 write_role = "operator"
 states = {{ false = "OPEN", true = "CLOSED" }}
-dnp3 = {{ point = "binary_output", index = 0, command = "crob", select = true }}
+dnp3 = {{ point = "binary_input", index = 2, command = "crob", command_index = 0, select = true }}
 
 [[tag]]
 name = "OS1.Pump"
@@ -600,7 +628,7 @@ writable = true
 write_role = "operator"
 min = 0.0
 max = 500.0
-dnp3 = {{ point = "analog_output", index = 0, command = "analog_output" }}
+dnp3 = {{ point = "analog_input", index = 1, command = "analog_output", command_index = 0 }}
 
 [[tag]]
 name = "OS2.Breaker"
@@ -631,7 +659,7 @@ device = "OS2"
 type = "bool"
 writable = true
 write_role = "operator"
-dnp3 = {{ point = "binary_output", index = 0, command = "crob", select = true }}
+dnp3 = {{ point = "binary_input", index = 2, command = "crob", command_index = 0, select = true }}
 
 [[tag]]
 name = "OS2.Q1"
@@ -649,7 +677,7 @@ writable = true
 write_role = "operator"
 min = 0
 max = 100
-dnp3 = {{ point = "analog_output", index = 0, command = "analog_output", select = true }}
+dnp3 = {{ point = "analog_input", index = 1, command = "analog_output", command_index = 0, select = true }}
 
 [[tag]]
 name = "HB.A0"
@@ -696,7 +724,11 @@ def quality(api, name):
 
 def main():
     tmp = tempfile.mkdtemp(prefix="gridscada-dnp3-")
-    p1, p2, ph, http_port = free_port(), free_port(), free_port(), free_port()
+    # The hostile outstation listens from the start, on a port of its own.
+    hostile = Hostile(0)
+    hostile.mode = "good"
+    ph = hostile.port
+    p1, p2, http_port = free_port(), free_port(), free_port()
     plant = os.path.join(tmp, "plant")
     os.makedirs(plant)
     with open(os.path.join(plant, "gridscada.toml"), "w") as f:
@@ -717,7 +749,6 @@ def main():
     wait_for(lambda: os.path.exists(cap), 10)
     time.sleep(1)
     peers = []
-    hostile = None
     proc = None
     log_path = os.path.join(tmp, "server.log")
     try:
@@ -725,12 +756,12 @@ def main():
         peers.append(os1)
         os2 = Peer("py1815", PY1815, p2, tmp)
         peers.append(os2)
-        hostile = Hostile(ph)
-        hostile.mode = "good"
         data = os.path.join(tmp, "data")
         log = open(log_path, "w")
+        # The outstations are the Python peers, not the demo's simulated ones.
         proc = subprocess.Popen([BIN, "demo", "--config", plant, "--http", f"127.0.0.1:{http_port}",
-                                 "--data", data], stdout=log, stderr=subprocess.STDOUT,
+                                 "--data", data, "--real-device", "OS1", "--real-device", "OS2",
+                                 "--real-device", "HB"], stdout=log, stderr=subprocess.STDOUT,
                                 preexec_fn=die_with_parent)
         run(f"http://127.0.0.1:{http_port}", data, proc, os1, os2, hostile, log_path)
     except Exception as e:  # a broken harness is a failure, not a traceback
@@ -748,8 +779,7 @@ def main():
                 proc.wait(5)
         for p in peers:
             p.stop()
-        if hostile is not None:
-            hostile.close()
+        hostile.close()
         time.sleep(1)
         tshark.terminate()
         try:
@@ -841,9 +871,10 @@ def run(base, data, proc, os1, os2, hostile, log_path):
     cmds = [l for l in os1.lines if l.split()[0] in ("SELECT", "OPERATE", "DIRECT")]
     check(cmds == ["SELECT 0 3", "OPERATE 0 3"], "dnp3py: the outstation saw SELECT, then OPERATE (LATCH_ON)",
           str(cmds))
-    status, body = api.call("POST", "/api/tags/OS1.Setpoint/write", {"value": 125.5})
+    # A whole number: dnp3py returns it on a 32-bit integer analog input.
+    status, body = api.call("POST", "/api/tags/OS1.Setpoint/write", {"value": 125})
     note(f"the write's answer shows OS1.Setpoint = {body.get('value')!r}")
-    check(status == 200 and wait_for(lambda: os1.said("DIRECT_AO 0 125.5"), 5),
+    check(status == 200 and wait_for(lambda: os1.said("DIRECT_AO 0 125"), 5),
           "dnp3py: a set point (g41, direct operate) is confirmed and reached the outstation",
           f"{status} {body} {os1.said('DIRECT_AO')}")
     status, body = api.call("POST", "/api/tags/OS1.Pump/write", {"value": True})
@@ -949,24 +980,20 @@ def run(base, data, proc, os1, os2, hostile, log_path):
 
 
 def hostile_cases(api, hostile):
-    """Each hostile answer in turn, on a new connection. What gridscada did
-    on 2026-11-29 (HEAD 782a068), and what is deliberately not checked:
+    """Each hostile answer in turn, on a new connection:
 
-    - bad CRC: the frame is dropped and counted (one per frame in
-      garbage_bytes), the last error names the CRC; the request times out
-      (counted), the device's tags turn Bad; the connection is kept;
+    - bad CRC: each frame dropped and its octets counted (garbage_bytes),
+      the last error names the CRC; three in a row close the connection
+      (reconnected with back-off); the device shows not connected, its comm
+      alarm active, its tags Bad;
     - FIR without FIN: the segment waits for the rest until the response
       timeout (counted, tags Bad); nothing counted as malformed;
-    - object header longer than the fragment: counted, named, but the
-      objects before the error are applied as Good and the poll counts as
-      done (not checked: a product bug);
-    - garbage: dropped and counted (one per read, not per octet), the
-      request times out, tags Bad.
+    - object header longer than the fragment: the fragment is malformed as
+      a whole, counted and named; none of its values is used;
+    - garbage: as a bad CRC.
 
-    In every case the device shows connected (any octets mark it so), so its
-    comm alarm never activates, and an integrity poll that timed out is not
-    asked again on the same connection (the tags stay Bad until a reconnect
-    or integrity_period_s): neither is checked, both product bugs."""
+    Then the outstation answers correctly on the same connection: the
+    integrity poll that failed is asked again and the tags come back."""
     def garbage():
         _, link = api.device("HB")
         return (link or {}).get("garbage_bytes", 0)
@@ -1004,10 +1031,11 @@ def hostile_cases(api, hostile):
               f"{last_error()} / answers sent {hostile.sent.get(mode)}")
         # Let it run for a while: the other devices go on meanwhile. The
         # device's connected flag, sampled.
-        seen, tag_seen = [], []
+        seen, tag_seen, errors_seen = [], [], {last_error()}
         end = time.time() + 3
         while time.time() < end:
             seen.append(bool((api.device("HB")[0] or {}).get("connected")))
+            errors_seen.add(last_error())
             tag_seen.append((api.tag("HB.Comm.Connected") or {}).get("value"))
             time.sleep(0.2)
         check(api.healthz() == 200, f"hostile ({what}): gridscada goes on, /healthz answers 200")
@@ -1026,8 +1054,23 @@ def hostile_cases(api, hostile):
              f"{seen.count(False)} false; HB.Comm.Connected sampled: {tag_seen.count(True)} true, "
              f"{tag_seen.count(False)} false; active alarms: {api.active_alarms()}")
         if mode in ("crc", "garbage", "short_objects"):
-            # Counted, though one per malformed input rather than per octet.
             check(g1 > g0, f"hostile ({what}): counted in the devices API's garbage_bytes ({g0} -> {g1})")
+        if mode in ("crc", "garbage"):
+            def closed():
+                errors_seen.add(last_error())
+                return hostile.accepts - accepts0 >= 2 and any(
+                    "3 malformed frames in a row" in e for e in errors_seen)
+            wait_for(closed, 10)
+            check(closed(),
+                  f"hostile ({what}): three malformed frames in a row close the connection, reconnected",
+                  f"{sorted(errors_seen)}; connections {hostile.accepts - accepts0}")
+            check(seen.count(True) == 0 and "HB:comm" in api.active_alarms(),
+                  f"hostile ({what}): HB shows not connected, its comm alarm active",
+                  f"connected sampled {seen}; alarms {api.active_alarms()}")
+        if mode == "short_objects":
+            check(q.get("value") != 77 or q.get("quality", {}).get("code") != "good",
+                  f"hostile ({what}): none of the malformed fragment's values is used",
+                  f"HB.A0 {q.get('value')!r} {json.dumps(q.get('quality'))}")
         if mode in ("crc", "fir_no_fin", "garbage"):
             check(t1 > t0 and q.get("quality", {}).get("code") == "bad",
                   f"hostile ({what}): the poll times out (counted) and HB.A0 turns Bad",
@@ -1038,15 +1081,13 @@ def hostile_cases(api, hostile):
           f"{metric_garbage()} vs {garbage()}")
 
     # Recovery. The outstation answers correctly again on the same
-    # connection: the event polls (every second) are answered, but today the
-    # integrity poll that timed out is not asked again before
-    # integrity_period_s (3600 s), so HB.A0 stays Bad: recorded, not checked
-    # (a product bug, see the report of this test's first runs).
+    # connection: the integrity poll that failed is asked again (5 s after
+    # its failure) and HB.A0 comes back.
     hostile.mode = "good"
     n = len(hostile.requests)
-    t = wait_for(lambda: good(api, "HB.A0", 5.0), 4)
-    note(f"good again on the same connection, 4 s: HB.A0 {quality(api, 'HB.A0')}; "
-         f"requests since: {[f for _, f in hostile.requests[n:]]}")
+    t = wait_for(lambda: good(api, "HB.A0", 5.0), 10)
+    check(t is not None, "hostile outstation correct again on the same connection: the failed integrity poll is asked again, HB.A0 Good",
+          f"{quality(api, 'HB.A0')}; requests since: {[f for _, f in hostile.requests[n:]]}")
     # After a reconnect the startup's integrity poll brings it back.
     hostile.drop_connections()
     t = wait_for(lambda: good(api, "HB.A0", 5.0), 10)

@@ -350,8 +350,10 @@ def main():
     rtu_a.start()
     data = os.path.join(tmp, "data")
     log = open(os.path.join(tmp, "server.log"), "w")
+    # The RTU is c104's, not the demo's simulated station.
     proc = subprocess.Popen([BIN, "demo", "--config", plant, "--http", f"127.0.0.1:{http_port}",
-                             "--data", data], stdout=log, stderr=subprocess.STDOUT)
+                             "--data", data, "--real-device", "RTU1"],
+                            stdout=log, stderr=subprocess.STDOUT)
     try:
         run(plant, data, http_port, rtu_a, rtu_b, centre_port)
     finally:

@@ -77,6 +77,11 @@ enum Command {
         /// accounts; see docs/NORTHBOUND.md).
         #[arg(long, value_name = "PORT")]
         opcua: Option<u16>,
+        /// Leave this device (by name) out of the simulation: gridscada
+        /// reaches it on its configured address, e.g. a real RTU beside
+        /// simulated panels. Repeat for several.
+        #[arg(long = "real-device", value_name = "DEVICE")]
+        real_devices: Vec<String>,
     },
     /// Replay a scenario through the whole stack (simulators, Modbus poller,
     /// alarms, historian, fault isolation, dispatch) faster than real time,
@@ -331,6 +336,7 @@ fn main() -> ExitCode {
             mqtt_node,
             mqtt_primary_host,
             opcua,
+            real_devices,
         } => {
             let live = match scenario {
                 Some(file) => match replay::LiveScenario::load(&file, speed) {
@@ -347,7 +353,15 @@ fn main() -> ExitCode {
                 node: mqtt_node,
                 primary_host: mqtt_primary_host,
             });
-            runtime::block_on(runtime::demo(http, data, config, live, mqtt, opcua))
+            runtime::block_on(runtime::demo(
+                http,
+                data,
+                config,
+                live,
+                mqtt,
+                opcua,
+                real_devices,
+            ))
         }
         Command::Replay {
             file,

@@ -90,6 +90,7 @@ pub trait LiveDriver: Send {
 
 /// `gridscada demo`: the embedded plant, on loopback; with a scenario, the
 /// scenario's plant driven by its timeline on a compressed clock.
+#[allow(clippy::too_many_arguments)]
 pub async fn demo(
     http: String,
     data: PathBuf,
@@ -97,6 +98,7 @@ pub async fn demo(
     scenario: Option<Box<dyn LiveDriver>>,
     mqtt: Option<northbound::DemoMqtt>,
     opcua_port: Option<u16>,
+    real_devices: Vec<String>,
 ) -> ExitCode {
     report(
         async {
@@ -119,7 +121,17 @@ pub async fn demo(
             }
             // The demo serves OPC UA only when asked (`--opcua PORT`).
             plant.opcua = opcua_port.map(opcua::demo_config);
-            run(plant, addr, &data, Mode::Demo, scenario).await
+            for name in &real_devices {
+                if !plant.devices.iter().any(|d| d.name.get_ref() == name) {
+                    let known: Vec<&str> =
+                        plant.devices.iter().map(|d| d.name.get_ref().as_str()).collect();
+                    return Err(anyhow!(
+                        "--real-device {name}: the plant has no such device (it has: {})",
+                        known.join(", ")
+                    ));
+                }
+            }
+            run(plant, addr, &data, Mode::Demo, scenario, real_devices).await
         }
         .await,
     )
@@ -135,7 +147,7 @@ pub async fn serve(config: PathBuf, http: Option<String>, data: Option<PathBuf>)
             settings::apply_flags(&mut plant, http, data)?;
             let addr = settings::listen_addr(plant.server.http.get_ref(), "[server] http")?;
             let data = plant.data_dir.clone();
-            run(plant, addr, &data, Mode::Serve, None).await
+            run(plant, addr, &data, Mode::Serve, None, Vec::new()).await
         }
         .await,
     )
@@ -316,6 +328,9 @@ pub struct StackOptions {
     pub clock: Arc<dyn Clock>,
     /// Start the simulated plant on ephemeral loopback ports and poll it.
     pub simulate: bool,
+    /// With `simulate`: devices left out of the simulation, reached on
+    /// their configured addresses (a real RTU beside simulated panels).
+    pub real_devices: Vec<String>,
     /// How the microgrid's outer loop makes setpoints (replay's rule-based
     /// baseline forces the rule).
     pub dispatch_policy: dispatch::DispatchPolicy,
@@ -373,10 +388,20 @@ impl Stack {
 
         // Simulators first, so the poller finds its devices.
         let simulator = if opts.simulate {
-            let sim =
-                gridscada_sim::start(&plant, clock.clone(), gridscada_sim::BindMode::Ephemeral)
-                    .await
-                    .context("starting the simulated plant")?;
+            let mut simulated = plant.clone();
+            simulated
+                .devices
+                .retain(|d| !opts.real_devices.contains(d.name.get_ref()));
+            simulated
+                .tags
+                .retain(|t| !opts.real_devices.contains(t.device.get_ref()));
+            let sim = gridscada_sim::start(
+                &simulated,
+                clock.clone(),
+                gridscada_sim::BindMode::Ephemeral,
+            )
+            .await
+            .context("starting the simulated plant")?;
             sim.patch_plant(&mut plant);
             Some(sim)
         } else {
@@ -767,6 +792,7 @@ async fn run(
     data: &Path,
     mode: Mode,
     scenario: Option<Box<dyn LiveDriver>>,
+    real_devices: Vec<String>,
 ) -> anyhow::Result<()> {
     // A wrong certificate or key stops the start before anything runs.
     let https = crate::https::load(&plant)?;
@@ -784,6 +810,7 @@ async fn run(
         StackOptions {
             clock,
             simulate: mode == Mode::Demo,
+            real_devices,
             dispatch_policy: Default::default(),
             // A scenario starts from its own initial state.
             restore_panels: scenario.is_none(),

@@ -117,6 +117,7 @@ async fn run_stack(
         StackOptions {
             clock: clock.clone(),
             simulate: true,
+            real_devices: Vec::new(),
             dispatch_policy: policy,
             restore_panels: false,
             data_dir: data.to_path_buf(),
