@@ -3,8 +3,10 @@
 # driven by playwright-core. Starts two servers on free ports with fresh data
 # directories (the demo plant, and tests/plants/three-panels), runs
 # tests/e2e/browser/tests/*.test.js against the first and
-# tests/e2e/browser/plant2/*.test.js against the second, side by side, stops
-# them, and prints "N passed, M failed". Screenshots, each run's report
+# tests/e2e/browser/plant2/*.test.js against the second, side by side, then
+# tests/e2e/browser/telecontrol/*.test.js against a third (the test plant
+# tests/plants/telecontrol, over IEC 104 and DNP3), stops them, and prints
+# "N passed, M failed". Screenshots, each run's report
 # (spec-NAME.log, results-NAME.tap) and the servers' logs go to
 # tests/e2e/artifacts/.
 #
@@ -117,10 +119,14 @@ else
   plant2_run=$!
   wait "$demo_run" "$plant2_run" || true
 fi
+# Then the telecontrol plant: its panels over IEC 104 and DNP3.
+port3="$(free_port)"
+start telecontrol "$port3" --config "$root/tests/plants/telecontrol"
+run telecontrol "$port3" "$data" "$server_pid" telecontrol/*.test.js
 
 total_passed=0
 total_failed=0
-for name in demo plant2; do
+for name in demo plant2 telecontrol; do
   echo "--- $name"
   cat "$artifacts/spec-$name.log" 2>/dev/null || true
   tap="$artifacts/results-$name.tap"
