@@ -144,6 +144,8 @@ pub enum Report {
     },
     #[error("the outstation restarted (IIN1.7 DEVICE_RESTART)")]
     DeviceRestart,
+    #[error("integrity poll complete")]
+    IntegrityPollDone,
     #[error("the outstation's event buffer overflowed (IIN2.3): events were lost; integrity poll queued")]
     EventBufferOverflow,
     #[error("time synchronised (LAN procedure), recorded time {unix_ms} ms")]
@@ -758,7 +760,10 @@ impl Master {
                     match task {
                         Task::EnableUnsolicited => self.unsolicited_enabled = true,
                         Task::DisableUnsolicited => self.unsolicited_enabled = false,
-                        Task::Integrity => self.integrity_retry_at = None,
+                        Task::Integrity => {
+                            self.integrity_retry_at = None;
+                            out.push(Action::Report(Report::IntegrityPollDone));
+                        }
                         _ => {}
                     }
                     match f.step {

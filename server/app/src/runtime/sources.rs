@@ -187,6 +187,11 @@ impl StackMetrics {
                 ),
                 ("gridscada_dnp3_commands_total", "Commands sent.", d.writes),
                 (
+                    "gridscada_dnp3_integrity_polls_total",
+                    "Integrity polls completed.",
+                    d.interrogations,
+                ),
+                (
                     "gridscada_dnp3_commands_failed_total",
                     "Commands refused by the outstation (status named) or not answered.",
                     d.writes_failed,
@@ -203,6 +208,14 @@ impl StackMetrics {
                 ),
             ] {
                 out.counter(name, help, &l, v as f64);
+            }
+            if let Some(at) = d.last_interrogation_ms {
+                out.gauge(
+                    "gridscada_dnp3_integrity_poll_age_seconds",
+                    "Time since the last integrity poll completed.",
+                    &l,
+                    (now_ms - at).max(0) as f64 / 1000.0,
+                );
             }
         }
         for d in poll

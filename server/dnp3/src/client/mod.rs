@@ -54,6 +54,8 @@ pub(crate) struct Counters {
     pub timeouts: AtomicU64,
     pub events: AtomicU64,
     pub integrity_polls: AtomicU64,
+    /// When the last integrity poll completed, ms since 1970; 0: never.
+    pub last_integrity_ms: std::sync::atomic::AtomicI64,
     pub commands: AtomicU64,
     pub commands_failed: AtomicU64,
     pub overflows: AtomicU64,
@@ -374,6 +376,10 @@ impl StatsSource for OutstationStats {
                 .to_string(),
                 events: get(&c.events),
                 interrogations: get(&c.integrity_polls),
+                last_interrogation_ms: {
+                    let at = c.last_integrity_ms.load(Ordering::Relaxed);
+                    (at > 0).then_some(at)
+                },
                 writes_failed: get(&c.commands_failed),
                 overflows: get(&c.overflows),
                 ..Default::default()

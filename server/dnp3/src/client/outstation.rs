@@ -338,6 +338,14 @@ impl Outstation {
             // Counted in octets where they are read (`discarded_octets`).
             Report::Malformed(_) => self.set_error(&r.to_string()),
             Report::Refused { .. } => self.set_error(&r.to_string()),
+            Report::IntegrityPollDone => {
+                self.counters
+                    .integrity_polls
+                    .fetch_add(1, Ordering::Relaxed);
+                self.counters
+                    .last_integrity_ms
+                    .store(self.clock.now().as_millis(), Ordering::Relaxed);
+            }
             Report::DeviceRestart | Report::TimeSynced { .. } => {
                 tracing::info!(outstation = %self.s.name, "{r}")
             }
