@@ -42,8 +42,10 @@ import time
 
 try:
     import c104
-    from dnp3.application.builder import build_write_request
-    from dnp3.application.fragment import ObjectBlock
+    from dnp3.application.builder import build_operate_request, build_select_request, build_write_request
+    from dnp3.application.fragment import ObjectBlock, RequestFragment
+    from dnp3.application.header import RequestHeader
+    from dnp3.core.enums import FunctionCode
     from dnp3.application.qualifiers import ObjectHeader
     from dnp3.core.flags import IIN, DoubleBitState
     from dnp3.master import CommandBuilder, DefaultSOEHandler, Master, MasterConfig, MasterTcpRunner
@@ -337,11 +339,6 @@ async def dnp3_session(sim, peer):
     timed = [e for e in soe.analog_events]
     check(len(timed) > 0 and all(abs((t - now_utc()).total_seconds()) < 30 for _, _, t in timed),
           "DNP3: class 1 events (g32 with time) carry the plant's time", f"{len(timed)} events")
-    if len(timed) > 1:
-        span = (max(t for _, _, t in timed) - min(t for _, _, t in timed)).total_seconds()
-        if span > 0:
-            note(f"DNP3: {len(timed)} analog events over {span:.2f} s of plant time "
-                 f"(~{len(timed) / span:.0f}/s: every change of every analog is an event, no deadband)")
 
     # -- the restart bit cleared by WRITE g80v1 index 7 = 0 -------------
     write = build_write_request((ObjectBlock(header=ObjectHeader(80, 1, 0x00), data=bytes([7, 7, 0])),),
@@ -393,6 +390,56 @@ async def dnp3_session(sim, peer):
           "DNP3: DIRECT_OPERATE CROB index 2 LATCH_ON is echoed with SUCCESS", f"{echo} {raw.hex()}")
     ok = await poll_until(peer, lambda: peer.db_state(2) == DoubleBitState.ON, 8)
     check(ok, "DNP3: double-bit 2 follows back to ON", repr(peer.db_state(2)))
+
+    # -- SELECT/OPERATE with 16-bit count and index (qualifier 0x28) --------
+    crob = bytes([0x03, 1]) + (0).to_bytes(4, "little") + (0).to_bytes(4, "little") + b"\x00"
+    block = ObjectBlock(header=ObjectHeader(12, 1, 0x28), data=(1).to_bytes(2, "little") + (3).to_bytes(2, "little") + crob)
+    sel = build_select_request((block,), seq=peer.master.next_request_sequence())
+    iin, echo, raw = await peer.command(sel)
+    op = build_operate_request((block,), seq=peer.master.next_request_sequence())
+    iin2, echo2, raw2 = await peer.command(op)
+    want = crob_request_objects(sel)
+    check(raw[4:] == want and raw2[4:] == want,
+          "DNP3: SELECT and OPERATE with qualifier 0x28 (CROB index 3 LATCH_ON) are echoed identically, SUCCESS",
+          f"request {want.hex()} echoes {raw[4:].hex()} {raw2[4:].hex()}")
+
+    # -- DIRECT_OPERATE_NR: no response, the command is carried out ----------
+    crob_off = bytes([0x04, 1]) + bytes(8) + b"\x00"
+    nr = RequestFragment(header=RequestHeader.build(function=FunctionCode.DIRECT_OPERATE_NO_ACK,
+                                                    seq=peer.master.next_request_sequence()),
+                         objects=(ObjectBlock(header=ObjectHeader(12, 1, 0x17), data=bytes([1, 4]) + crob_off),))
+    n = len([r for r in peer.raw if not r[0] & 0x10])
+    await peer.runner.send(nr)
+    ok = await poll_until(peer, lambda: peer.db_state(4) == DoubleBitState.OFF, 8)
+    solicited = [r for r in peer.raw if not r[0] & 0x10]
+    nr_answers = [r for r in solicited[n:] if (r[0] & 0x0F) == nr.header.control.seq and crob_echo(r)]
+    check(ok and not nr_answers, "DNP3: DIRECT_OPERATE_NR LATCH_OFF on index 4: no response, zone 3 opens",
+          f"state={peer.db_state(4)!r} answers={[r.hex() for r in nr_answers]}")
+    d = peer.master.build_direct_operate(CommandBuilder().latch_on(4).build_direct_operate())
+    await peer.command(d)
+    check(await poll_until(peer, lambda: peer.db_state(4) == DoubleBitState.ON, 8),
+          "DNP3: ... and closes again on a DIRECT_OPERATE LATCH_ON", repr(peer.db_state(4)))
+
+    # -- time: WRITE g50v1, and the LAN procedure (RECORD_CURRENT_TIME, g50v3) --
+    ms = int(time.time() * 1000)
+    w = build_write_request((ObjectBlock(header=ObjectHeader(50, 1, 0x07), data=bytes([1]) + ms.to_bytes(6, "little")),),
+                            seq=peer.master.next_request_sequence())
+    infos, _ = await peer.request(w)
+    bad = IIN.PARAMETER_ERROR | IIN.OBJECT_UNKNOWN | IIN.NO_FUNC_CODE_SUPPORT
+    check(bool(infos) and not infos[-1].iin & bad, "DNP3: WRITE g50v1 (absolute time) is accepted",
+          repr(infos[-1].iin if infos else None))
+    rct = RequestFragment(header=RequestHeader.build(function=FunctionCode.RECORD_CURRENT_TIME,
+                                                     seq=peer.master.next_request_sequence()))
+    infos, _ = await peer.request(rct)
+    ms = int(time.time() * 1000)
+    w = build_write_request((ObjectBlock(header=ObjectHeader(50, 3, 0x07), data=bytes([1]) + ms.to_bytes(6, "little")),),
+                            seq=peer.master.next_request_sequence())
+    infos2, _ = await peer.request(w)
+    check(bool(infos) and bool(infos2) and not (infos[-1].iin | infos2[-1].iin) & bad,
+          "DNP3: RECORD_CURRENT_TIME then WRITE g50v3 (LAN time sync) are accepted",
+          f"{infos[-1].iin if infos else None!r} {infos2[-1].iin if infos2 else None!r}")
+    check(bool(infos2) and not infos2[-1].iin & IIN.NEED_TIME, "DNP3: IIN1.4 (need time) is not set",
+          repr(infos2[-1].iin if infos2 else None))
 
     # -- a CROB on an index without a control ------------------------------
     sel = peer.master.build_select(CommandBuilder().latch_off(9).build_select())
@@ -461,7 +508,15 @@ async def dnp3_session(sim, peer):
           "DNP3: DISABLE_UNSOLICITED accepted", repr(infos[-1].iin if infos else None))
     check(not peer.unparsed, f"DNP3: dnp3py parsed all {len(peer.raw)} response fragments, none cut short",
           str(peer.unparsed[:3]))
-    # Without polls, how long until the event buffer overflows (IIN2.3)?
+    # How many events a second, and how long without a poll until the event
+    # buffer overflows (IIN2.3)?
+    await peer.runner.request(peer.master.build_class_poll())
+    t_poll = time.time()
+    await asyncio.sleep(1.0)
+    n = len(soe.analog_events)
+    await peer.runner.request(peer.master.build_class_poll())
+    rate = (len(soe.analog_events) - n) / (time.time() - t_poll)
+    note(f"DNP3: ~{rate:.0f} analog events a second (every change of every analog, no deadband)")
     await asyncio.sleep(2.5)
     infos = await peer.runner.request(peer.master.build_class_poll())
     if infos and infos[0].iin & IIN.EVENT_BUFFER_OVERFLOW:
