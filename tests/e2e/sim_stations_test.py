@@ -604,6 +604,7 @@ def iec104_on(address_port, which, sim):
     for ioa in M_IT:
         points[ioa] = st.add_point(io_address=ioa, type=c104.Type.M_IT_TB_1)
     cmd = st.add_point(io_address=2041, type=c104.Type.C_DC_NA_1, command_mode=c104.CommandMode.SELECT_AND_EXECUTE)
+    direct = st.add_point(io_address=2042, type=c104.Type.C_DC_NA_1, command_mode=c104.CommandMode.DIRECT)
     cl.start()
     try:
         connected = wait_for(lambda: conn.is_connected, 10)
@@ -718,6 +719,16 @@ def iec104_on(address_port, which, sim):
                 break
         check(wait_for(lambda: points[1011].value == c104.Double.ON, 10),
               f"IEC 104 ({which}): C_DC ON closes zone 1 again (M_DP 1011 ON)", str(points[1011].value))
+        # An execute without a select on a select-before-operate command.
+        n = len(asdus)
+        direct.value = c104.Double.OFF
+        direct.transmit(cause=c104.Cot.ACTIVATION)
+        wait_for(lambda: any(a[0] == 46 for a in asdus.since(n)), 5)
+        time.sleep(1.0)
+        replies = [(a[1], bool(a[3][8] & 0x40)) for a in asdus.since(n) if a[0] == 46]
+        check(replies == [(7, True)] and points[1012].value == c104.Double.ON,
+              f"IEC 104 ({which}): C_DC 2042 executed without a select is refused (negative ACT_CON), "
+              "zone 2 stays closed", f"replies (cause, negative)={replies} M_DP 1012={points[1012].value}")
         return conn, cl
     finally:
         if which != "first address":
