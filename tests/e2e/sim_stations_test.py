@@ -297,8 +297,8 @@ async def dnp3_session(sim, peer):
           f"seqs={seqs} fir/fin/con={ctl}")
     iin = infos[0].iin if infos else IIN(0)
     check(bool(iin & IIN.DEVICE_RESTART), "DNP3: IIN1.7 device restart is set at first", repr(iin))
-    if iin & IIN.EVENT_BUFFER_OVERFLOW:
-        note(f"DNP3: IIN2.3 event buffer overflow already set in the first integrity poll ({iin!r})")
+    check(not iin & IIN.EVENT_BUFFER_OVERFLOW,
+          "DNP3: no event buffer overflow (IIN2.3) at the first integrity poll", repr(iin))
     headers = [h for f in frags for h in (walk_response(f, headers=True) or [])]
     statics = sorted({(g, v) for g, v, q in headers if q == 0x01})
     want_db = {0: "ELCB", 1: "MCCB", 2: "Zone1", 3: "Zone2", 4: "Zone3"}
@@ -357,9 +357,8 @@ async def dnp3_session(sim, peer):
     check(echo is not None and len(echo) == 1 and echo[0][1] == 2 and echo[0][2] == 0x04 and echo[0][3] == 0,
           "DNP3: SELECT CROB index 2 LATCH_OFF is echoed with SUCCESS", f"{echo} {raw.hex()}")
     want = crob_request_objects(sel)
-    if raw[4:] != want:
-        note(f"DNP3: the SELECT echo differs from the request's objects: request {want.hex()}, "
-             f"echo {raw[4:].hex()}")
+    check(raw[4:] == want, "DNP3: the SELECT's echo is its request, qualifier and all",
+          f"request {want.hex()}, echo {raw[4:].hex()}")
     t_cmd = now_utc()
     op = peer.master.build_operate(CommandBuilder().latch_off(2).build_operate())
     iin, echo, raw = await peer.command(op)
@@ -512,12 +511,12 @@ async def dnp3_session(sim, peer):
     n = len(soe.analog_events)
     await peer.runner.request(peer.master.build_class_poll())
     rate = (len(soe.analog_events) - n) / (time.time() - t_poll)
-    note(f"DNP3: ~{rate:.0f} analog events a second (every change of every analog, no deadband)")
+    note(f"DNP3: ~{rate:.0f} analog events a second (1 % deadband)")
     await asyncio.sleep(2.5)
     infos = await peer.runner.request(peer.master.build_class_poll())
-    if infos and infos[0].iin & IIN.EVENT_BUFFER_OVERFLOW:
-        note(f"DNP3: 2.5 s without a poll and the event buffer has overflowed (IIN2.3 set, "
-             f"{len(infos)} fragment(s) of events)")
+    check(bool(infos) and not infos[0].iin & IIN.EVENT_BUFFER_OVERFLOW,
+          "DNP3: 2.5 s without a poll and the event buffer has not overflowed (analogs report 1 % moves)",
+          f"{len(infos or [])} fragment(s) of events, IIN {infos[0].iin if infos else None!r}")
     # A request the outstation does not support: IIN2.0.
     from dnp3.application.builder import build_cold_restart_request
     infos, _ = await peer.request(build_cold_restart_request(seq=peer.master.next_request_sequence()))
@@ -632,13 +631,11 @@ def iec104_on(address_port, which, sim):
                          "with their types (M_DP, M_SP, M_ME_NC/NB/NA)", f"missing or wrong type: {wrong}")
         extra = [i for i in by_type if i not in want and i != 3011]
         check(not extra, f"IEC 104 ({which}): ... and no IOA that is not configured", str(extra))
-        if 3011 in by_type:
-            # IEC 60870-5-101 7.2.3 allows M_IT only with causes 3 and 37..41:
-            # integrated totals come by counter interrogation, not station
-            # interrogation. gridscada's controlled station sends them in both.
-            it = [a[3].hex() for a in items if a[1] == 20 and 3011 in a[2]]
-            note(f"IEC 104 ({which}): the general interrogation also returns the counter M_IT 3011 "
-                 f"(type {by_type[3011]}) with cause 20: {it[:1]}")
+        # Integrated totals come by counter interrogation (causes 37..41), not
+        # in a station interrogation.
+        it = [a[3].hex() for a in items if a[1] == 20 and 3011 in a[2]]
+        check(3011 not in by_type, f"IEC 104 ({which}): the general interrogation does not carry the counter M_IT 3011",
+              f"type {by_type.get(3011)}: {it[:1]}")
         dp = {i: points[i].value for i in M_DP}
         check(all(v == c104.Double.ON for v in dp.values()),
               f"IEC 104 ({which}): every breaker position (M_DP 1001..1013) is ON (closed)", str(dp))

@@ -40,6 +40,10 @@ pub struct OutstationConfig {
     /// How long an unsolicited response or a confirmed fragment waits for
     /// its CONFIRM before it is sent again.
     pub confirm_timeout: Duration,
+    /// An analog's move that makes an event, as a fraction of the value
+    /// last reported (at least 0.001 in the value's units); 0: every
+    /// change. The static value always follows.
+    pub analog_deadband: f64,
 }
 
 impl Default for OutstationConfig {
@@ -50,6 +54,7 @@ impl Default for OutstationConfig {
             max_fragment: transport::DEFAULT_MAX_FRAGMENT,
             select_timeout: Duration::from_secs(10),
             confirm_timeout: Duration::from_secs(5),
+            analog_deadband: 0.0,
         }
     }
 }
@@ -79,6 +84,8 @@ struct Held {
     point: Point,
     value: PointValue,
     online: bool,
+    /// The value of the last event.
+    reported: PointValue,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -95,12 +102,14 @@ pub enum OutstationAction {
     /// Write these octets (link frames) to the connection.
     Send(Vec<u8>),
     /// Carry out these controls (index, object) and call
-    /// [`Outstation::operated`] with one status each, in order. `respond`
-    /// is false for DIRECT_OPERATE_NR.
+    /// [`Outstation::operated`] with the request's objects and one status
+    /// each, in order. `respond` is false for DIRECT_OPERATE_NR.
     Operate {
         seq: u8,
         function: FunctionCode,
         commands: Vec<(u16, CommandObject)>,
+        /// The request's objects, echoed with the statuses.
+        request: Vec<u8>,
         respond: bool,
     },
     /// The master set our clock (ms since 1970).
@@ -126,7 +135,8 @@ struct AwaitingConfirm {
 #[derive(Debug, Clone)]
 struct Selected {
     seq: u8,
-    commands: Vec<(u16, CommandObject)>,
+    /// The SELECT's objects: the OPERATE's must be identical.
+    request: Vec<u8>,
     at: Instant,
 }
 
@@ -183,6 +193,7 @@ impl Outstation {
                         point: p,
                         value,
                         online: false,
+                        reported: value,
                     },
                 )
             })
@@ -247,8 +258,19 @@ impl Outstation {
         if held.value == value && held.online == online {
             return Vec::new();
         }
+        let significant = match (held.reported, value) {
+            (PointValue::Analog(was), PointValue::Analog(now)) if held.online == online => {
+                let band = self.cfg.analog_deadband * was.abs();
+                self.cfg.analog_deadband <= 0.0 || (now - was).abs() > band.max(0.001)
+            }
+            _ => true,
+        };
         held.value = value;
         held.online = online;
+        if !significant {
+            return Vec::new();
+        }
+        held.reported = value;
         let point = held.point;
         if self.events.len() >= EVENT_CAPACITY {
             self.events.pop_front();
@@ -363,16 +385,16 @@ impl Outstation {
                 if statuses.iter().all(|s| *s == CommandStatus::Success) && !commands.is_empty() {
                     self.selected = Some(Selected {
                         seq,
-                        commands: commands.clone(),
+                        request: body.to_vec(),
                         at: now,
                     });
                 }
-                self.echo(seq, &commands, &statuses, out);
+                self.echo(seq, body, &statuses, out);
             }
             FunctionCode::Operate => {
                 let commands = commands_of(body);
                 let matches = self.selected.take().is_some_and(|s| {
-                    s.commands == commands
+                    s.request == body
                         && seq == (s.seq + 1) & crate::app::SEQ_MASK
                         && now.duration_since(s.at) <= self.cfg.select_timeout
                 });
@@ -381,11 +403,12 @@ impl Outstation {
                         seq,
                         function: header.function,
                         commands,
+                        request: body.to_vec(),
                         respond: true,
                     });
                 } else {
                     let statuses = vec![CommandStatus::NoSelect; commands.len()];
-                    self.echo(seq, &commands, &statuses, out);
+                    self.echo(seq, body, &statuses, out);
                 }
             }
             FunctionCode::DirectOperate | FunctionCode::DirectOperateNoResponse => {
@@ -393,32 +416,34 @@ impl Outstation {
                 let respond = header.function == FunctionCode::DirectOperate;
                 let statuses: Vec<CommandStatus> =
                     commands.iter().map(|c| self.can_command(c)).collect();
-                if statuses.iter().all(|s| *s == CommandStatus::Success) {
+                if statuses.iter().all(|s| *s == CommandStatus::Success) && !commands.is_empty() {
                     out.push(OutstationAction::Operate {
                         seq,
                         function: header.function,
                         commands,
+                        request: body.to_vec(),
                         respond,
                     });
                 } else if respond {
-                    self.echo(seq, &commands, &statuses, out);
+                    self.echo(seq, body, &statuses, out);
                 }
             }
             _ => self.respond(seq, Iin::NO_FUNC_CODE_SUPPORT, Vec::new(), out),
         }
     }
 
-    /// The caller carried out an OPERATE or DIRECT_OPERATE: answer it.
+    /// The caller carried out an OPERATE or DIRECT_OPERATE (`request`:
+    /// its objects): answer it.
     pub fn operated(
         &mut self,
         seq: u8,
-        commands: &[(u16, CommandObject)],
+        request: &[u8],
         statuses: &[CommandStatus],
         respond: bool,
     ) -> Vec<OutstationAction> {
         let mut out = Vec::new();
         if respond {
-            self.echo(seq, commands, statuses, &mut out);
+            self.echo(seq, request, statuses, &mut out);
         }
         out
     }
@@ -435,21 +460,17 @@ impl Outstation {
         }
     }
 
+    /// The response to a control request: its objects as they came
+    /// (headers, qualifiers and prefixes), each status octet set.
     fn echo(
         &mut self,
         seq: u8,
-        commands: &[(u16, CommandObject)],
+        request: &[u8],
         statuses: &[CommandStatus],
         out: &mut Vec<OutstationAction>,
     ) {
-        let mut body = Vec::new();
-        for ((index, object), status) in commands.iter().zip(statuses) {
-            let (g, v) = object.group_variation();
-            ObjectHeader::new(g, v, Range::Indexed16(1)).encode(&mut body);
-            body.extend_from_slice(&index.to_le_bytes());
-            object.encode(*status, &mut body);
-        }
-        let iin = if commands.is_empty() {
+        let body = echo_of(request, statuses);
+        let iin = if statuses.is_empty() {
             Iin::PARAMETER_ERROR
         } else {
             Iin::default()
@@ -717,6 +738,48 @@ impl Outstation {
             out.push(OutstationAction::Send(b));
         }
     }
+}
+
+/// A control object's octets, its status octet last: g12v1, g41v1-v4.
+fn control_size(group: u8, variation: u8) -> Option<usize> {
+    match (group, variation) {
+        (12, 1) => Some(crate::objects::Crob::LEN),
+        (41, 1) | (41, 3) => Some(5),
+        (41, 2) => Some(3),
+        (41, 4) => Some(9),
+        _ => None,
+    }
+}
+
+/// The request's control objects with the status octet of the `k`-th set
+/// to `statuses[k]`, in the order [`commands_of`] gives them; anything
+/// after the last whole control object is left out.
+fn echo_of(request: &[u8], statuses: &[CommandStatus]) -> Vec<u8> {
+    let mut out = request.to_vec();
+    let (mut at, mut k) = (0, 0);
+    'headers: while at < request.len() {
+        let Ok((h, n)) = ObjectHeader::decode(request, at) else {
+            break;
+        };
+        let Some(size) = control_size(h.group, h.variation) else {
+            break;
+        };
+        let mut next = at + n;
+        for _ in 0..h.range.count() {
+            let end = next + h.range.prefix_len() + size;
+            if end > request.len() {
+                break 'headers;
+            }
+            if let Some(s) = statuses.get(k) {
+                out[end - 1] = s.code();
+            }
+            k += 1;
+            next = end;
+        }
+        at = next;
+    }
+    out.truncate(at);
+    out
 }
 
 /// The controls of a SELECT/OPERATE request (g12v1, g41), by index.

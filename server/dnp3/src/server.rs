@@ -165,6 +165,7 @@ impl Session {
                     OutstationAction::Operate {
                         seq,
                         commands,
+                        request,
                         respond,
                         ..
                     } => {
@@ -172,7 +173,7 @@ impl Session {
                         for (index, object) in &commands {
                             statuses.push(self.operate(*index, object).await);
                         }
-                        next.extend(self.os.operated(seq, &commands, &statuses, respond));
+                        next.extend(self.os.operated(seq, &request, &statuses, respond));
                     }
                 }
             }

@@ -269,6 +269,9 @@ impl Station {
                     OutstationConfig {
                         address: *session.outstation_address.get_ref(),
                         master_address: *session.master_address.get_ref(),
+                        // Analogs report moves of 1 %, as an RTU's deadband
+                        // would, not every step of the plant model.
+                        analog_deadband: 0.01,
                         ..OutstationConfig::default()
                     },
                     served.clone(),

@@ -40,15 +40,17 @@ fn point(kind: MeasurementKind, index: u16) -> Point {
 
 impl Pair {
     fn new(points: Vec<Point>, max_fragment: usize) -> Pair {
-        let os = Outstation::new(
+        Pair::with(
+            points,
             OutstationConfig {
                 max_fragment,
                 ..OutstationConfig::default()
             },
-            points,
-            [0, 1],
-            [0],
-        );
+        )
+    }
+
+    fn with(points: Vec<Point>, cfg: OutstationConfig) -> Pair {
+        let os = Outstation::new(cfg, points, [0, 1], [0]);
         let master = Master::new(MasterConfig {
             integrity_period: None,
             event_period: None,
@@ -113,12 +115,13 @@ impl Pair {
                 OutstationAction::Operate {
                     seq,
                     commands,
+                    request,
                     respond,
                     ..
                 } => {
                     self.operated.extend(commands.iter().copied());
                     let statuses = vec![self.field_status; commands.len()];
-                    let a = self.os.operated(seq, &commands, &statuses, respond);
+                    let a = self.os.operated(seq, &request, &statuses, respond);
                     self.carry_outstation(a);
                 }
                 OutstationAction::TimeSet(_) | OutstationAction::Timer(_) => {}
@@ -355,4 +358,83 @@ fn an_operate_without_its_select_is_refused() {
     let fragment = &frame.data[1..];
     let objects = gridscada_dnp3::objects::parse(&fragment[4..], 4);
     assert_eq!(objects.commands[0].status, CommandStatus::NoSelect);
+}
+
+/// The frames an outstation sent: the first fragment's objects.
+fn response_objects(out: &[OutstationAction]) -> Vec<u8> {
+    let sent: Vec<u8> = out
+        .iter()
+        .filter_map(|a| match a {
+            OutstationAction::Send(b) => Some(b.clone()),
+            _ => None,
+        })
+        .flatten()
+        .collect();
+    let (frame, _) = gridscada_dnp3::link::decode(&sent).unwrap().unwrap();
+    frame.data[1 + 4..].to_vec()
+}
+
+#[test]
+fn the_echo_repeats_the_request_with_its_qualifier_and_headers() {
+    let mut os = Outstation::new(OutstationConfig::default(), [], [0], []);
+    os.connected();
+    // SELECT of two CROBs under one header, one-octet count and indices
+    // (qualifier 0x17), as some masters send them; index 5 has no control.
+    let crob = "03 01 00 00 00 00 00 00 00 00 00";
+    let objects = format!("0C 01 17 02 00 {crob} 05 {crob}");
+    let select =
+        gridscada_dnp3::request::fragment(3, gridscada_dnp3::FunctionCode::Select, &hex(&objects));
+    let mut tseq = 0;
+    let mut bytes = Vec::new();
+    for seg in gridscada_dnp3::transport::segment(&select, &mut tseq) {
+        bytes.extend(
+            gridscada_dnp3::LinkFrame::user_data(1024, 1, seg)
+                .encode()
+                .unwrap(),
+        );
+    }
+    let echo = response_objects(&os.received(&bytes, Instant::now()));
+    let mut want = hex(&objects);
+    // The second control's status octet: NOT_SUPPORTED (4).
+    let last = want.len() - 1;
+    want[last] = 4;
+    assert_eq!(echo, want, "the echo is the request with its statuses");
+}
+
+fn hex(s: &str) -> Vec<u8> {
+    s.split_whitespace()
+        .map(|b| u8::from_str_radix(b, 16).unwrap())
+        .collect()
+}
+
+#[test]
+fn an_analog_deadband_holds_back_small_moves_only() {
+    let mut p = Pair::with(
+        vec![point(MeasurementKind::Analog, 0)],
+        OutstationConfig {
+            analog_deadband: 0.01,
+            ..OutstationConfig::default()
+        },
+    );
+    p.update(MeasurementKind::Analog, 0, PointValue::Analog(230.0), 1);
+    p.connect();
+    p.values.clear();
+    let events =
+        |p: &Pair| -> Vec<Value> { p.values.iter().filter(|v| v.4).map(|v| v.2).collect() };
+    // 1 V of 230 V is under 1 %: no event.
+    p.update(MeasurementKind::Analog, 0, PointValue::Analog(231.0), 2);
+    assert!(events(&p).is_empty());
+    // 3 V past the last reported 230 V: an event.
+    p.update(MeasurementKind::Analog, 0, PointValue::Analog(233.0), 3);
+    assert_eq!(events(&p), vec![Value::Analog(233.0)]);
+    // The static value follows every move.
+    p.update(MeasurementKind::Analog, 0, PointValue::Analog(233.5), 4);
+    p.values.clear();
+    let a = p.master.integrity_poll(p.clock());
+    p.carry_master(a);
+    assert!(
+        p.values.iter().any(|v| !v.4 && v.2 == Value::Analog(233.5)),
+        "{:?}",
+        p.values
+    );
 }

@@ -281,7 +281,11 @@ impl Conn {
             .interrogations
             .fetch_add(1, Ordering::Relaxed);
         self.mirror(a, Cause::ActCon, false);
-        self.send_all(Cause::InroGen, |_| true);
+        // Integrated totals answer the counter interrogation, not the
+        // station interrogation.
+        self.send_all(Cause::InroGen, |e| {
+            e.point != gridscada_config::Iec104Point::M_IT
+        });
         self.mirror(a, Cause::ActTerm, false);
     }
 
