@@ -10,7 +10,10 @@
 #      plain serialize-once broadcast;
 #   4. replay: the sunny day at a 1 s step on the virtual clock, the main run
 #      alone (--no-compare) and then the whole command (baseline beside it);
-#   5. memory: `serve` with 100,000 tags for MEMORY_SECONDS (default 600).
+#   5. telecontrol: IEC 104 interrogation and spontaneous data against c104's
+#      client, a DNP3 integrity poll against dnp3py's master, 50 IEC 104
+#      stations on one server (scripts/bench-telecontrol.py);
+#   6. memory: `serve` with 100,000 tags for MEMORY_SECONDS (default 600).
 #
 #     bash scripts/bench-all.sh [LOG]      # default target/bench-all.log
 #
@@ -48,6 +51,7 @@ stage replay-main 900 target/release/gridscada replay scenarios/sunny-day.toml -
   --no-compare --report target/bench-replay-main.json
 stage replay-with-baseline 900 target/release/gridscada replay scenarios/sunny-day.toml --max \
   --report target/bench-replay.json
+stage telecontrol 900 env GRIDSCADA_BIN=target/release/gridscada "$PY" scripts/bench-telecontrol.py
 stage memory $((MEMORY_SECONDS + 300)) env GRIDSCADA_BIN=target/release/gridscada \
   MALLOC_ARENA_MAX=2 "$PY" scripts/bench-memory.py --seconds "$MEMORY_SECONDS"
 say "done; log in $LOG"
