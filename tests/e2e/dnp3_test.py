@@ -47,6 +47,9 @@ import sys
 import tempfile
 import threading
 import time
+
+import checks
+from checks import check, free_port, note, wait_for
 import http.cookiejar
 import urllib.error
 import urllib.request
@@ -60,24 +63,11 @@ except ImportError as e:  # the README test command installs them
     sys.exit(1)
 
 BIN = sys.argv[1]
-PASSED = 0
-FAILED = 0
 STARTED = time.time()
 
 
-def check(ok, what, detail=""):
-    global PASSED, FAILED
-    if ok:
-        PASSED += 1
-        print(f"ok   {what}", flush=True)
-    else:
-        FAILED += 1
-        print(f"FAIL {what}" + (f": {detail}" if detail else ""), flush=True)
 
 
-def note(what):
-    """What gridscada did, for the record (not a check)."""
-    print(f"     {what}", flush=True)
 
 
 def die_with_parent():
@@ -90,23 +80,8 @@ def die_with_parent():
         pass
 
 
-def free_port():
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
-def wait_for(cond, timeout, step=0.1):
-    end = time.time() + timeout
-    last = None
-    while time.time() < end:
-        last = cond()
-        if last:
-            return last
-        time.sleep(step)
-    return last
 
 
 # ---------------------------------------------------------------------------
@@ -787,7 +762,7 @@ def main():
         except subprocess.TimeoutExpired:
             tshark.kill()
         wire_check(cap, [p1, p2], ph)
-        if FAILED:
+        if checks.FAILED:
             for p in peers:
                 print(f"--- {p.name} said (last 15 lines) ---")
                 print("\n".join(p.lines[-15:]))
@@ -800,8 +775,8 @@ def main():
             print(f"(everything is in {tmp})")
         else:
             shutil.rmtree(tmp, ignore_errors=True)
-    print(f"{PASSED} passed, {FAILED} failed ({time.time() - STARTED:.0f} s)")
-    sys.exit(1 if FAILED else 0)
+    print(f"{checks.PASSED} passed, {checks.FAILED} failed ({time.time() - STARTED:.0f} s)")
+    sys.exit(1 if checks.FAILED else 0)
 
 
 def run(base, data, proc, os1, os2, hostile, log_path):

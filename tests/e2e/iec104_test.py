@@ -35,6 +35,9 @@ import sys
 import tempfile
 import threading
 import time
+
+import checks
+from checks import check, free_port, note, wait_for
 import http.cookiejar
 import urllib.error
 import urllib.request
@@ -47,37 +50,12 @@ except ImportError as e:  # the README test command installs it
     sys.exit(1)
 
 BIN = sys.argv[1]
-PASSED = 0
-FAILED = 0
 
 
-def check(ok, what, detail=""):
-    global PASSED, FAILED
-    if ok:
-        PASSED += 1
-        print(f"ok   {what}")
-    else:
-        FAILED += 1
-        print(f"FAIL {what}" + (f": {detail}" if detail else ""))
 
 
-def free_port():
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
-def wait_for(cond, timeout, step=0.1):
-    end = time.time() + timeout
-    last = None
-    while time.time() < end:
-        last = cond()
-        if last:
-            return last
-        time.sleep(step)
-    return last
 
 
 def utc_ms(dt):
@@ -371,11 +349,11 @@ def main():
         tshark.terminate()
         tshark.wait(10)
         wire_check(cap, [port_a, port_b, centre_port])
-        if FAILED:
+        if checks.FAILED:
             print("--- server log (last 40 lines) ---")
             print("".join(open(os.path.join(tmp, "server.log")).readlines()[-40:]))
-    print(f"{PASSED} passed, {FAILED} failed")
-    sys.exit(1 if FAILED else 0)
+    print(f"{checks.PASSED} passed, {checks.FAILED} failed")
+    sys.exit(1 if checks.FAILED else 0)
 
 
 HOSTILE_FROM = [None]  # when the hostile station began: its frames are meant to be malformed

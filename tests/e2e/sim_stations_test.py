@@ -40,6 +40,9 @@ import tempfile
 import threading
 import time
 
+import checks
+from checks import check, free_port, note, wait_for
+
 try:
     import c104
     from dnp3.application.builder import build_operate_request, build_select_request, build_write_request
@@ -58,47 +61,17 @@ except ImportError as e:  # the README test command installs them
 BIN = sys.argv[1]
 HERE = os.path.dirname(os.path.abspath(__file__))
 PLANT = os.path.join(HERE, "..", "plants", "telecontrol")
-PASSED = 0
-FAILED = 0
-NOTES = []
 T0 = time.time()
 DNP3_HOST = "127.0.0.2"
 BUDGET_S = 85  # the whole run, tshark included, stays under 90 s
 
 
-def check(ok, what, detail=""):
-    global PASSED, FAILED
-    if ok:
-        PASSED += 1
-        print(f"ok   {what}", flush=True)
-    else:
-        FAILED += 1
-        print(f"FAIL {what}" + (f": {detail}" if detail else ""), flush=True)
 
 
-def note(what):
-    """Something seen that is not a check (printed, not counted)."""
-    NOTES.append(what)
-    print(f"note {what}", flush=True)
 
 
-def free_port(host="127.0.0.1"):
-    s = socket.socket()
-    s.bind((host, 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
-def wait_for(cond, timeout, step=0.1):
-    end = time.time() + timeout
-    last = None
-    while time.time() < end:
-        last = cond()
-        if last:
-            return last
-        time.sleep(step)
-    return last
 
 
 def now_utc():
@@ -970,7 +943,7 @@ def main():
         except subprocess.TimeoutExpired:
             tshark.kill()
         wire_check(cap, dnp3_port, [port_a, port_b])
-        if FAILED or os.environ.get("SIM_STATIONS_KEEP"):
+        if checks.FAILED or os.environ.get("SIM_STATIONS_KEEP"):
             print("--- sim log (last 30 lines) ---")
             print("".join(log.splitlines(True)[-30:]))
             print(f"(capture and logs kept in {tmp})")
@@ -978,8 +951,8 @@ def main():
             shutil.rmtree(tmp, ignore_errors=True)
     elapsed = time.time() - T0
     check(elapsed < 90, f"the whole run took {elapsed:.1f} s (< 90 s)")
-    print(f"{PASSED} passed, {FAILED} failed")
-    sys.exit(1 if FAILED else 0)
+    print(f"{checks.PASSED} passed, {checks.FAILED} failed")
+    sys.exit(1 if checks.FAILED else 0)
 
 
 if __name__ == "__main__":
