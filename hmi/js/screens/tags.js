@@ -15,7 +15,7 @@ const ROW_H = 30;
 
 /** The device protocol as an engineer names it. */
 function protocolName(p) {
-  return { tcp: 'Modbus TCP', rtu: 'Modbus RTU', iec104: 'IEC 60870-5-104' }[p] || p;
+  return { tcp: 'Modbus TCP', rtu: 'Modbus RTU', iec104: 'IEC 60870-5-104', dnp3: 'DNP3' }[p] || p;
 }
 const PAGE = 200;
 
@@ -250,6 +250,9 @@ export default {
           ...(src.iec104 ? [
             h('dt', { text: 'Point' }), h('dd', { text: `${src.iec104.point} at IOA ${src.iec104.ioa}` }),
             h('dt', { text: 'Command' }), h('dd', { text: src.iec104.command ? `${src.iec104.command} at IOA ${src.iec104.command_ioa}${src.iec104.select ? ', select before operate' : ', direct execute'}` : 'none' }),
+          ] : src.dnp3 ? [
+            h('dt', { text: 'Point' }), h('dd', { text: `${src.dnp3.point.replace('_', ' ')} ${src.dnp3.index}` }),
+            h('dt', { text: 'Command' }), h('dd', { text: src.dnp3.command ? `${src.dnp3.command === 'crob' ? `CROB (${src.dnp3.op.replace('_', '/')})` : 'analog output'} at index ${src.dnp3.command_index}${src.dnp3.select ? ', select before operate' : ', direct operate'}` : 'none' }),
           ] : [
             h('dt', { text: 'Table' }), h('dd', { text: (src.table || '').replace('_', ' ') }),
             h('dt', { text: 'Address' }), h('dd', { text: `${src.address}${src.bit !== null && src.bit !== undefined ? ` bit ${src.bit}` : ''}` }),
@@ -258,7 +261,7 @@ export default {
           ]),
           h('dt', { text: 'Data type' }), h('dd', { text: src.data_type }),
           h('dt', { text: 'Scaling' }), h('dd', { text: `× ${src.scale} + ${src.offset}` }),
-          h('dt', { text: 'Timestamp' }), h('dd', { id: 'tag-time-source', text: src.iec104 ? 'the station\'s time tag (CP56Time2a) where sent, else receive time' : src.time_tag ? `device clock ${src.time_tag}` : 'receive time' }))
+          h('dt', { text: 'Timestamp' }), h('dd', { id: 'tag-time-source', text: src.iec104 ? 'the station\'s time tag (CP56Time2a) where sent, else receive time' : src.dnp3 ? 'the outstation\'s event time where sent, else receive time' : src.time_tag ? `device clock ${src.time_tag}` : 'receive time' }))
           : h('p', { class: 'hint', id: 'tag-source', text: 'Derived by the server (device status, sequence or dispatch), not read from a device.' }),
         h('div', { class: 'btn-row' }, writeBtn,
           numeric ? h('a', { class: 'btn', id: 'tag-add-trend', href: `#/trends?pens=${enc(t.name)}`, text: 'Add to trend' }) : null),

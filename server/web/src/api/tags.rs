@@ -3,7 +3,7 @@
 use axum::extract::{Path, Query, State};
 use axum::http::StatusCode;
 use axum::{Extension, Json};
-use gridscada_config::{DataType, Endian, RegisterKind, Role};
+use gridscada_config::{DataType, Dnp3Command, Endian, RegisterKind, Role};
 use gridscada_tagdb::{Sample, TagId, TagMeta, Value, WriteError};
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
@@ -40,7 +40,7 @@ pub struct TagView {
 #[serde(deny_unknown_fields)]
 pub struct TagSource {
     pub device: String,
-    /// The device's protocol: tcp or rtu (Modbus), iec104
+    /// The device's protocol: tcp or rtu (Modbus), iec104, dnp3
     pub protocol: String,
     /// The Modbus table; null for a tag of another protocol
     #[schema(value_type = Option<shapes::RegisterKind>, inline, required = true)]
@@ -51,6 +51,9 @@ pub struct TagSource {
     /// The IEC 104 point: type, information object address, command
     #[schema(required = true)]
     pub iec104: Option<Iec104Source>,
+    /// The DNP3 point: type, index, command
+    #[schema(required = true)]
+    pub dnp3: Option<Dnp3Source>,
     #[schema(required = true)]
     pub bit: Option<u8>,
     #[schema(value_type = String)]
@@ -80,6 +83,25 @@ pub struct Iec104Source {
     pub command_ioa: Option<u32>,
     /// Select before operate
     pub select: bool,
+}
+
+/// Where a DNP3 tag is read and commanded.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct Dnp3Source {
+    /// Point type, e.g. double_bit, analog_input
+    pub point: String,
+    pub index: u16,
+    /// crob or analog_output; null: read-only
+    #[schema(required = true)]
+    pub command: Option<String>,
+    #[schema(required = true)]
+    pub command_index: Option<u16>,
+    /// Select before operate
+    pub select: bool,
+    /// What a CROB does with true/false: latch, pulse or trip_close; null
+    /// for an analog output or a read-only tag
+    #[schema(required = true)]
+    pub op: Option<String>,
 }
 
 impl WebState {
@@ -129,6 +151,17 @@ impl WebState {
                     command: p.command.as_ref().map(|c| c.get_ref().label().to_string()),
                     command_ioa: p.command.as_ref().map(|_| p.command_ioa()),
                     select: p.select,
+                }),
+                dnp3: t.dnp3.as_ref().map(|p| {
+                    let command = p.command.as_ref().map(|c| *c.get_ref());
+                    Dnp3Source {
+                        point: p.point.get_ref().label().to_string(),
+                        index: *p.index.get_ref(),
+                        command: command.map(|c| c.label().to_string()),
+                        command_index: command.map(|_| p.command_index()),
+                        select: p.select,
+                        op: (command == Some(Dnp3Command::Crob)).then(|| p.op().label().to_string()),
+                    }
                 }),
                 bit: t.bit.as_ref().map(|b| *b.get_ref()),
                 data_type: t.data_type(),
