@@ -26,6 +26,9 @@ pub(crate) struct PlantSim {
     pub stations: Vec<StationSpec>,
     /// Each station's point values, parallel to its `points`.
     station_values: Vec<Vec<f64>>,
+    /// Each station's points that a model drives (the others stay 0): the
+    /// only ones worth computing at every step.
+    station_driven: Vec<Vec<usize>>,
     pub panels: Vec<PanelModel>,
     /// Panel prefixes, parallel to `panels`.
     pub panel_prefixes: Vec<String>,
@@ -62,11 +65,24 @@ impl PlantSim {
             .iter()
             .map(|s| vec![0.0; s.points.len()])
             .collect();
+        let station_driven = layout
+            .stations
+            .iter()
+            .map(|s| {
+                s.points
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, p)| p.source.is_some() || p.target.is_some())
+                    .map(|(i, _)| i)
+                    .collect()
+            })
+            .collect();
         let mut sim = PlantSim {
             devices: layout.devices,
             gateways: layout.gateways,
             stations: layout.stations,
             station_values,
+            station_driven,
             panels,
             panel_prefixes: plant
                 .panels
@@ -103,6 +119,15 @@ impl PlantSim {
             Target::Setpoint(u) => self.unit(u).map(|u| u.setpoint_kw).unwrap_or(0.0),
             Target::RunCmd(u) => bool_f(self.unit(u).is_some_and(|u| u.run_cmd)),
         }
+    }
+
+    /// The points of a station that a model drives (indices into its
+    /// points); the others never change.
+    pub fn station_driven(&self, station: usize) -> &[usize] {
+        self.station_driven
+            .get(station)
+            .map(Vec::as_slice)
+            .unwrap_or(&[])
     }
 
     /// A station's point values (engineering units), parallel to its
@@ -171,7 +196,7 @@ impl PlantSim {
             }
         }
         for si in 0..self.stations.len() {
-            for pi in 0..self.stations[si].points.len() {
+            for &pi in &self.station_driven[si] {
                 let point = &self.stations[si].points[pi];
                 let v = match (point.source, point.target) {
                     (Some(src), _) => {

@@ -104,15 +104,25 @@ impl Points {
         self.encodings.get(i).copied()
     }
 
-    /// Sets every point from the models' values, stamped with plant time.
-    fn refresh(&self, shared: &Shared, station: usize) {
-        let (values, now) = shared.with_plant(|p| (p.station_values(station).to_vec(), p.now()));
-        let batch: Vec<(TagId, Sample)> = self
-            .ids
-            .iter()
-            .zip(&self.encodings)
-            .zip(values)
-            .filter_map(|((&id, e), v)| {
+    /// Sets the points a model drives (`all`: every point) from the
+    /// models' values, stamped with plant time.
+    fn refresh(&self, shared: &Shared, station: usize, all: bool) {
+        let (values, now) = shared.with_plant(|p| {
+            let values = p.station_values(station);
+            let picked: Vec<(usize, f64)> = if all {
+                values.iter().copied().enumerate().collect()
+            } else {
+                p.station_driven(station)
+                    .iter()
+                    .filter_map(|&i| Some((i, *values.get(i)?)))
+                    .collect()
+            };
+            (picked, p.now())
+        });
+        let batch: Vec<(TagId, Sample)> = values
+            .into_iter()
+            .filter_map(|(i, v)| {
+                let (&id, e) = (self.ids.get(i)?, self.encodings.get(i)?);
                 let raw = e.raw(v);
                 let unchanged = self
                     .db
@@ -162,7 +172,7 @@ impl TagWriter for StationWriter {
                     device: "simulated station".into(),
                     reason,
                 })?;
-            self.points.refresh(&self.shared, self.station);
+            self.points.refresh(&self.shared, self.station, false);
             Ok(Sample::good(value, now))
         })
     }
@@ -207,16 +217,21 @@ impl Station {
         mut shutdown: watch::Receiver<bool>,
     ) -> Result<Station, Error> {
         let tags: Vec<&TagConfig> = {
+            // One pass over the plant's tags, not one per point.
+            let of_device: std::collections::HashMap<&str, &TagConfig> = plant
+                .tags
+                .iter()
+                .filter(|t| t.device.get_ref() == device)
+                .map(|t| (t.name.get_ref().as_str(), t))
+                .collect();
             let sim = shared.plant.lock();
-            let station = &sim.stations[index];
-            station
+            sim.stations[index]
                 .points
                 .iter()
                 .map(|p| {
-                    plant
-                        .tags
-                        .iter()
-                        .find(|t| t.name.get_ref() == &p.tag)
+                    of_device
+                        .get(p.tag.as_str())
+                        .copied()
                         .ok_or_else(|| Error::Config(format!("no tag '{}'", p.tag)))
                 })
                 .collect::<Result<_, _>>()?
@@ -251,7 +266,8 @@ impl Station {
             ids: ids.clone(),
             encodings,
         });
-        points.refresh(&shared, index);
+        points.refresh(&shared, index, true);
+        let driven = !shared.plant.lock().station_driven(index).is_empty();
 
         let writer: Arc<dyn TagWriter> = Arc::new(StationWriter {
             shared: Arc::clone(&shared),
@@ -296,13 +312,17 @@ impl Station {
                 ));
             }
         }
+        // A station no model drives never changes: nothing to refresh.
         let refresh = tokio::spawn(async move {
+            if !driven {
+                return;
+            }
             loop {
                 tokio::select! {
                     _ = shared.clock.sleep(tick) => {}
                     _ = shutdown.wait_for(|s| *s) => return,
                 }
-                points.refresh(&shared, index);
+                points.refresh(&shared, index, false);
             }
         });
         Ok(Station { servers, refresh })

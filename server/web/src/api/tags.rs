@@ -160,7 +160,8 @@ impl WebState {
                         command: command.map(|c| c.label().to_string()),
                         command_index: command.map(|_| p.command_index()),
                         select: p.select,
-                        op: (command == Some(Dnp3Command::Crob)).then(|| p.op().label().to_string()),
+                        op: (command == Some(Dnp3Command::Crob))
+                            .then(|| p.op().label().to_string()),
                     }
                 }),
                 bit: t.bit.as_ref().map(|b| *b.get_ref()),
