@@ -253,7 +253,7 @@ fn the_pair_rides_through_database_restarts_under_load() {
     let dir = tempfile::tempdir().unwrap();
     let (pa, pb) = (free_port(), free_port());
     let pair = [("a", pa), ("b", pb)];
-    let port_base = 30000 + (std::process::id() % 1000) as u16 * 20;
+    let port_base = port_block(100);
     let ca = write_plant(&dir.path().join("a"), &url, "a", &pair, port_base);
     let cb = write_plant(&dir.path().join("b"), &url, "b", &pair, port_base);
     let _sim = Sim::start(&cb, &dir.path().join("sim.log"));

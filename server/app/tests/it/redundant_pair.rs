@@ -188,7 +188,7 @@ fn the_pair_keeps_isolating_faults_through_kills_freezes_and_a_cut_database() {
     let dir = tempfile::tempdir().unwrap();
     let (pa, pb) = (free_port(), free_port());
     let pair = [("a", pa), ("b", pb)];
-    let port_base = 20000 + (std::process::id() % 2000) as u16 * 20;
+    let port_base = port_block(100);
     let ca = write_plant(&dir.path().join("a"), &a_url, "a", &pair, port_base);
     let cb = write_plant(&dir.path().join("b"), &db.url, "b", &pair, port_base);
 

@@ -72,7 +72,7 @@ fn a_restart_at_every_step_of_a_sequence_finishes_it() {
     let _one_at_a_time = common::kill_test_lock();
     let dir = tempfile::tempdir().unwrap();
     let port = free_port();
-    let port_base = 24000 + (std::process::id() % 1000) as u16 * 20;
+    let port_base = port_block(100);
     let config = write_site_plant(
         &dir.path().join("plant"),
         "sqlite://gridscada.db",

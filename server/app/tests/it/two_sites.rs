@@ -83,8 +83,8 @@ fn two_sites_share_a_database_and_read_each_others_history() {
     };
     let db = Database::create(&base);
     let dir = tempfile::tempdir().unwrap();
-    let north_base = 24000 + (std::process::id() % 400) as u16 * 20;
-    let south_base = north_base + 10000;
+    let north_base = port_block(100);
+    let south_base = port_block(100);
     let north_cfg = write_site_plant(&dir.path().join("north"), &db.url, "north", north_base);
     let south_cfg = write_site_plant(&dir.path().join("south"), &db.url, "south", south_base);
     let _north_sim = Sim::start(&north_cfg, &dir.path().join("north-sim.log"));

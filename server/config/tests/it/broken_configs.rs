@@ -321,7 +321,8 @@ fn the_telecontrol_test_plant_is_valid() {
     let dir =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/plants/telecontrol");
     let plant = load_path(&dir).unwrap_or_else(|d| panic!("{d:?}"));
-    assert_eq!(plant.panels.len(), 1);
+    // Panel FX over IEC 104, panel FY over DNP3.
+    assert_eq!(plant.panels.len(), 2);
 }
 
 #[test]

@@ -25,6 +25,33 @@ pub fn free_port() -> u16 {
         .port()
 }
 
+/// A block of `len` consecutive loopback ports for a plant's simulated
+/// devices (`gridscada sim` binds them as configured): free when handed
+/// out, below the kernel's ephemeral range (32768..), so no connection
+/// takes one meanwhile, and distinct for every call in this test process,
+/// since its tests run side by side in one binary (one pid).
+pub fn port_block(len: u16) -> u16 {
+    use std::sync::atomic::{AtomicU32, Ordering};
+    const LOW: u32 = 20000;
+    const HIGH: u32 = 32000;
+    static NEXT: AtomicU32 = AtomicU32::new(0);
+    // Where this process starts, so that two test runs at once rarely meet.
+    let start = (std::process::id() % 60) * 200;
+    for _ in 0..500 {
+        let k = NEXT.fetch_add(u32::from(len), Ordering::Relaxed);
+        let base = LOW + (start + k) % (HIGH - LOW);
+        if base + u32::from(len) > HIGH {
+            continue;
+        }
+        let free = (base..base + u32::from(len))
+            .all(|p| std::net::TcpListener::bind(("127.0.0.1", p as u16)).is_ok());
+        if free {
+            return base as u16;
+        }
+    }
+    panic!("no block of {len} free loopback ports between {LOW} and {HIGH}");
+}
+
 /// A database of its own on the test cluster, dropped at the end.
 pub struct Database {
     pub base: String,
