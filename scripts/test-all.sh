@@ -156,7 +156,9 @@ if [ -n "$clippy_driver" ]; then
     step "cargo test, linted by clippy as it builds (-D warnings)"
     rustflags_before=${RUSTFLAGS-}
     export RUSTFLAGS="${RUSTFLAGS:+$RUSTFLAGS }-D warnings"
-    RUSTC_WORKSPACE_WRAPPER="$clippy_driver" limit 600 cargo test --workspace --benches --no-run
+    # The first build is a cold one of every dependency too (about 13
+    # minutes on two cores): its limit is the build's, not a bench's.
+    RUSTC_WORKSPACE_WRAPPER="$clippy_driver" limit 1800 cargo test --workspace --benches --no-run
     RUSTC_WORKSPACE_WRAPPER="$clippy_driver" limit 2400 cargo test --workspace --no-fail-fast
     export RUSTFLAGS="$rustflags_before"
     [ -n "$RUSTFLAGS" ] || unset RUSTFLAGS
