@@ -331,33 +331,27 @@ fn an_operate_without_its_select_is_refused() {
     let crob = CommandObject::Crob(Crob::latch(true));
     let operate =
         gridscada_dnp3::request::command(5, gridscada_dnp3::FunctionCode::Operate, 0, crob);
-    let mut seg_seq = 0;
-    let mut bytes = Vec::new();
-    for seg in gridscada_dnp3::transport::segment(&operate, &mut seg_seq) {
-        bytes.extend(
-            gridscada_dnp3::LinkFrame::user_data(1024, 1, seg)
-                .encode()
-                .unwrap(),
-        );
-    }
-    let out = os.received(&bytes, now + Duration::from_millis(1));
+    let out = os.received(&from_master(&operate), now + Duration::from_millis(1));
     assert!(
         !out.iter()
             .any(|a| matches!(a, OutstationAction::Operate { .. })),
         "{out:?}"
     );
-    let sent: Vec<u8> = out
-        .iter()
-        .filter_map(|a| match a {
-            OutstationAction::Send(b) => Some(b.clone()),
-            _ => None,
-        })
-        .flatten()
-        .collect();
-    let (frame, _) = gridscada_dnp3::link::decode(&sent).unwrap().unwrap();
-    let fragment = &frame.data[1..];
-    let objects = gridscada_dnp3::objects::parse(&fragment[4..], 4);
+    let objects = gridscada_dnp3::objects::parse(&response_objects(&out), 4);
     assert_eq!(objects.commands[0].status, CommandStatus::NoSelect);
+}
+
+/// A request as the master's link frames (master 1 to outstation 1024).
+fn from_master(request: &[u8]) -> Vec<u8> {
+    let mut tseq = 0;
+    gridscada_dnp3::transport::segment(request, &mut tseq)
+        .into_iter()
+        .flat_map(|seg| {
+            gridscada_dnp3::LinkFrame::user_data(1024, 1, seg)
+                .encode()
+                .unwrap()
+        })
+        .collect()
 }
 
 /// The frames an outstation sent: the first fragment's objects.
@@ -384,16 +378,7 @@ fn the_echo_repeats_the_request_with_its_qualifier_and_headers() {
     let objects = format!("0C 01 17 02 00 {crob} 05 {crob}");
     let select =
         gridscada_dnp3::request::fragment(3, gridscada_dnp3::FunctionCode::Select, &hex(&objects));
-    let mut tseq = 0;
-    let mut bytes = Vec::new();
-    for seg in gridscada_dnp3::transport::segment(&select, &mut tseq) {
-        bytes.extend(
-            gridscada_dnp3::LinkFrame::user_data(1024, 1, seg)
-                .encode()
-                .unwrap(),
-        );
-    }
-    let echo = response_objects(&os.received(&bytes, Instant::now()));
+    let echo = response_objects(&os.received(&from_master(&select), Instant::now()));
     let mut want = hex(&objects);
     // The second control's status octet: NOT_SUPPORTED (4).
     let last = want.len() - 1;
