@@ -18,6 +18,10 @@ gridscada runs `demo --config` on a plant of three DNP3 devices:
   the outstation's time (g2v2, g32v3), a counter, binary outputs
   (g10v2 + CROB, one of them refused NOT_AUTHORIZED), an analog output
   (g40 + g41);
+- OS3, a second dnp3py outstation reached over a serial line: gridscada
+  opens a pseudo-terminal that socat joins to the outstation's TCP port
+  (the way an RS-232 RTU sits behind a terminal server); values, a
+  select-before-operate CROB, and the line pulled and put back;
 - HB, a hostile outstation written here: it answers gridscada's requests
   with (a) link frames whose user data CRC is wrong, (b1) a transport
   segment with FIR and no FIN that is never continued, (b2) an object header
@@ -543,6 +547,34 @@ unsolicited = true
 response_timeout_ms = 2000
 
 [[device]]
+name = "OS3"
+description = "dnp3py 0.6.0 outstation on a serial line"
+protocol = "dnp3"
+
+[device.serial]
+port = "{serial}"
+baud = 19200
+
+[device.dnp3]
+event_poll_period_s = 1
+unsolicited = false
+response_timeout_ms = 2000
+
+[[tag]]
+name = "OS3.Power"
+device = "OS3"
+units = "kW"
+dnp3 = {{ point = "analog_input", index = 0 }}
+
+[[tag]]
+name = "OS3.Q1.Closed"
+device = "OS3"
+type = "bool"
+writable = true
+write_role = "operator"
+dnp3 = {{ point = "binary_input", index = 2, command = "crob", command_index = 0, select = true }}
+
+[[device]]
 name = "HB"
 description = "A hostile outstation"
 protocol = "dnp3"
@@ -703,13 +735,14 @@ def main():
     hostile = Hostile(0)
     hostile.mode = "good"
     ph = hostile.port
-    p1, p2, http_port = free_port(), free_port(), free_port()
+    p1, p2, p3, http_port = free_port(), free_port(), free_port(), free_port()
+    serial = os.path.join(tmp, "ttyDNP3")
     plant = os.path.join(tmp, "plant")
     os.makedirs(plant)
     with open(os.path.join(plant, "gridscada.toml"), "w") as f:
         f.write(MAIN)
     with open(os.path.join(plant, "dnp3.toml"), "w") as f:
-        f.write(TAGS.format(p1=p1, p2=p2, ph=ph))
+        f.write(TAGS.format(p1=p1, p2=p2, ph=ph, serial=serial))
 
     r = subprocess.run([BIN, "check", plant], capture_output=True, text=True, timeout=60)
     check(r.returncode == 0, "gridscada check takes the DNP3 plant", r.stdout + r.stderr)
@@ -718,27 +751,32 @@ def main():
     # DNP3 dissector afterwards.
     cap = os.path.join(tmp, "dnp3.pcapng")
     tshark = subprocess.Popen(
-        ["tshark", "-q", "-i", "lo", "-f", f"tcp port {p1} or tcp port {p2} or tcp port {ph}", "-w", cap],
+        ["tshark", "-q", "-i", "lo", "-f", f"tcp port {p1} or tcp port {p2} or tcp port {p3} or tcp port {ph}",
+         "-w", cap],
         stdout=subprocess.DEVNULL, stderr=open(os.path.join(tmp, "tshark.log"), "w"),
         preexec_fn=die_with_parent)
     wait_for(lambda: os.path.exists(cap), 10)
     time.sleep(1)
     peers = []
     proc = None
+    line = None
     log_path = os.path.join(tmp, "server.log")
     try:
         os1 = Peer("dnp3py", DNP3PY, p1, tmp)
         peers.append(os1)
         os2 = Peer("py1815", PY1815, p2, tmp)
         peers.append(os2)
+        os3 = Peer("dnp3py-serial", DNP3PY, p3, tmp)
+        peers.append(os3)
+        line = SerialLine(serial, p3, tmp)
         data = os.path.join(tmp, "data")
         log = open(log_path, "w")
         # The outstations are the Python peers, not the demo's simulated ones.
         proc = subprocess.Popen([BIN, "demo", "--config", plant, "--http", f"127.0.0.1:{http_port}",
                                  "--data", data, "--real-device", "OS1", "--real-device", "OS2",
-                                 "--real-device", "HB"], stdout=log, stderr=subprocess.STDOUT,
+                                 "--real-device", "OS3", "--real-device", "HB"], stdout=log, stderr=subprocess.STDOUT,
                                 preexec_fn=die_with_parent)
-        run(f"http://127.0.0.1:{http_port}", data, proc, os1, os2, hostile, log_path)
+        run(f"http://127.0.0.1:{http_port}", data, proc, os1, os2, os3, line, hostile, log_path)
     except Exception as e:  # a broken harness is a failure, not a traceback
         import traceback
         check(False, "the test ran to its end", f"{e!r}\n{traceback.format_exc()}")
@@ -752,6 +790,8 @@ def main():
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait(5)
+        if line is not None:
+            line.stop()
         for p in peers:
             p.stop()
         hostile.close()
@@ -761,7 +801,7 @@ def main():
             tshark.wait(10)
         except subprocess.TimeoutExpired:
             tshark.kill()
-        wire_check(cap, [p1, p2], ph)
+        wire_check(cap, [p1, p2, p3], ph)
         if checks.FAILED:
             for p in peers:
                 print(f"--- {p.name} said (last 15 lines) ---")
@@ -779,7 +819,7 @@ def main():
     sys.exit(1 if checks.FAILED else 0)
 
 
-def run(base, data, proc, os1, os2, hostile, log_path):
+def run(base, data, proc, os1, os2, os3, line, hostile, log_path):
     api, user = login(base, data, proc)
     check(api is not None, "gridscada demo --config serves the DNP3 plant and logs in")
     if api is None:
@@ -950,8 +990,74 @@ def run(base, data, proc, os1, os2, hostile, log_path):
     note("restart in the server log: "
          + (re.sub(r"\x1b\[[0-9;]*m", "", restart[0]).strip()[:300] if restart else "nothing"))
 
+    serial_cases(api, os3, line)
+
     # -- Hostile outstations.
     hostile_cases(api, hostile)
+
+
+class SerialLine:
+    """A pseudo-terminal at `path` joined by socat to an outstation's TCP
+    port: to gridscada, a serial port with an outstation on it."""
+
+    def __init__(self, path, port, tmp):
+        self.path, self.port, self.tmp = path, port, tmp
+        self.proc = None
+        self.start()
+
+    def start(self):
+        self.proc = subprocess.Popen(
+            ["socat", f"pty,link={self.path},raw,echo=0", f"tcp:127.0.0.1:{self.port}"],
+            stdout=subprocess.DEVNULL, stderr=open(os.path.join(self.tmp, "socat.log"), "a"),
+            preexec_fn=die_with_parent)
+        if not wait_for(lambda: os.path.exists(self.path) or self.proc.poll() is not None, 10) \
+                or not os.path.exists(self.path):
+            raise RuntimeError(f"socat did not make {self.path}")
+
+    def stop(self):
+        if self.proc and self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(5)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(5)
+
+
+def serial_cases(api, os3, line):
+    """OS3 is on a serial line: the integrity poll brings its values, a
+    breaker is closed with select-before-operate over the line, the line is
+    pulled (the port disappears: values Bad, comm alarm) and put back (the
+    port is opened again, values Good)."""
+    t = wait_for(lambda: good(api, "OS3.Power", 42.0), 20)
+    check(t is not None and good(api, "OS3.Q1.Closed", False) is not None,
+          "serial line: the integrity poll brings OS3's values, Good",
+          f"{quality(api, 'OS3.Power')} {quality(api, 'OS3.Q1.Closed')}")
+    dev, _ = api.device("OS3")
+    note(f"devices API, OS3: {json.dumps(dev)[:300]}")
+    check(dev and dev.get("protocol") == "dnp3" and dev.get("address") == line.path and dev.get("connected"),
+          "devices API: OS3 is a connected dnp3 device at its serial port", json.dumps(dev)[:400])
+    status, body = api.call("POST", "/api/tags/OS3.Q1.Closed/write", {"value": True})
+    wait_for(lambda: os3.said("OPERATE 0"), 3)
+    cmds = [l for l in os3.lines if l.split()[0] in ("SELECT", "OPERATE", "DIRECT")]
+    check(status == 200 and cmds == ["SELECT 0 3", "OPERATE 0 3"],
+          "serial line: closing OS3's breaker (CROB, select before operate) is confirmed; the outstation saw SELECT, OPERATE",
+          f"{status} {body} {cmds}")
+    line.stop()
+    bad = wait_for(lambda: (api.tag("OS3.Power") or {}).get("quality", {}).get("code") == "bad", 15)
+    check(bad, "serial line pulled (the port is gone): OS3's values turn Bad", quality(api, "OS3.Power"))
+    alarm = wait_for(lambda: "OS3:comm" in (api.active_alarms() or []), 10)
+    check(alarm, "serial line pulled: OS3's comm alarm activates", str(api.active_alarms()))
+    note(f"OS3.Comm.LastError with the line pulled: {(api.tag('OS3.Comm.LastError') or {}).get('value')!r}")
+    status, body = api.call("POST", "/api/tags/OS3.Q1.Closed/write", {"value": False})
+    check(status == 502 and "nothing was sent" in json.dumps(body),
+          "serial line pulled: a command fails at once, saying nothing was sent", f"{status} {body}")
+    line.start()
+    t = wait_for(lambda: good(api, "OS3.Power", 42.0), 30)
+    check(t is not None, "serial line back: the port is opened again and OS3's values are Good",
+          quality(api, "OS3.Power"))
+    cleared = wait_for(lambda: "OS3:comm" not in (api.active_alarms() or ["?"]), 15)
+    check(cleared, "serial line back: OS3:comm clears", str(api.active_alarms()))
 
 
 def hostile_cases(api, hostile):
@@ -1091,7 +1197,7 @@ def wire_check(cap, ports, hostile_port):
         r = subprocess.run(["tshark", "-r", cap, *decode, "-Y", f"dnp3 && tcp.port == {p}"],
                            capture_output=True, text=True, timeout=60)
         per_port[p] = len(r.stdout.splitlines())
-    check(all(n > 10 for n in per_port.values()), "tshark: both outstations' sessions are in the capture",
+    check(all(n > 10 for n in per_port.values()), "tshark: every outstation's session is in the capture (OS3's on the TCP side of its serial line)",
           str(per_port))
     # On dnp3py's port: each of its two starts answered with IIN1.7 and was
     # followed by gridscada's WRITE g80v1 (index 7 cleared); the breaker's

@@ -5,7 +5,8 @@
 //! tags, the device and link figures ([`PollStats`]) that the devices screen
 //! and `/metrics` show, the engineering write limits every write is checked
 //! against ([`check_limits`]), the returned status point that confirms a
-//! telecontrol command ([`ReturnedStatus`]), and the writer that sends each tag's write to
+//! telecontrol command ([`ReturnedStatus`]), the serial line settings
+//! ([`open_serial`]), and the writer that sends each tag's write to
 //! the protocol its device speaks ([`Router`]).
 //!
 //! **Must not touch:** any protocol's framing or connections (each protocol
@@ -15,6 +16,7 @@
 
 mod feedback;
 mod round_trip;
+mod serial;
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -26,6 +28,7 @@ use gridscada_tagdb::{
 
 pub use feedback::{within_resolution, ReturnedStatus};
 pub use round_trip::{RoundTripHistogram, RoundTrips, ROUND_TRIP_BOUNDS};
+pub use serial::open_serial;
 
 /// Names of a device's communication status tags.
 pub fn status_tag_names(device: &str) -> [(String, ValueKind, &'static str, &'static str); 8] {

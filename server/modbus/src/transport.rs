@@ -20,7 +20,6 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 use tokio::time::{timeout_at, Instant};
 use tokio_modbus::Request;
-use tokio_serial::SerialPortBuilderExt;
 
 use crate::frame::{self, Answer, Mbap};
 
@@ -308,28 +307,7 @@ impl RtuLine {
 
     fn open(&mut self) -> Result<(), String> {
         self.stream = None;
-        let c = &self.config;
-        let port = c.port.get_ref();
-        let builder = tokio_serial::new(port, c.baud)
-            .parity(match c.parity {
-                Parity::None => tokio_serial::Parity::None,
-                Parity::Even => tokio_serial::Parity::Even,
-                Parity::Odd => tokio_serial::Parity::Odd,
-            })
-            .data_bits(match c.data_bits.get_ref() {
-                5 => tokio_serial::DataBits::Five,
-                6 => tokio_serial::DataBits::Six,
-                7 => tokio_serial::DataBits::Seven,
-                _ => tokio_serial::DataBits::Eight,
-            })
-            .stop_bits(if *c.stop_bits.get_ref() == 2 {
-                tokio_serial::StopBits::Two
-            } else {
-                tokio_serial::StopBits::One
-            });
-        let stream = builder
-            .open_native_async()
-            .map_err(|e| format!("cannot open serial port {port}: {e}"))?;
+        let stream = gridscada_field::open_serial(&self.config)?;
         self.stream = Some(stream);
         self.dirty = true;
         Ok(())

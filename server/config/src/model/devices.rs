@@ -1,5 +1,6 @@
 //! Devices: `[[device]]` in the tag files, its protocol and transport
-//! (Modbus over TCP or a serial line, IEC 60870-5-104 or DNP3 over TCP), its polling
+//! (Modbus over TCP or a serial line, IEC 60870-5-104 over TCP, DNP3 over
+//! TCP or a serial line), its polling
 //! limits and its comm alarm.
 
 use serde::{Deserialize, Serialize};
@@ -14,7 +15,7 @@ pub enum Protocol {
     Rtu,
     /// IEC 60870-5-104 (`[device.iec104]`).
     Iec104,
-    /// DNP3 over TCP (`[device.dnp3]`).
+    /// DNP3 over TCP or a serial line (`[device.dnp3]`).
     Dnp3,
 }
 
@@ -41,9 +42,9 @@ pub struct DeviceConfig {
     #[serde(default)]
     pub description: String,
     pub protocol: Protocol,
-    /// TCP (Modbus TCP, IEC 104, DNP3): `host:port`.
+    /// TCP (Modbus TCP, IEC 104, DNP3 over TCP): `host:port`.
     pub address: Option<Spanned<String>>,
-    /// RTU: the serial line.
+    /// RTU, or DNP3 on a serial line: the line.
     pub serial: Option<SerialConfig>,
     /// Modbus unit (slave) id.
     #[serde(default = "default_unit_id")]

@@ -24,16 +24,30 @@ pub(super) fn check_device(cx: &mut Ctx<'_>, f: usize, d: &DeviceConfig) {
         }
     }
     match d.protocol {
-        Protocol::Tcp | Protocol::Iec104 | Protocol::Dnp3 => {
+        Protocol::Tcp | Protocol::Iec104 => {
             check_tcp_address(cx, f, d);
             if d.serial.is_some() {
                 cx.err(
                     f,
                     at.clone(),
-                    format!("device '{name}': [device.serial] is only for protocol = \"rtu\""),
+                    format!(
+                        "device '{name}': [device.serial] is only for protocol = \"rtu\" or \"dnp3\""
+                    ),
                 );
             }
         }
+        // DNP3 runs over TCP or a serial line: one of the two.
+        Protocol::Dnp3 => match (&d.address, &d.serial) {
+            (_, None) => check_tcp_address(cx, f, d),
+            (None, Some(s)) => check_serial_line(cx, f, name, s),
+            (Some(a), Some(_)) => cx.err(
+                f,
+                a.span(),
+                format!(
+                    "device '{name}': a dnp3 device has either address (TCP) or [device.serial], not both"
+                ),
+            ),
+        },
         Protocol::Rtu => {
             match &d.serial {
                 None => cx.err(
@@ -43,29 +57,7 @@ pub(super) fn check_device(cx: &mut Ctx<'_>, f: usize, d: &DeviceConfig) {
                         "device '{name}': an rtu device needs a [device.serial] table with port"
                     ),
                 ),
-                Some(s) => {
-                    if !(5..=8).contains(s.data_bits.get_ref()) {
-                        cx.err(
-                            f,
-                            s.data_bits.span(),
-                            format!("device '{name}': data_bits must be 5 to 8"),
-                        );
-                    }
-                    if !(1..=2).contains(s.stop_bits.get_ref()) {
-                        cx.err(
-                            f,
-                            s.stop_bits.span(),
-                            format!("device '{name}': stop_bits must be 1 or 2"),
-                        );
-                    }
-                    if s.port.get_ref().is_empty() {
-                        cx.err(
-                            f,
-                            s.port.span(),
-                            format!("device '{name}': serial port is empty"),
-                        );
-                    }
-                }
+                Some(s) => check_serial_line(cx, f, name, s),
             }
             if let Some(a) = &d.address {
                 cx.err(f, a.span(), format!("device '{name}': address is only for protocol = \"tcp\"; use [device.serial]"));
@@ -78,6 +70,26 @@ pub(super) fn check_device(cx: &mut Ctx<'_>, f: usize, d: &DeviceConfig) {
                 );
             }
         }
+    }
+    match (d.protocol, &d.iec104) {
+        (Protocol::Iec104, Some(link)) => check_iec104_link(cx, f, name, link),
+        (Protocol::Iec104, None) => {}
+        (_, Some(link)) => cx.err(
+            f,
+            link.common_address.span(),
+            format!("device '{name}': [device.iec104] is only for protocol = \"iec104\""),
+        ),
+        (_, None) => {}
+    }
+    match (d.protocol, &d.dnp3) {
+        (Protocol::Dnp3, Some(session)) => check_dnp3_session(cx, f, name, session),
+        (Protocol::Dnp3, None) => {}
+        (_, Some(session)) => cx.err(
+            f,
+            session.master_address.span(),
+            format!("device '{name}': [device.dnp3] is only for protocol = \"dnp3\""),
+        ),
+        (_, None) => {}
     }
     if *d.scan_ms.get_ref() < 10 {
         cx.err(
@@ -148,6 +160,58 @@ fn is_host_port(address: &str) -> bool {
         .is_some_and(|(host, port)| !host.is_empty() && port.parse::<u16>().is_ok_and(|p| p > 0))
 }
 
+/// A DNP3 outstation on a serial port has the port to itself: the master
+/// polls one outstation per line (several on one RS-485 line, or beside
+/// Modbus RTU slaves, would need one task sharing the line between them).
+pub(super) fn check_serial_sharing(cx: &mut Ctx<'_>, devices: &[(usize, DeviceConfig)]) {
+    let mut by_port: std::collections::HashMap<&str, (usize, &DeviceConfig)> =
+        std::collections::HashMap::new();
+    for (f, d) in devices {
+        let Some(s) = &d.serial else { continue };
+        let port = s.port.get_ref().as_str();
+        if let Some((pf, prev)) = by_port.get(port) {
+            if d.protocol == Protocol::Dnp3 || prev.protocol == Protocol::Dnp3 {
+                let first = cx.place(*pf, prev.name.span());
+                cx.err(
+                    *f,
+                    s.port.span(),
+                    format!(
+                        "device '{}': serial port {port} is already used by device '{}' (at {first}); a DNP3 outstation needs a serial port of its own",
+                        d.name.get_ref(),
+                        prev.name.get_ref()
+                    ),
+                );
+            }
+        } else {
+            by_port.insert(port, (*f, d));
+        }
+    }
+}
+
+fn check_serial_line(cx: &mut Ctx<'_>, f: usize, name: &str, s: &SerialConfig) {
+    if !(5..=8).contains(s.data_bits.get_ref()) {
+        cx.err(
+            f,
+            s.data_bits.span(),
+            format!("device '{name}': data_bits must be 5 to 8"),
+        );
+    }
+    if !(1..=2).contains(s.stop_bits.get_ref()) {
+        cx.err(
+            f,
+            s.stop_bits.span(),
+            format!("device '{name}': stop_bits must be 1 or 2"),
+        );
+    }
+    if s.port.get_ref().is_empty() {
+        cx.err(
+            f,
+            s.port.span(),
+            format!("device '{name}': serial port is empty"),
+        );
+    }
+}
+
 fn check_tcp_address(cx: &mut Ctx<'_>, f: usize, d: &DeviceConfig) {
     let name = d.name.get_ref();
     match &d.address {
@@ -155,8 +219,13 @@ fn check_tcp_address(cx: &mut Ctx<'_>, f: usize, d: &DeviceConfig) {
             f,
             d.name.span(),
             format!(
-                "device '{name}': a {} device needs address = \"host:port\"",
-                d.protocol.label()
+                "device '{name}': a {} device needs address = \"host:port\"{}",
+                d.protocol.label(),
+                if d.protocol == Protocol::Dnp3 {
+                    " or a [device.serial] table"
+                } else {
+                    ""
+                }
             ),
         ),
         Some(a) if !is_host_port(a.get_ref()) => cx.err(
@@ -168,26 +237,6 @@ fn check_tcp_address(cx: &mut Ctx<'_>, f: usize, d: &DeviceConfig) {
             ),
         ),
         Some(_) => {}
-    }
-    match (d.protocol, &d.iec104) {
-        (Protocol::Iec104, Some(link)) => check_iec104_link(cx, f, name, link),
-        (Protocol::Iec104, None) => {}
-        (_, Some(link)) => cx.err(
-            f,
-            link.common_address.span(),
-            format!("device '{name}': [device.iec104] is only for protocol = \"iec104\""),
-        ),
-        (_, None) => {}
-    }
-    match (d.protocol, &d.dnp3) {
-        (Protocol::Dnp3, Some(session)) => check_dnp3_session(cx, f, name, session),
-        (Protocol::Dnp3, None) => {}
-        (_, Some(session)) => cx.err(
-            f,
-            session.master_address.span(),
-            format!("device '{name}': [device.dnp3] is only for protocol = \"dnp3\""),
-        ),
-        (_, None) => {}
     }
 }
 

@@ -89,6 +89,7 @@ pub(crate) fn check(
             device_by_name.insert(name, (*f, d));
         }
     }
+    devices::check_serial_sharing(&mut cx, devices);
 
     let mut tag_by_name: HashMap<&str, (usize, &TagConfig)> = HashMap::new();
     for (f, t) in tags {

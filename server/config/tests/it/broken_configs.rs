@@ -885,3 +885,27 @@ fn a_dnp3_key_that_does_not_belong_is_located() {
         ],
     );
 }
+
+#[test]
+fn a_dnp3_outstation_on_a_serial_line_loads_and_has_the_line_to_itself() {
+    let serial = "[[device]]\nname = \"OS\"\nprotocol = \"dnp3\"\n\n[device.serial]\nport = \"/dev/ttyS1\"\nbaud = 19200\n\n\
+                  [[tag]]\nname = \"OS.P\"\ndevice = \"OS\"\ndnp3 = { point = \"analog_input\", index = 0 }\n";
+    assert_eq!(problems(MAIN, serial), Vec::<String>::new());
+
+    let tags = "[[device]]\nname = \"OS\"\nprotocol = \"dnp3\"\naddress = \"127.0.0.1:20000\"\n\n[device.serial]\nport = \"/dev/ttyS1\"\n\n\
+                [[device]]\nname = \"OS2\"\nprotocol = \"dnp3\"\n\n[device.serial]\nport = \"/dev/ttyS2\"\nstop_bits = 3\n\n\
+                [[device]]\nname = \"M1\"\nprotocol = \"rtu\"\nunit_id = 2\n\n[device.serial]\nport = \"/dev/ttyS2\"\n\n\
+                [[device]]\nname = \"OS3\"\nprotocol = \"dnp3\"\n\n\
+                [[device]]\nname = \"T1\"\nprotocol = \"tcp\"\naddress = \"127.0.0.1:502\"\n\n[device.serial]\nport = \"/dev/ttyS3\"\n";
+    assert_problems(
+        MAIN,
+        tags,
+        &[
+            "DIR/tags.toml:4:11: error: device 'OS': a dnp3 device has either address (TCP) or [device.serial], not both",
+            "DIR/tags.toml:15:13: error: device 'OS2': stop_bits must be 1 or 2",
+            "DIR/tags.toml:23:8: error: device 'M1': serial port /dev/ttyS2 is already used by device 'OS2' (at DIR/tags.toml:10:8); a DNP3 outstation needs a serial port of its own",
+            "DIR/tags.toml:26:8: error: device 'OS3': a dnp3 device needs address = \"host:port\" or a [device.serial] table",
+            "DIR/tags.toml:30:8: error: device 'T1': [device.serial] is only for protocol = \"rtu\" or \"dnp3\"",
+        ],
+    );
+}

@@ -1,5 +1,5 @@
 //! The DNP3 master's I/O shell: one task per configured outstation
-//! (`protocol = "dnp3"`) that connects over TCP, feeds the bytes to
+//! (`protocol = "dnp3"`) that connects over TCP or opens its serial port, feeds the bytes to
 //! [`crate::master::Master`] and carries out its actions; the samples of
 //! its points in the tag database, its status tags and figures, and its
 //! commands (CROB, analog output; select-before-operate or direct)
@@ -32,7 +32,7 @@ use tokio::task::JoinHandle;
 
 use crate::master::{CommandMode, MasterConfig};
 use crate::objects::{AnalogOutput, CommandObject, Crob};
-use outstation::{Outstation, Settings};
+use outstation::{Line, Outstation, Settings};
 pub use points::kind_of;
 use points::{PointMap, PointTag};
 
@@ -228,8 +228,13 @@ impl Dnp3Io {
                 device: name.clone(),
                 reason,
             };
-            let Some(address) = d.address.as_ref().map(|a| a.get_ref().clone()) else {
-                return Err(err("a dnp3 device needs address = \"host:port\"".into()));
+            let line = match (&d.address, &d.serial) {
+                (Some(a), None) => Line::Tcp(a.get_ref().clone()),
+                (None, Some(s)) => Line::Serial(s.clone()),
+                _ => return Err(err(
+                    "a dnp3 device needs either address = \"host:port\" or a [device.serial] table"
+                        .into(),
+                )),
             };
             let index = outstations.len();
             let mut map = PointMap::default();
@@ -272,7 +277,7 @@ impl Dnp3Io {
             let status =
                 gridscada_field::StatusIds::resolve(&db, &name).map_err(StartError::MissingTag)?;
             let counters = Arc::new(Counters::default());
-            outstations.push((name.clone(), address.clone(), Arc::clone(&counters)));
+            outstations.push((name.clone(), line.label(), Arc::clone(&counters)));
             let (tx, rx) = mpsc::channel(16);
             senders.push(tx);
             let response_timeout = Duration::from_millis(*session.response_timeout_ms.get_ref());
@@ -293,7 +298,7 @@ impl Dnp3Io {
             to_start.push(Outstation::new(
                 Settings {
                     name: name.clone(),
-                    address,
+                    line,
                     master,
                     connect_timeout: response_timeout.max(Duration::from_secs(1)),
                     backoff_max: d.backoff_max(Duration::from_millis(*d.scan_ms.get_ref())),

@@ -1,4 +1,5 @@
-//! One outstation's task: the TCP connection (re-opened with back-off),
+//! One outstation's task: the TCP connection or serial line (re-opened with
+//! back-off),
 //! the bytes both ways through [`Master`], its actions carried out (send,
 //! timers, measurements into the tag database, commands' outcomes, IIN
 //! reports), and the status tags.
@@ -11,10 +12,10 @@ use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use gridscada_config::SerialConfig;
 use gridscada_field::StatusIds;
 use gridscada_tagdb::{Clock, Leadership, Quality as TagQuality, Sample, TagDb, TagId, WriteError};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::net::TcpStream;
 use tokio::sync::{mpsc, oneshot, watch};
 
@@ -22,10 +23,31 @@ use super::points::PointMap;
 use super::{CommandRequest, Counters};
 use crate::master::{self, Action, Command, Master, MasterConfig, Report};
 
+/// Where the outstation is reached.
+pub(crate) enum Line {
+    /// `host:port`.
+    Tcp(String),
+    /// A serial port, one outstation on it.
+    Serial(SerialConfig),
+}
+
+impl Line {
+    /// The address or port, for logs and the devices screen.
+    pub fn label(&self) -> String {
+        match self {
+            Line::Tcp(a) => a.clone(),
+            Line::Serial(c) => c.port.get_ref().clone(),
+        }
+    }
+}
+
+type Reader = Box<dyn AsyncRead + Unpin + Send>;
+type Writer = Box<dyn AsyncWrite + Unpin + Send>;
+
 /// Everything the task needs from the configuration.
 pub(crate) struct Settings {
     pub name: String,
-    pub address: String,
+    pub line: Line,
     pub master: MasterConfig,
     pub connect_timeout: Duration,
     pub backoff_max: Duration,
@@ -103,29 +125,17 @@ impl Outstation {
             if *shutdown.borrow() {
                 break;
             }
-            let connect =
-                tokio::time::timeout(self.s.connect_timeout, TcpStream::connect(&self.s.address));
-            let stream = tokio::select! {
+            let opened = tokio::select! {
                 _ = shutdown.changed() => break,
-                r = connect => r,
+                r = self.open() => r,
             };
-            let stream = match stream {
-                Err(_) => Err(format!(
-                    "no connection to {} within {:?}",
-                    self.s.address, self.s.connect_timeout
-                )),
-                Ok(Err(e)) => Err(format!("cannot connect to {}: {e}", self.s.address)),
-                Ok(Ok(s)) => Ok(s),
-            };
-            match stream {
-                Ok(stream) => {
+            match opened {
+                Ok((read, write)) => {
                     self.backoff = Duration::from_millis(250);
                     // The reason of the last failure no longer holds.
                     self.counters.last_error.lock().clear();
-                    let _ = stream.set_nodelay(true);
                     self.counters.connects.fetch_add(1, Ordering::Relaxed);
-                    tracing::info!(outstation = %self.s.name, address = %self.s.address, "DNP3 connected");
-                    let (read, write) = stream.into_split();
+                    tracing::info!(outstation = %self.s.name, line = %self.s.line.label(), "DNP3 line open");
                     match self.session(read, write, &mut shutdown).await {
                         End::Shutdown => break,
                         End::Lost(reason) => self.lost(&reason),
@@ -150,6 +160,33 @@ impl Outstation {
         self.stop();
     }
 
+    /// Connects to the outstation's address, or opens its serial port.
+    async fn open(&self) -> Result<(Reader, Writer), String> {
+        match &self.s.line {
+            Line::Tcp(address) => {
+                match tokio::time::timeout(self.s.connect_timeout, TcpStream::connect(address))
+                    .await
+                {
+                    Err(_) => Err(format!(
+                        "no connection to {address} within {:?}",
+                        self.s.connect_timeout
+                    )),
+                    Ok(Err(e)) => Err(format!("cannot connect to {address}: {e}")),
+                    Ok(Ok(stream)) => {
+                        let _ = stream.set_nodelay(true);
+                        let (read, write) = stream.into_split();
+                        Ok((Box::new(read) as Reader, Box::new(write) as Writer))
+                    }
+                }
+            }
+            Line::Serial(config) => {
+                let port = gridscada_field::open_serial(config)?;
+                let (read, write) = tokio::io::split(port);
+                Ok((Box::new(read) as Reader, Box::new(write) as Writer))
+            }
+        }
+    }
+
     fn stop(&mut self) {
         for (_, p) in self.pending.drain() {
             let _ = p.reply.send(Err(WriteError::Closed));
@@ -167,8 +204,8 @@ impl Outstation {
     /// One connection, until it ends.
     async fn session(
         &mut self,
-        mut read: OwnedReadHalf,
-        mut write: OwnedWriteHalf,
+        mut read: Reader,
+        mut write: Writer,
         shutdown: &mut watch::Receiver<bool>,
     ) -> End {
         let now = self.now();
@@ -188,7 +225,10 @@ impl Outstation {
             let actions = tokio::select! {
                 _ = shutdown.changed() => return End::Shutdown,
                 r = read.read(&mut buf) => match r {
-                    Ok(0) => return End::Lost("the outstation closed the connection".into()),
+                    Ok(0) => return End::Lost(match self.s.line {
+                        Line::Tcp(_) => "the outstation closed the connection".into(),
+                        Line::Serial(_) => "the serial port closed".into(),
+                    }),
                     Err(e) => return End::Lost(format!("read failed: {e}")),
                     Ok(n) => {
                         let now = self.now();
@@ -256,11 +296,7 @@ impl Outstation {
     }
 
     /// Carries out the master's actions; `Err` when the connection failed.
-    async fn carry_out(
-        &mut self,
-        actions: Vec<Action>,
-        write: &mut OwnedWriteHalf,
-    ) -> Result<(), String> {
+    async fn carry_out(&mut self, actions: Vec<Action>, write: &mut Writer) -> Result<(), String> {
         for a in actions {
             match a {
                 Action::Send(bytes) => {
@@ -388,7 +424,7 @@ impl Outstation {
 
     /// The connection is gone: its points turn bad, commands under way fail.
     fn lost(&mut self, reason: &str) {
-        let reason = format!("{}: {reason}", self.s.address);
+        let reason = format!("{}: {reason}", self.s.line.label());
         tracing::warn!(outstation = %self.s.name, %reason, "DNP3 connection closed");
         self.counters.disconnects.fetch_add(1, Ordering::Relaxed);
         self.counters.connected.store(false, Ordering::Relaxed);
