@@ -11,7 +11,8 @@
 #   4. replay: the sunny day at a 1 s step on the virtual clock, the main run
 #      alone (--no-compare) and then the whole command (baseline beside it);
 #   5. telecontrol: IEC 104 interrogation and spontaneous data against c104's
-#      client, a DNP3 integrity poll against dnp3py's master, 50 IEC 104
+#      client, a DNP3 integrity poll and events at 2,000/s against dnp3py's
+#      master, 50 IEC 104
 #      stations on one server (scripts/bench-telecontrol.py);
 #   6. memory: `serve` with 100,000 tags for MEMORY_SECONDS (default 600).
 #
@@ -39,8 +40,8 @@ stage() { # NAME TIMEOUT_S COMMAND...
 }
 
 say "build"
-cargo build --release -p gridscada -p gridscada-store --example bench \
-  -p gridscada-web --example ws_fanout 2>&1 | tail -n 2 | tee -a "$LOG"
+cargo build --release -p gridscada --bin gridscada -p gridscada-store --example bench \
+  -p gridscada-web --example ws_fanout -p gridscada-dnp3 --example dnp3_event_source 2>&1 | tail -n 2 | tee -a "$LOG"
 cargo bench -p gridscada-control --bench dispatch --no-run 2>&1 | tail -n 1 | tee -a "$LOG"
 eval "$(bash scripts/pg-test-cluster.sh | grep '^export')"
 
@@ -51,7 +52,7 @@ stage replay-main 900 target/release/gridscada replay scenarios/sunny-day.toml -
   --no-compare --report target/bench-replay-main.json
 stage replay-with-baseline 900 target/release/gridscada replay scenarios/sunny-day.toml --max \
   --report target/bench-replay.json
-stage telecontrol 900 env GRIDSCADA_BIN=target/release/gridscada "$PY" scripts/bench-telecontrol.py
+stage telecontrol 1200 env GRIDSCADA_BIN=target/release/gridscada "$PY" scripts/bench-telecontrol.py
 stage memory $((MEMORY_SECONDS + 300)) env GRIDSCADA_BIN=target/release/gridscada \
   MALLOC_ARENA_MAX=2 "$PY" scripts/bench-memory.py --seconds "$MEMORY_SECONDS"
 say "done; log in $LOG"

@@ -7,16 +7,25 @@
    (gridscada: every point in its tag database; c104: ACT_TERM received),
    with the CPU each process spent.
 2. IEC 104 spontaneous data at 5,000 points/s for 10 s from the same
-   station: the CPU gridscada spends taking it in (tag database, historian
-   off), against c104's client taking the same stream.
+   station: the CPU gridscada spends taking it in (tag database and its
+   subscribers: historian, alarms, live push), against c104's client (a
+   process of its own) taking the same stream at the same time.
 3. DNP3 integrity poll of 10,000 points from gridscada's simulated
    outstation (`gridscada sim`): gridscada's master against dnp3py's
    master, time and CPU.
+3b. DNP3 events at 2,000/s (1,000 analog inputs changing round-robin,
+   served by this crate's outstation in `examples/dnp3_event_source`):
+   events taken and CPU, gridscada's master (event polls every 0.2 s, and
+   unsolicited responses) against dnp3py's master (class polls every
+   0.2 s), each fed by a source of its own.
 4. 50 IEC 104 stations of 2,000 points each (simulated by `gridscada sim`)
    on one `gridscada serve`: time until every point is Good, then RSS and
    CPU over 30 s.
 
-    GRIDSCADA_BIN=target/release/gridscada python3 scripts/bench-telecontrol.py
+    GRIDSCADA_BIN=target/release/gridscada python3 scripts/bench-telecontrol.py [iec104] [dnp3] [events] [stations]
+
+DNP3_EVENT_SOURCE (default target/release/examples/dnp3_event_source):
+cargo build --release -p gridscada-dnp3 --example dnp3_event_source.
 
 Needs the test venv (c104, dnp3py). Prints one line per figure; run it on
 an otherwise idle machine.
@@ -37,6 +46,37 @@ import urllib.request
 import c104
 
 BIN = os.environ.get("GRIDSCADA_BIN", "target/release/gridscada")
+EVENT_SOURCE = os.environ.get("DNP3_EVENT_SOURCE", "target/release/examples/dnp3_event_source")
+
+# The peer client of the spontaneous stream, a process of its own so its CPU
+# is its own: c104's client with the station's points, counting the
+# spontaneous M_ME_NC ASDUs it receives. "MARK" on stdin: it prints
+# "COUNT n CPU seconds".
+C104_CLIENT = r"""
+import sys, time, c104
+port, points = int(sys.argv[1]), int(sys.argv[2])
+count = [0]
+cl = c104.Client(tick_rate_ms=50)
+conn = cl.add_connection(ip="127.0.0.1", port=port, init=c104.Init.MUTED)
+st = conn.add_station(common_address=1)
+for i in range(1, points + 1):
+    st.add_point(io_address=i, type=c104.Type.M_ME_NC_1)
+def on_raw(connection, data):
+    if len(data) > 8 and data[6] == 13 and data[8] & 0x3F == 3:
+        count[0] += 1
+conn.on_receive_raw(callable=on_raw)
+cl.start()
+end = time.time() + 20
+while not conn.is_connected and time.time() < end:
+    time.sleep(0.05)
+conn.unmute()
+while conn.state != c104.ConnectionState.OPEN and time.time() < end:
+    time.sleep(0.05)
+print("READY" if conn.state == c104.ConnectionState.OPEN else "NOT OPEN", flush=True)
+for line in sys.stdin:
+    print(f"COUNT {count[0]} CPU {time.process_time():.6f}", flush=True)
+cl.stop()
+"""
 
 
 def free_port():
@@ -254,16 +294,34 @@ def iec104(points=20_000, rate=5_000, seconds=10):
                     n += 1
                 time.sleep(0.001)
             return n
-        ev0 = metric(fetch(f"{base}/metrics"), "gridscada_iec104_events_total", "B") or 0
+        # The peer takes the same stream at the same time, in a process
+        # of its own.
+        peer = subprocess.Popen([sys.executable, "-c", C104_CLIENT, str(port), str(points)],
+                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, bufsize=1)
+
+        def mark():
+            peer.stdin.write("MARK\n")
+            peer.stdin.flush()
+            _, n, _, cpu = peer.stdout.readline().split()
+            return int(n), float(cpu)
+        ready = peer.stdout.readline().strip()
+        if ready != "READY":
+            print(f"iec104 spontaneous: c104's client did not start ({ready})", flush=True)
+        events = lambda: metric(fetch(f"{base}/metrics"), "gridscada_iec104_events_total", "B") or 0
+        ev0 = events()
+        pn0, pc0 = mark()
         c0 = cpu_s(gs.pid)
         t0 = time.perf_counter()
         sent = stream()
-        wait_for(lambda: (metric(fetch(f"{base}/metrics"), "gridscada_iec104_events_total", "B") or 0) - ev0 >= sent,
-                 30, 0.1)
+        wait_for(lambda: events() - ev0 >= sent and mark()[0] - pn0 >= sent, 30, 0.1)
         t1, c1 = time.perf_counter(), cpu_s(gs.pid)
-        got = (metric(fetch(f"{base}/metrics"), "gridscada_iec104_events_total", "B") or 0) - ev0
+        pn1, pc1 = mark()
+        got = events() - ev0
         print(f"iec104 spontaneous: {sent} points sent in {seconds} s ({sent / seconds:.0f}/s); gridscada took "
-              f"{got:.0f}, {100 * (c1 - c0) / (t1 - t0):.1f} % of a core", flush=True)
+              f"{got:.0f}, {100 * (c1 - c0) / (t1 - t0):.1f} % of a core; c104's client took {pn1 - pn0}, "
+              f"{100 * (pc1 - pc0) / (t1 - t0):.1f} % of a core", flush=True)
+        peer.stdin.close()
+        peer.wait(10)
     finally:
         gs.terminate()
         gs.wait(20)
@@ -344,6 +402,100 @@ async def dnp3py_integrity(port, points):
         await runner.close()
 
 
+# --- 3b: DNP3 events at 2,000/s ---------------------------------------------
+
+def event_source(port, points, rate):
+    src = subprocess.Popen([EVENT_SOURCE, str(port), "--points", str(points), "--rate", str(rate),
+                            "--outstation", "10"], stdout=subprocess.PIPE, text=True, bufsize=1)
+    line = src.stdout.readline().strip()
+    if line != "LISTENING":
+        raise RuntimeError(f"the event source did not start: {line!r}")
+    # Its "GENERATED" lines are not needed: drain them.
+    threading.Thread(target=lambda: [None for _ in src.stdout], daemon=True).start()
+    return src
+
+
+def dnp3_events(rate=2_000, points=1_000, seconds=10, period=0.2):
+    if not os.path.exists(EVENT_SOURCE):
+        print(f"dnp3 events: no event source at {EVENT_SOURCE} (cargo build --release -p gridscada-dnp3 "
+              f"--example dnp3_event_source)", flush=True)
+        return
+    for how, session in (("event polls every 0.2 s", f"event_poll_period_s = {period}\nunsolicited = false\n"),
+                         ("unsolicited responses", "event_poll_period_s = 0\nunsolicited = true\n")):
+        port = free_port()
+        src = event_source(port, points, rate)
+        tags = [f'[[device]]\nname = "O"\nprotocol = "dnp3"\naddress = "127.0.0.1:{port}"\n'
+                f'[device.dnp3]\noutstation_address = 10\nintegrity_period_s = 3600\n{session}']
+        for i in range(points):
+            tags.append(f'[[tag]]\nname = "O.A{i}"\ndevice = "O"\ntype = "f32"\n'
+                        f'dnp3 = {{ point = "analog_input", index = {i} }}\n')
+        d, http = plant_dir("\n".join(tags))
+        gs = demo(d, http, os.path.join(d, "data"), ["O"])
+        base = f"http://127.0.0.1:{http}"
+        try:
+            polls = lambda: metric(fetch(f"{base}/metrics"), "gridscada_dnp3_integrity_polls_total", "O") or 0
+            if not wait_for(lambda: polls() >= 1, 120, 0.2):
+                print("dnp3 events: gridscada never finished its first integrity poll", flush=True)
+                continue
+            events = lambda: metric(fetch(f"{base}/metrics"), "gridscada_dnp3_events_total", "O") or 0
+            overflows = lambda: metric(fetch(f"{base}/metrics"), "gridscada_dnp3_overflows_total", "O") or 0
+            time.sleep(3)  # past the start
+            e0, o0, c0, t0 = events(), overflows(), cpu_s(gs.pid), time.perf_counter()
+            time.sleep(seconds)
+            e1, o1, c1, t1 = events(), overflows(), cpu_s(gs.pid), time.perf_counter()
+            print(f"dnp3 events at {rate}/s ({how}): gridscada took {(e1 - e0) / (t1 - t0):.0f} events/s, "
+                  f"{100 * (c1 - c0) / (t1 - t0):.1f} % of a core, {o1 - o0:.0f} buffer overflows", flush=True)
+        finally:
+            gs.terminate()
+            gs.wait(20)
+            src.terminate()
+            src.wait(10)
+
+    # The peer: dnp3py's master, class polls at the same period.
+    port = free_port()
+    src = event_source(port, points, rate)
+    try:
+        asyncio.run(dnp3py_events(port, seconds, period, rate))
+    except Exception as e:
+        print(f"dnp3 events: dnp3py master failed: {e!r}", flush=True)
+    finally:
+        src.terminate()
+        src.wait(10)
+
+
+async def dnp3py_events(port, seconds, period, rate):
+    from dnp3.master import DefaultSOEHandler, Master, MasterConfig, MasterTcpRunner
+    from dnp3.master.config import PollingConfig
+
+    class Counting(DefaultSOEHandler):
+        n = 0
+
+        def on_analog_input(self, values, info):
+            Counting.n += len(values)
+            super().on_analog_input(values, info)
+    master = Master(config=MasterConfig(address=1, outstation_address=10,
+                                        polling=PollingConfig(integrity_poll_interval=0)),
+                    handler=Counting())
+    runner = MasterTcpRunner(master=master, host="127.0.0.1", port=port, response_timeout=10)
+    await asyncio.wait_for(runner.open(), 10)
+    try:
+        await runner.integrity_poll()
+
+        async def polls(until):
+            while time.perf_counter() < until:
+                started = time.perf_counter()
+                await runner.class_poll()
+                await asyncio.sleep(max(0.0, period - (time.perf_counter() - started)))
+        await polls(time.perf_counter() + 3)  # past the start
+        n0, p0, t0 = Counting.n, time.process_time(), time.perf_counter()
+        await polls(t0 + seconds)
+        n1, p1, t1 = Counting.n, time.process_time(), time.perf_counter()
+        print(f"dnp3 events at {rate}/s (class polls every {period} s): dnp3py master took "
+              f"{(n1 - n0) / (t1 - t0):.0f} events/s, {100 * (p1 - p0) / (t1 - t0):.1f} % of a core", flush=True)
+    finally:
+        await runner.close()
+
+
 # --- 4: 50 stations --------------------------------------------------------
 
 def stations(n=50, per=2_000, seconds=30):
@@ -393,10 +545,12 @@ def stations(n=50, per=2_000, seconds=30):
 
 
 if __name__ == "__main__":
-    which = sys.argv[1:] or ["iec104", "dnp3", "stations"]
+    which = sys.argv[1:] or ["iec104", "dnp3", "events", "stations"]
     if "iec104" in which:
         iec104()
     if "dnp3" in which:
         dnp3()
+    if "events" in which:
+        dnp3_events()
     if "stations" in which:
         stations()

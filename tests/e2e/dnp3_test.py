@@ -870,6 +870,10 @@ def run(base, data, proc, os1, os2, os3, line, hostile, log_path):
           f"got {t}, want timestamp {stamp}")
     check(wait_for(lambda: os2.said("TIME"), 5),
           "py1815: the outstation asked for the time (IIN1.4) and was given it (LAN procedure)", str(os2.lines[-5:]))
+    status, body = api.call("GET", "/api/events?limit=200")
+    synced = [e for e in (body or {}).get("events", [])
+              if e.get("source") == "OS2" and e.get("kind") == "device" and "NEED_TIME" in e.get("message", "")]
+    check(synced, "the clock set at the outstation's request is in the event log", json.dumps(synced)[:300])
 
     # -- Commands through the audited write.
     status, body = api.call("POST", "/api/tags/OS1.Q1.Closed/write", {"value": True})
@@ -984,6 +988,9 @@ def run(base, data, proc, os1, os2, os3, line, hostile, log_path):
     status, body = api.call("GET", "/api/events?limit=200")
     kinds = sorted({(e.get("source"), e.get("kind")) for e in (body or {}).get("events", [])})
     note(f"event log after the restart (source, kind): {kinds}")
+    restarted = [e for e in (body or {}).get("events", [])
+                 if e.get("source") == "OS1" and e.get("kind") == "device" and "IIN1.7" in e.get("message", "")]
+    check(restarted, "the restart (IIN1.7) is in the event log, from the outstation", str(kinds))
     cleared = wait_for(lambda: "OS1:comm" not in (api.active_alarms() or ["?"]), 10)
     check(cleared, "dnp3py restarted: OS1:comm clears", str(api.active_alarms()))
     note(f"OS1.Comm.LastError after the restart: {(api.tag('OS1.Comm.LastError') or {}).get('value')!r}")

@@ -605,6 +605,18 @@ def run(plant, data, http_port, rtu_a, rtu_b, centre_port):
     check(status == 200 and "RTU1.Q1.Closed" in text and "RTU1.Remote" in text,
           "the commands are in the event log", text[:300])
 
+    # The station ends an initialisation (M_EI_NA_1, a local manual reset):
+    # the event log records it with the cause, and gridscada interrogates.
+    rtu_a.st.signal_initialized(cause=c104.Coi.LOCAL_MANUAL_RESET)
+
+    def end_of_init():
+        status, body = api.call("GET", "/api/events?limit=100")
+        return next((e for e in (body or {}).get("events", [])
+                     if e.get("source") == "RTU1" and "initialisation" in e.get("message", "")), None)
+    e = wait_for(end_of_init, 10)
+    check(e is not None and e.get("kind") == "device" and "local manual reset" in e.get("message", ""),
+          "end of initialisation (M_EI_NA_1) is in the event log, from the station, with its cause", str(e))
+
     control_centre(api, rtu_a, centre_port)
 
     # Redundancy group: the started RTU goes away, the other address takes over.

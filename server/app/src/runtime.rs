@@ -517,8 +517,14 @@ impl Stack {
         ));
         let mut loops = JoinSet::new();
 
-        let field = field::Field::start(&plant, db.clone(), clock.clone(), leadership.clone())
-            .context("starting field I/O")?;
+        let field = field::Field::start(
+            &plant,
+            db.clone(),
+            clock.clone(),
+            leadership.clone(),
+            events_tx.clone(),
+        )
+        .context("starting field I/O")?;
 
         // The lease keeper and the announcements of role changes.
         let (pair, pair_keeper) = match (lease, &plant.redundancy) {

@@ -6,7 +6,8 @@
 //! and `/metrics` show, the engineering write limits every write is checked
 //! against ([`check_limits`]), the returned status point that confirms a
 //! telecontrol command ([`ReturnedStatus`]), the serial line settings
-//! ([`open_serial`]), and the writer that sends each tag's write to
+//! ([`open_serial`]), the notices a device's task leaves for the event
+//! log ([`Notices`]), and the writer that sends each tag's write to
 //! the protocol its device speaks ([`Router`]).
 //!
 //! **Must not touch:** any protocol's framing or connections (each protocol
@@ -15,6 +16,7 @@
 //! together here.
 
 mod feedback;
+mod notice;
 mod round_trip;
 mod serial;
 
@@ -28,6 +30,7 @@ use gridscada_tagdb::{
 
 pub use feedback::{within_resolution, ReturnedStatus};
 pub use round_trip::{RoundTripHistogram, RoundTrips, ROUND_TRIP_BOUNDS};
+pub use notice::{DeviceNotice, Notices};
 pub use serial::open_serial;
 
 /// Names of a device's communication status tags.

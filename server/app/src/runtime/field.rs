@@ -6,8 +6,10 @@ use std::sync::Arc;
 
 use anyhow::Context;
 use gridscada_config::{Plant, Protocol};
-use gridscada_field::{Router, StatsHandle};
+use gridscada_field::{DeviceNotice, Router, StatsHandle};
+use gridscada_store::NewEvent;
 use gridscada_tagdb::{Clock, Leadership, TagDb, TagWriter};
+use tokio::sync::mpsc;
 
 pub(crate) struct Field {
     modbus: gridscada_modbus::FieldIo,
@@ -18,12 +20,15 @@ pub(crate) struct Field {
 }
 
 impl Field {
-    /// Starts every protocol's tasks; writes are fenced by `leadership`.
+    /// Starts every protocol's tasks; writes are fenced by `leadership`;
+    /// the devices' notices (a restart, lost events, a clock set) go to the
+    /// event log through `events`.
     pub(crate) fn start(
         plant: &Plant,
         db: Arc<TagDb>,
         clock: Arc<dyn Clock>,
         leadership: Leadership,
+        events: mpsc::Sender<NewEvent>,
     ) -> anyhow::Result<Field> {
         let modbus = gridscada_modbus::FieldIo::start_fenced(
             plant,
@@ -32,11 +37,17 @@ impl Field {
             leadership.clone(),
         )
         .context("starting Modbus field I/O")?;
-        let iec104 =
+        let mut iec104 =
             gridscada_iec104::Iec104Io::start(plant, db.clone(), clock.clone(), leadership.clone())
                 .context("starting the IEC 104 client")?;
-        let dnp3 = gridscada_dnp3::Dnp3Io::start(plant, db, clock, leadership)
+        let mut dnp3 = gridscada_dnp3::Dnp3Io::start(plant, db, clock.clone(), leadership)
             .context("starting the DNP3 master")?;
+        for notices in [iec104.take_notices(), dnp3.take_notices()]
+            .into_iter()
+            .flatten()
+        {
+            tokio::spawn(record_notices(notices, events.clone(), clock.clone()));
+        }
         let writer: Arc<dyn TagWriter> = Arc::new(Router::new([
             (modbus.writer(), Router::tags_of(plant, |p| p.is_modbus())),
             (
@@ -78,5 +89,20 @@ impl Field {
         self.modbus.shutdown().await;
         self.iec104.shutdown().await;
         self.dnp3.shutdown().await;
+    }
+}
+
+/// A device's notices into the event log, with the device as the source,
+/// until the protocol's tasks end.
+async fn record_notices(
+    mut notices: mpsc::Receiver<DeviceNotice>,
+    events: mpsc::Sender<NewEvent>,
+    clock: Arc<dyn Clock>,
+) {
+    while let Some(n) = notices.recv().await {
+        let event = crate::sinks::system_event(clock.as_ref(), "device", &n.device, n.message);
+        if events.send(event).await.is_err() {
+            return;
+        }
     }
 }

@@ -20,7 +20,7 @@ use gridscada_config::{
     DataType, Dnp3Command, Dnp3DeviceConfig, Dnp3Op, Dnp3Point, Dnp3TimeSync, Plant, Protocol,
 };
 use gridscada_field::{
-    check_limits, within_resolution, DeviceStats, LinkStats, PollStats, ReturnedStatus, RoundTrips,
+    check_limits, DeviceNotice, Notices, within_resolution, DeviceStats, LinkStats, PollStats, ReturnedStatus, RoundTrips,
     StatsSource,
 };
 use gridscada_tagdb::{
@@ -195,6 +195,7 @@ pub struct Dnp3Io {
     stats: Arc<OutstationStats>,
     shutdown: watch::Sender<bool>,
     tasks: Vec<JoinHandle<()>>,
+    notices: Option<mpsc::Receiver<DeviceNotice>>,
 }
 
 struct OutstationStats {
@@ -217,6 +218,7 @@ impl Dnp3Io {
         let mut targets = HashMap::new();
         let mut to_start = Vec::new();
         let default_session = Dnp3DeviceConfig::default();
+        let (notices, notices_rx) = Notices::channel(256);
         for d in plant
             .devices
             .iter()
@@ -310,6 +312,7 @@ impl Dnp3Io {
                 Arc::clone(&clock),
                 leadership.clone(),
                 rx,
+                notices.clone(),
             ));
         }
         let tasks = to_start
@@ -327,7 +330,14 @@ impl Dnp3Io {
             stats: Arc::new(OutstationStats { outstations }),
             shutdown,
             tasks,
+            notices: Some(notices_rx),
         })
+    }
+
+    /// The outstations' notices for the event log (restart, lost events,
+    /// clock set); `None` after the first call.
+    pub fn take_notices(&mut self) -> Option<mpsc::Receiver<DeviceNotice>> {
+        self.notices.take()
     }
 
     /// The command path to the outstations.

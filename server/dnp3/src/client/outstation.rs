@@ -13,7 +13,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use gridscada_config::SerialConfig;
-use gridscada_field::StatusIds;
+use gridscada_field::{Notices, StatusIds};
 use gridscada_tagdb::{Clock, Leadership, Quality as TagQuality, Sample, TagDb, TagId, WriteError};
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::net::TcpStream;
@@ -69,6 +69,7 @@ pub(crate) struct Outstation {
     clock: Arc<dyn Clock>,
     leadership: Leadership,
     commands: mpsc::Receiver<CommandRequest>,
+    notices: Notices,
     pending: HashMap<u64, Pending>,
     next_id: u64,
     backoff: Duration,
@@ -93,6 +94,7 @@ impl Outstation {
         clock: Arc<dyn Clock>,
         leadership: Leadership,
         commands: mpsc::Receiver<CommandRequest>,
+        notices: Notices,
     ) -> Outstation {
         let master = Master::new(s.master.clone());
         Outstation {
@@ -105,6 +107,7 @@ impl Outstation {
             clock,
             leadership,
             commands,
+            notices,
             pending: HashMap::new(),
             next_id: 0,
             backoff: Duration::from_millis(250),
@@ -370,6 +373,7 @@ impl Outstation {
             Report::EventBufferOverflow => {
                 self.counters.overflows.fetch_add(1, Ordering::Relaxed);
                 tracing::warn!(outstation = %self.s.name, "{r}");
+                self.notices.send(&self.s.name, r.to_string());
             }
             // Counted in octets where they are read (`discarded_octets`).
             Report::Malformed(_) => self.set_error(&r.to_string()),
@@ -382,8 +386,19 @@ impl Outstation {
                     .last_integrity_ms
                     .store(self.clock.now().as_millis(), Ordering::Relaxed);
             }
-            Report::DeviceRestart | Report::TimeSynced { .. } => {
-                tracing::info!(outstation = %self.s.name, "{r}")
+            // In the event log: a restart means the outstation's state
+            // (latched outputs, counters, its event buffer) may have been
+            // lost; a clock set is part of the time stamps' record.
+            Report::DeviceRestart => {
+                tracing::info!(outstation = %self.s.name, "{r}");
+                self.notices.send(&self.s.name, r.to_string());
+            }
+            Report::TimeSynced { .. } => {
+                tracing::info!(outstation = %self.s.name, "{r}");
+                self.notices.send(
+                    &self.s.name,
+                    "the outstation asked for the time (IIN1.4 NEED_TIME); its clock was set (LAN procedure)".into(),
+                );
             }
             Report::Ignored(_) | Report::Note(_) => {
                 tracing::debug!(outstation = %self.s.name, "{r}")

@@ -18,6 +18,7 @@ use std::time::Duration;
 
 use gridscada_config::{Iec104DeviceConfig, Plant, Protocol};
 use gridscada_field::{
+    DeviceNotice, Notices,
     check_limits, DeviceStats, LinkStats, PollStats, ReturnedStatus, RoundTrips, StatsSource,
 };
 use gridscada_tagdb::{Clock, Leadership, TagDb, TagId, TagWriter, Value, WriteError, WriteFuture};
@@ -93,6 +94,7 @@ pub struct Iec104Io {
     stats: Arc<StationStats>,
     shutdown: watch::Sender<bool>,
     tasks: Vec<JoinHandle<()>>,
+    notices: Option<mpsc::Receiver<DeviceNotice>>,
 }
 
 struct StationStats {
@@ -110,6 +112,7 @@ impl Iec104Io {
         leadership: Leadership,
     ) -> Result<Iec104Io, StartError> {
         let (shutdown, shutdown_rx) = watch::channel(false);
+        let (notices, notices_rx) = Notices::channel(256);
         let mut senders = Vec::new();
         let mut stations = Vec::new();
         let mut targets = HashMap::new();
@@ -199,6 +202,7 @@ impl Iec104Io {
                 Arc::clone(&clock),
                 leadership.clone(),
                 rx,
+                notices.clone(),
             ));
         }
         let tasks = tasks_to_start
@@ -215,7 +219,14 @@ impl Iec104Io {
             stats: Arc::new(StationStats { stations }),
             shutdown,
             tasks,
+            notices: Some(notices_rx),
         })
+    }
+
+    /// The stations' notices for the event log (end of initialisation);
+    /// `None` after the first call.
+    pub fn take_notices(&mut self) -> Option<mpsc::Receiver<DeviceNotice>> {
+        self.notices.take()
     }
 
     /// The command path to the stations.

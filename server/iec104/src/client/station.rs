@@ -12,7 +12,7 @@ use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use gridscada_field::StatusIds;
+use gridscada_field::{Notices, StatusIds};
 use gridscada_tagdb::{Clock, Leadership, Quality as TagQuality, Sample, TagDb, TagId, WriteError};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::tcp::OwnedWriteHalf;
@@ -81,6 +81,8 @@ pub(crate) struct Station {
     clock: Arc<dyn Clock>,
     leadership: Leadership,
     commands: mpsc::Receiver<CommandRequest>,
+    /// Notices for the event log (end of initialisation).
+    notices: Notices,
     slots: Vec<Slot>,
     /// The started connection's slot, once STARTDT is confirmed.
     started: Option<usize>,
@@ -111,6 +113,7 @@ impl Station {
         clock: Arc<dyn Clock>,
         leadership: Leadership,
         commands: mpsc::Receiver<CommandRequest>,
+        notices: Notices,
     ) -> Station {
         let now = Instant::now();
         let slots = s
@@ -134,6 +137,7 @@ impl Station {
             clock,
             leadership,
             commands,
+            notices,
             slots,
             started: None,
             starting: None,
@@ -453,6 +457,27 @@ impl Station {
                 // The station restarted: what we knew may be stale.
                 tracing::info!(station = %self.s.name, "end of initialisation: general interrogation");
                 self.next_interrogation = Some(Instant::now());
+                let why = match asdu.objects().first().map(|o| o.element) {
+                    Some(Element::EndOfInit { cause, after_change }) => format!(
+                        "{}{}",
+                        match cause {
+                            0 => "local power on".to_string(),
+                            1 => "local manual reset".to_string(),
+                            2 => "remote reset".to_string(),
+                            c => format!("cause {c}"),
+                        },
+                        if after_change {
+                            ", after a change of local parameters"
+                        } else {
+                            ""
+                        }
+                    ),
+                    _ => "cause not given".to_string(),
+                };
+                self.notices.send(
+                    &self.s.name,
+                    format!("the station ended its initialisation (M_EI_NA_1: {why}); general interrogation"),
+                );
             }
             TypeId::C_IC_NA_1 => match (asdu.cause(), asdu.is_negative()) {
                 (Cause::ActTerm, false) => {
