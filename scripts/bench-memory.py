@@ -23,6 +23,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import urllib.error
 import urllib.request
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -165,17 +166,28 @@ def main():
         password = "bench-memory-" + str(random.randrange(10**9))
         subprocess.run([binary, "user", "add", "bench", "--role", "display", "--config", tmp],
                        input=password + "\n", text=True, check=True, capture_output=True)
+        # Start-up: `check` of the generated configuration, then `serve` to
+        # its first /healthz answer (any status: it is up and answering).
+        t0 = time.perf_counter()
+        subprocess.run([binary, "check", tmp], check=True, capture_output=True)
+        print(f"start-up: check of {args.tags} tags on {args.devices} devices took "
+              f"{time.perf_counter() - t0:.1f} s", flush=True)
+        t0 = time.perf_counter()
         server = subprocess.Popen([binary, "serve", "--config", tmp],
                                   stdout=open(f"{tmp}/serve.log", "w"), stderr=subprocess.STDOUT)
         procs.append(server)
-        for _ in range(600):
+        for _ in range(3000):
             try:
                 urllib.request.urlopen(base + "/healthz", timeout=1)
+                break
+            except urllib.error.HTTPError:
                 break
             except OSError:
                 if server.poll() is not None:
                     sys.exit(f"serve exited: see {tmp}/serve.log")
                 time.sleep(0.2)
+        print(f"start-up: serve answered /healthz {time.perf_counter() - t0:.1f} s after it started",
+              flush=True)
         cookies = [login(base, "bench", password) for _ in range((args.clients + 7) // 8)]
         counts = [0] * args.clients
         loop = asyncio.new_event_loop()

@@ -4,6 +4,7 @@
 //! entry, is deserialized on its own, so one bad entry does not hide the
 //! problems of the others: `gridscada check` reports them all.
 
+use std::collections::HashMap;
 use std::io;
 use std::path::{Path, PathBuf};
 
@@ -53,6 +54,45 @@ pub struct Plant {
     pub suppression: Vec<SuppressionConfig>,
     /// `[reports]`: when reports are made on their own.
     pub reports: ReportsConfig,
+    /// Positions of the tags and devices by name, made at the first lookup.
+    index: NameIndex,
+}
+
+/// Where each tag and device name sits in [`Plant::tags`] and
+/// [`Plant::devices`], so a lookup by name is not a scan of a million tags
+/// (start-up looks up every tag once: a scan each would be quadratic).
+/// Built at the first lookup; a hit is checked against the list, and a
+/// miss scans it, so a plant whose lists were changed after loading (tests
+/// do) still answers right, only slower.
+#[derive(Debug, Clone, Default)]
+struct NameIndex {
+    tags: std::sync::OnceLock<HashMap<String, usize>>,
+    devices: std::sync::OnceLock<HashMap<String, usize>>,
+}
+
+/// Each name's position (the first, should a name repeat).
+fn positions<'a>(names: impl Iterator<Item = &'a str>) -> HashMap<String, usize> {
+    let mut index = HashMap::new();
+    for (i, name) in names.enumerate() {
+        index.entry(name.to_string()).or_insert(i);
+    }
+    index
+}
+
+/// The item named `name`: by the index when it still holds there, else by
+/// a scan.
+fn lookup<'a, T>(
+    index: &HashMap<String, usize>,
+    items: &'a [T],
+    name: &str,
+    name_of: impl Fn(&T) -> &String,
+) -> Option<&'a T> {
+    if let Some(item) = index.get(name).and_then(|&i| items.get(i)) {
+        if name_of(item) == name {
+            return Some(item);
+        }
+    }
+    items.iter().find(|item| name_of(item) == name)
 }
 
 /// Where HTTPS takes its certificate and key, and its other settings.
@@ -70,10 +110,18 @@ pub struct TlsFiles {
 
 impl Plant {
     pub fn device(&self, name: &str) -> Option<&DeviceConfig> {
-        self.devices.iter().find(|d| d.name.get_ref() == name)
+        let index = self
+            .index
+            .devices
+            .get_or_init(|| positions(self.devices.iter().map(|d| d.name.get_ref().as_str())));
+        lookup(index, &self.devices, name, |d| d.name.get_ref())
     }
     pub fn tag(&self, name: &str) -> Option<&TagConfig> {
-        self.tags.iter().find(|t| t.name.get_ref() == name)
+        let index = self
+            .index
+            .tags
+            .get_or_init(|| positions(self.tags.iter().map(|t| t.name.get_ref().as_str())));
+        lookup(index, &self.tags, name, |t| t.name.get_ref())
     }
 
     /// The engineering limits `(min, max)` a write to `name` must respect:
@@ -87,12 +135,18 @@ impl Plant {
             configured(tag.and_then(|t| t.min.as_ref())),
             configured(tag.and_then(|t| t.max.as_ref())),
         );
-        if let Some(u) = self
-            .microgrid
-            .iter()
-            .flat_map(|m| &m.units)
-            .find(|u| u.io().setpoint_kw == name)
-        {
+        // A unit's setpoint is `{prefix}.Setpoint_kW` (`UnitConfig::io`);
+        // matched by its prefix, not by building every unit's names per tag.
+        let setpoint_of = name
+            .rsplit_once('.')
+            .filter(|(_, last)| *last == crate::model::SETPOINT_KW)
+            .map(|(prefix, _)| prefix);
+        if let Some(u) = setpoint_of.and_then(|prefix| {
+            self.microgrid
+                .iter()
+                .flat_map(|m| &m.units)
+                .find(|u| u.prefix.get_ref() == prefix)
+        }) {
             let (ulo, uhi) = match u.kind {
                 crate::UnitKind::Pv | crate::UnitKind::Wind => (0.0, u.rated_kw),
                 crate::UnitKind::Storage => (-u.max_charge_kw, u.max_discharge_kw),
@@ -240,6 +294,7 @@ pub fn load_with(
         notify: main_cfg.notify,
         suppression: main_cfg.suppression,
         reports: main_cfg.reports,
+        index: NameIndex::default(),
     })
 }
 

@@ -66,7 +66,10 @@ async fn main() {
         ..ServedDatabase::default()
     };
     let ids: Vec<_> = served.points.iter().map(|p| p.id).collect();
-    db.apply(ids.iter().map(|&id| (id, Sample::good(0.0, Timestamp::now_utc()))));
+    db.apply(
+        ids.iter()
+            .map(|&id| (id, Sample::good(0.0, Timestamp::now_utc()))),
+    );
     let listener = tokio::net::TcpListener::bind(("127.0.0.1", port))
         .await
         .expect("the port is free");
@@ -92,7 +95,12 @@ async fn main() {
         let due = (elapsed.as_secs_f64() * rate as f64) as u64;
         let now = Timestamp::now_utc();
         let batch: Vec<_> = (made..due)
-            .map(|n| (ids[(n as usize) % points], Sample::good(n as f64 + 1.0, now)))
+            .map(|n| {
+                (
+                    ids[(n as usize) % points],
+                    Sample::good(n as f64 + 1.0, now),
+                )
+            })
             .collect();
         db.apply(batch);
         made = due;

@@ -29,8 +29,8 @@ use gridscada_tagdb::{
 };
 
 pub use feedback::{within_resolution, ReturnedStatus};
-pub use round_trip::{RoundTripHistogram, RoundTrips, ROUND_TRIP_BOUNDS};
 pub use notice::{DeviceNotice, Notices};
+pub use round_trip::{RoundTripHistogram, RoundTrips, ROUND_TRIP_BOUNDS};
 pub use serial::open_serial;
 
 /// Names of a device's communication status tags.

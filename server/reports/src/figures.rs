@@ -183,7 +183,7 @@ impl<'a> TagIndex<'a> {
     }
 
     fn tag(&self, name: &str) -> Option<&'a gridscada_config::TagConfig> {
-        self.plant.tags.iter().find(|t| t.name.get_ref() == name)
+        self.plant.tag(name)
     }
 
     /// How long a sample of `name` holds: twice its max interval and 5

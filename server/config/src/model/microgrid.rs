@@ -336,11 +336,14 @@ pub struct UnitIo {
     pub run_cmd: String,
 }
 
+/// The last part of a unit's setpoint tag, `{prefix}.Setpoint_kW`.
+pub const SETPOINT_KW: &str = "Setpoint_kW";
+
 impl UnitConfig {
     pub fn io(&self) -> UnitIo {
         let p = self.prefix.get_ref();
         UnitIo {
-            setpoint_kw: format!("{p}.Setpoint_kW"),
+            setpoint_kw: format!("{p}.{SETPOINT_KW}"),
             p_kw: format!("{p}.P_kW"),
             voltage_v: format!("{p}.V"),
             current_a: format!("{p}.I"),

@@ -20,8 +20,8 @@ use gridscada_config::{
     DataType, Dnp3Command, Dnp3DeviceConfig, Dnp3Op, Dnp3Point, Dnp3TimeSync, Plant, Protocol,
 };
 use gridscada_field::{
-    check_limits, DeviceNotice, Notices, within_resolution, DeviceStats, LinkStats, PollStats, ReturnedStatus, RoundTrips,
-    StatsSource,
+    check_limits, within_resolution, DeviceNotice, DeviceStats, LinkStats, Notices, PollStats,
+    ReturnedStatus, RoundTrips, StatsSource,
 };
 use gridscada_tagdb::{
     Clock, Leadership, Sample, TagDb, TagId, TagWriter, Value, WriteError, WriteFuture,

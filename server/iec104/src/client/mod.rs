@@ -18,8 +18,8 @@ use std::time::Duration;
 
 use gridscada_config::{Iec104DeviceConfig, Plant, Protocol};
 use gridscada_field::{
-    DeviceNotice, Notices,
-    check_limits, DeviceStats, LinkStats, PollStats, ReturnedStatus, RoundTrips, StatsSource,
+    check_limits, DeviceNotice, DeviceStats, LinkStats, Notices, PollStats, ReturnedStatus,
+    RoundTrips, StatsSource,
 };
 use gridscada_tagdb::{Clock, Leadership, TagDb, TagId, TagWriter, Value, WriteError, WriteFuture};
 use parking_lot::Mutex;

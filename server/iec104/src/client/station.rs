@@ -458,7 +458,10 @@ impl Station {
                 tracing::info!(station = %self.s.name, "end of initialisation: general interrogation");
                 self.next_interrogation = Some(Instant::now());
                 let why = match asdu.objects().first().map(|o| o.element) {
-                    Some(Element::EndOfInit { cause, after_change }) => format!(
+                    Some(Element::EndOfInit {
+                        cause,
+                        after_change,
+                    }) => format!(
                         "{}{}",
                         match cause {
                             0 => "local power on".to_string(),
