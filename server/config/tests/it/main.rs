@@ -4,6 +4,7 @@
 //! and gets a `mod` line here; run one with `cargo test --test it NAME`.
 
 mod broken_configs;
+mod lookup;
 mod mqtt_host;
 mod notify;
 mod redundancy_config;
