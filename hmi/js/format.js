@@ -31,6 +31,23 @@ export function fmtValue(v, digits) {
   return String(v);
 }
 
+/**
+ * The configured word for a value (a tag's `states`, e.g. {false: "OPEN",
+ * true: "CLOSED"}), or undefined: a boolean by "true"/"false", else by
+ * "1"/"0"; a whole number by its digits. The server's `state_label` does the same.
+ */
+export function stateWord(states, v) {
+  if (!states) return undefined;
+  if (typeof v === 'boolean') return states[String(v)] ?? states[v ? '1' : '0'];
+  if (typeof v === 'number' && Number.isInteger(v)) return states[String(v)];
+  return undefined;
+}
+
+/** A value in the tag's words where it has them, else as a value. */
+export function fmtStated(states, v, digits) {
+  return stateWord(states, v) ?? fmtValue(v, digits);
+}
+
 /** Samples older than this while the source claims Good are shown as stale. */
 export const STALE_MS = 60_000;
 

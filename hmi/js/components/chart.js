@@ -9,7 +9,9 @@
 
 import { fmtNumber, fmtTime, pad } from '../format.js';
 
-export const PEN_COLORS = ['#1d5fa8', '#c62828', '#2e7d32', '#b26a00', '#6a3fb5', '#00838f', '#ad1457', '#4e5b6a'];
+// Pens: blues, greens, greys and browns, readable on the light and the dark
+// plot; none red, orange, yellow or purple, the alarm colours (ISA-101).
+export const PEN_COLORS = ['#1d5fa8', '#00838f', '#2e7d32', '#78909c', '#8d6e63', '#26a69a', '#0288d1', '#546e7a'];
 
 /** Room of one Y axis (its tick labels and unit), and the plot's other margins. */
 const AXIS_W = 58;
@@ -274,14 +276,16 @@ export class TrendChart {
     g.fillStyle = col.text;
     g.textAlign = 'center';
     g.textBaseline = 'top';
-    const ticks = Math.max(2, Math.floor(pw / 110));
-    for (let i = 0; i <= ticks; i++) {
-      const t = this.from + (span * i) / ticks;
+    // Time ticks on round intervals of the local clock (10:00, 10:05, 10:10), labels kept inside the plot.
+    const ticks = timeTicks(this.from, this.from + span, Math.max(2, Math.floor(pw / 110)));
+    for (const t of ticks.times) {
       const x = Math.round(X(t)) + 0.5;
       g.strokeStyle = col.grid;
       g.beginPath(); g.moveTo(x, M.top); g.lineTo(x, M.top + ph); g.stroke();
-      g.textAlign = i === 0 ? 'left' : i === ticks ? 'right' : 'center';
-      g.fillText(timeLabel(t, span), i === 0 ? x - 4 : i === ticks ? x + 4 : x, M.top + ph + 6);
+      const label = timeLabel(t, ticks.step, span);
+      const half = g.measureText(label).width / 2;
+      g.textAlign = 'center';
+      g.fillText(label, Math.min(Math.max(x, left + half), left + pw - half), M.top + ph + 6);
     }
     g.strokeStyle = col.frame;
     g.strokeRect(left + 0.5, M.top + 0.5, pw, ph);
@@ -378,10 +382,29 @@ function niceTicks(min, max, n) {
   return out;
 }
 
-function timeLabel(t, span) {
+/** The tick steps an axis may take: round seconds, minutes, hours and days. */
+const TIME_STEPS = [1, 2, 5, 10, 15, 30].map((s) => s * 1000)
+  .concat([1, 2, 5, 10, 15, 30].map((m) => m * 60_000), [1, 2, 3, 6, 12].map((h) => h * 3_600_000), [1, 2, 7, 14].map((d) => d * 86_400_000));
+
+/**
+ * Ticks of a time axis from `from` to `to` (ms), at most `max` of them: the
+ * smallest round step that fits, every tick a whole multiple of it on the
+ * local clock. {step, times}.
+ */
+export function timeTicks(from, to, max) {
+  const span = Math.max(1, to - from);
+  const step = TIME_STEPS.find((s) => span / s <= max) || TIME_STEPS[TIME_STEPS.length - 1];
+  // Local clock time = UTC time - offset: align the ticks on the local clock.
+  const offset = new Date(from).getTimezoneOffset() * 60_000;
+  const times = [];
+  for (let t = Math.ceil((from - offset) / step) * step + offset; t <= to; t += step) times.push(t);
+  return { step, times };
+}
+
+function timeLabel(t, step, span) {
   const d = new Date(t);
   const hm = `${pad(d.getHours())}:${pad(d.getMinutes())}`;
-  if (span <= 10 * 60_000) return `${hm}:${pad(d.getSeconds())}`;
+  if (step < 60_000) return `${hm}:${pad(d.getSeconds())}`;
   if (span <= 36 * 3_600_000) return hm;
   return `${pad(d.getDate())}/${pad(d.getMonth() + 1)} ${hm}`;
 }

@@ -10,8 +10,12 @@ import { fmtTime, fmtNumber } from '../format.js';
 
 const RANGES = [['1', 'Last 24 hours'], ['7', 'Last 7 days'], ['30', 'Last 30 days']];
 
-/** A verdict badge: within the target or not. */
+/** Fewer alarms than this in the range: the top-10 share says nothing (with 4 alarms it is 100 %). */
+export const TOP10_MIN_ALARMS = 50;
+
+/** A verdict badge: within the target or not; `null`: too few alarms to judge. */
 function verdict(ok, id) {
+  if (ok === null) return h('span', { class: 'badge', dataset: { kpi: id, ok: 'unjudged' }, text: 'TOO FEW ALARMS TO JUDGE' });
   return h('span', { class: `badge ${ok ? 'badge-ok' : 'badge-bad'}`, dataset: { kpi: id, ok: String(ok) }, text: ok ? 'MEETS TARGET' : 'OVER TARGET' });
 }
 
@@ -28,15 +32,19 @@ function summary(m) {
     ['max-rate', 'Peak alarms per operator in 10 min', m.max_per_interval_per_operator,
       `≤ ${t.max_per_interval_per_operator}`, m.max_per_interval_per_operator <= t.max_per_interval_per_operator],
     ['flood', 'Time in flood (%)', m.percent_time_in_flood, `< ${t.percent_time_in_flood}`, m.percent_time_in_flood < t.percent_time_in_flood],
-    ['top10', 'Top 10 alarms\u2019 share of all alarms (%)', top10, `≤ ${t.top10_percent}`, m.total_activations === 0 || top10 <= t.top10_percent],
+    ['top10', 'Top 10 alarms\u2019 share of all alarms (%)', top10, `≤ ${t.top10_percent} (judged from ${TOP10_MIN_ALARMS} alarms)`,
+      m.total_activations < TOP10_MIN_ALARMS ? null : top10 <= t.top10_percent,
+      ` of ${m.total_activations} alarm${m.total_activations === 1 ? '' : 's'}`],
     ['chattering', 'Chattering alarms', m.chattering.length, `${t.chattering}`, m.chattering.length <= t.chattering],
     ['stale', 'Stale alarms (active over 24 h)', m.stale.length, `< ${t.stale}`, m.stale.length < t.stale],
     ['shelved', 'Shelved alarms now', m.shelved.length, `≤ ${t.shelved} (site guideline)`, m.shelved.length <= t.shelved],
   ];
   return h('table', { class: 'data', id: 'kpi-summary' },
     h('thead', {}, h('tr', {}, ['KPI', 'Measured', 'ISA-18.2 target', ''].map((x) => h('th', { scope: 'col', text: x })))),
-    h('tbody', {}, rows.map(([id, label, v, target, ok]) => h('tr', { dataset: { kpi: id } },
-      h('th', { scope: 'row', text: label }), num(v, Number.isInteger(v) ? 0 : 2), h('td', { text: target }), h('td', {}, verdict(ok, id))))));
+    h('tbody', {}, rows.map(([id, label, v, target, ok, of = '']) => h('tr', { dataset: { kpi: id } },
+      h('th', { scope: 'row', text: label }),
+      h('td', { class: 'num', text: `${Number.isFinite(v) ? fmtNumber(v, Number.isInteger(v) ? 0 : 2) : '—'}${of}` }),
+      h('td', { text: target }), h('td', {}, verdict(ok, id))))));
 }
 
 function section(id, title, body) {

@@ -104,10 +104,17 @@ export default {
         status.textContent = `Cannot list the screens: ${e.detail}`;
         return;
       }
-      replace(picker, screens.length ? screens.map((x) => h('option', { value: x.id, text: `${x.label} (${x.id})` }))
-        : h('option', { value: '', text: 'No screens yet: New…' }));
+      fillPicker();
       const want = keep || (screen && screen.id) || (screens[0] && screens[0].id);
       if (want && screens.some((x) => x.id === want)) { picker.value = want; await open(want); } else if (!screens.length) { screen = null; draw(); }
+    }
+    /** The saved screens, and the one open if it is not saved yet (new, copied or imported). */
+    function fillPicker() {
+      const unsaved = screen && !screens.some((x) => x.id === screen.id);
+      const options = screens.map((x) => h('option', { value: x.id, text: `${x.label} (${x.id})` }));
+      if (unsaved) options.push(h('option', { value: screen.id, text: `${screen.name} (${screen.id}), not saved yet` }));
+      replace(picker, options.length ? options : h('option', { value: '', text: 'No screens yet: New…' }));
+      if (screen) picker.value = screen.id;
     }
     picker.addEventListener('change', async () => {
       if (dirty && !(await confirmDialog('Unsaved changes', 'Leave this screen without saving?', { submitLabel: 'Leave' }))) {
@@ -125,6 +132,7 @@ export default {
       }
       undo = []; redo = []; selected = -1; dirty = false;
       draw();
+      fillPicker();
     }
 
     async function askIdName(title, id = '', name = '') {
@@ -142,6 +150,7 @@ export default {
       undo = []; redo = []; selected = -1; dirty = true;
       draw();
       status.textContent = `New screen "${r.name}": place elements, then Save.`;
+      fillPicker();
     }
 
     async function rename() {
@@ -159,6 +168,7 @@ export default {
       undo = []; redo = []; selected = -1; dirty = true;
       draw();
       status.textContent = `Copy "${r.name}": Save to keep it.`;
+      fillPicker();
     }
 
     async function remove() {
@@ -200,6 +210,7 @@ export default {
       undo = []; redo = []; selected = -1; dirty = true;
       draw();
       status.textContent = `Imported "${imported.name}" from ${f.name}: Save to keep it${existing ? ' (replaces the stored one)' : ''}.`;
+      fillPicker();
     });
 
     async function save() {

@@ -165,7 +165,9 @@ export function panelScreen(id) {
           modeBtns.children[1].setAttribute('aria-pressed', String(manual));
         }
         const hint = document.getElementById(`${id}-bk-hint`);
-        if (hint) hint.textContent = canOperate ? (manual ? 'Manual mode: breakers may be operated.' : 'Auto mode: the sequence operates the breakers. Switch to Manual to operate them.') : '';
+        // Only a supervisor (or above) switches the mode: an operator is told who can.
+        const toManual = canMode ? 'Switch to Manual (above) to operate them.' : 'A supervisor can switch the panel to Manual; then you can operate them.';
+        if (hint) hint.textContent = canOperate ? (manual ? 'Manual mode: breakers may be operated.' : `Auto mode: the sequence operates the breakers. ${toManual}`) : '';
         for (const b of bkBody.querySelectorAll('button[data-breaker]')) b.disabled = !manual;
       }
 

@@ -41,6 +41,14 @@ export default {
   mount(el) {
     let timer = null;
     let state = null;
+    // Panels by the names the plant gives them (the screens' labels); the id
+    // until those arrive, or for a panel without a screen.
+    let panelNames = new Map();
+    const panelName = (id) => panelNames.get(id) || id;
+    get('/api/screens').then(({ screens }) => {
+      panelNames = new Map((screens || []).filter((e) => e.kind === 'panel').map((e) => [e.panel || e.id, e.label]));
+      if (state) draw(state);
+    }).catch(() => { /* the ids stay */ });
 
     const status = h('p', { class: 'hint', id: 'sim-status', role: 'status' });
     el.append(h('h1', { class: 'screen-title', text: 'Simulation (training)' }),
@@ -68,7 +76,7 @@ export default {
       const body = { panel: fPanel.value, zone: Number(fZone.value), kind: fKind.value };
       if (fKind.value === 'transient' && fClears.value) body.clears_after_s = Number(fClears.value);
       const ok = await attempt('Inject fault', () => post('/api/sim/faults', body));
-      if (ok) { toast(`Fault injected on ${zoneLabel(body.zone).toLowerCase()} of ${body.panel}`); refresh(); }
+      if (ok) { toast(`Fault injected on ${zoneLabel(body.zone).toLowerCase()} of ${panelName(body.panel)}`); refresh(); }
     });
     const faultBox = h('div', { class: 'table-wrap', tabindex: '0', role: 'group', 'aria-label': 'Zone faults table' });
 
@@ -101,7 +109,7 @@ export default {
       e.preventDefault();
       const ok = await attempt('Set the zone load', () => put(`/api/sim/zones/${enc(lPanel.value)}/${enc(lZone.value)}/load`,
         { kw: Number(lKw.value), pf: Number(lPf.value) }));
-      if (ok) { toast(`Load of zone ${lZone.value} of ${lPanel.value} set`); refresh(); }
+      if (ok) { toast(`Load of zone ${lZone.value} of ${panelName(lPanel.value)} set`); refresh(); }
     });
 
     // ----- Plant inputs -----
@@ -131,7 +139,7 @@ export default {
 
     async function repair(panel, zone) {
       const ok = await attempt('Repair', () => del(`/api/sim/faults/${enc(panel)}/${zone}`));
-      if (ok !== undefined) { toast(`${zoneLabel(zone)} of ${panel} repaired`); refresh(); }
+      if (ok !== undefined) { toast(`${zoneLabel(zone)} of ${panelName(panel)} repaired`); refresh(); }
     }
 
     async function setOffline(device, offline) {
@@ -139,22 +147,25 @@ export default {
       if (ok) { toast(`${device} ${offline ? 'offline' : 'online'}`); refresh(); }
     }
 
-    function fillSelect(sel, values) {
-      if (sel.options.length === values.length) return; // the trainer's choice stays
+    /** Fills a select with [value, text] pairs; the trainer's choice stays. */
+    function fillSelect(sel, options) {
+      const same = sel.options.length === options.length
+        && options.every(([v, t], i) => sel.options[i].value === v && sel.options[i].text === t);
+      if (same) return;
       const current = sel.value;
-      replace(sel, values.map((v) => h('option', { value: v, selected: v === current, text: v })));
+      replace(sel, options.map(([v, t]) => h('option', { value: v, selected: v === current, text: t })));
     }
 
     function draw(s) {
       state = s;
-      const ids = s.panels.map((p) => p.id);
-      fillSelect(fPanel, ids);
-      fillSelect(lPanel, ids);
+      const panels = s.panels.map((p) => [p.id, panelName(p.id)]);
+      fillSelect(fPanel, panels);
+      fillSelect(lPanel, panels);
       if (fZone.options.length === 0) fillZones();
-      fillSelect(dName, s.devices.map((d) => d.name));
+      fillSelect(dName, s.devices.map((d) => [d.name, d.name]));
 
       const faultRows = s.panels.flatMap((p) => p.zones.map((z) => h('tr', { dataset: { panel: p.id, zone: String(z.zone), faulted: String(!!z.fault) } },
-        h('th', { scope: 'row', text: p.id }),
+        h('th', { scope: 'row', text: panelName(p.id), title: `panel id ${p.id}` }),
         h('td', { text: p.elcb_closed ? 'closed' : 'TRIPPED' }),
         h('td', { text: zoneLabel(z.zone) }),
         h('td', { class: 'sim-fault' }, z.fault ? h('span', { class: 'badge badge-bad', text: faultText(z) }) : 'none'),

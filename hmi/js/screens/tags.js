@@ -7,7 +7,7 @@
 
 import { get, post, qs, enc } from '../api.js';
 import { h, replace, field, select } from '../dom.js';
-import { fmtTime, fmtValue, qualityOf, roleAtLeast, showSample } from '../format.js';
+import { fmtStated, fmtTime, qualityOf, roleAtLeast, showSample } from '../format.js';
 import { live } from '../live.js';
 import { Binder, attempt, formDialog, confirmDialog, toast } from '../ui.js';
 
@@ -19,10 +19,36 @@ function protocolName(p) {
 }
 const PAGE = 200;
 
+/** A tag with `states` shows its values in those words (OPEN, CLOSED), not TRUE/FALSE. */
+function wordsOf(t) {
+  return t.states ? (v) => fmtStated(t.states, v) : undefined;
+}
+
+/** A tag's engineering limits in the server's words ("0 to 100", "at least 0"), or ''. */
+export function limitsText(limits) {
+  if (!limits) return '';
+  const has = (v) => v !== null && v !== undefined;
+  if (has(limits.min) && has(limits.max)) return `${limits.min} to ${limits.max}`;
+  if (has(limits.min)) return `at least ${limits.min}`;
+  if (has(limits.max)) return `at most ${limits.max}`;
+  return '';
+}
+
+/** Why `typed` may not be written to `tag`, as the server says it, or ''. */
+export function outsideLimits(tag, typed) {
+  const range = limitsText(tag.limits);
+  const text = String(typed).trim();
+  if (!range || text === '') return '';
+  const v = Number(text);
+  const { min, max } = tag.limits;
+  const inside = Number.isFinite(v) && (min === null || min === undefined || v >= min) && (max === null || max === undefined || v <= max);
+  return inside ? '' : `${text} is outside the engineering limits of '${tag.name}' (${range}); nothing was written`;
+}
+
 /** The write dialog of a tag; resolves with the typed value or undefined. */
 export async function askValue(tag, current) {
   const input = tag.kind === 'bool'
-    ? select({ name: 'value', id: 'write-value' }, [['true', 'TRUE (1)'], ['false', 'FALSE (0)']], current === true ? 'true' : 'false')
+    ? select({ name: 'value', id: 'write-value' }, [['true', `${fmtStated(tag.states, true)} (1)`], ['false', `${fmtStated(tag.states, false)} (0)`]], current === true ? 'true' : 'false')
     : h('input', {
       name: 'value', id: 'write-value', required: true,
       // An integer is typed as digits: a number input rounds beyond 2^53.
@@ -32,8 +58,17 @@ export async function askValue(tag, current) {
       pattern: tag.kind === 'int' ? '[-+]?[0-9]+' : undefined,
       value: current === undefined || current === null ? '' : String(current),
     });
+  // The engineering limits before the operator types, and a value outside
+  // them refused here in the server's words (it would refuse it too).
+  const range = limitsText(tag.limits);
+  if (range && tag.kind !== 'bool') {
+    if (tag.limits.min !== null && tag.limits.min !== undefined) input.min = String(tag.limits.min);
+    if (tag.limits.max !== null && tag.limits.max !== undefined) input.max = String(tag.limits.max);
+    input.addEventListener('input', () => input.setCustomValidity(outsideLimits(tag, input.value) || ''));
+  }
   const data = await formDialog(`Write ${tag.name}`, (f) => f.append(
     h('p', { class: 'hint', text: tag.description || '' }),
+    range ? h('p', { class: 'hint', id: 'write-limits', text: `Engineering limits: ${range}${tag.units ? ` ${tag.units}` : ''}` }) : '',
     field(`New value${tag.units ? ` (${tag.units})` : ''}`, input)), { submitLabel: 'Next' });
   if (!data) return undefined;
   const raw = data.get('value');
@@ -54,11 +89,11 @@ export async function askValue(tag, current) {
  */
 export async function confirmedWrite(tag, value) {
   const ok = await confirmDialog(`Write ${tag.name}`,
-    `Write ${fmtValue(value)}${tag.units ? ` ${tag.units}` : ''} to ${tag.name}? The device is commanded at once.`,
+    `Write ${fmtStated(tag.states, value)}${tag.units ? ` ${tag.units}` : ''} to ${tag.name}? The device is commanded at once.`,
     { submitLabel: 'Write', danger: true });
   if (!ok) return undefined;
   const r = await attempt(`Write ${tag.name}`, () => post(`/api/tags/${enc(tag.name)}/write`, { value }));
-  if (r) toast(`${tag.name}: the device confirmed ${fmtValue(r.value)}${r.units ? ` ${r.units}` : ''}.`, 'ok');
+  if (r) toast(`${tag.name}: the device confirmed ${fmtStated(tag.states, r.value)}${r.units ? ` ${r.units}` : ''}.`, 'ok');
   return r;
 }
 
@@ -179,7 +214,7 @@ export default {
       replace(rows, shown.map(([i, t]) => {
         const value = h('span', { class: 'value' });
         const s = live.get(t.name) || t;
-        showSample(value, s, { units: t.units, kind: t.kind, live: live.connected });
+        showSample(value, s, { units: t.units, kind: t.kind, live: live.connected, format: wordsOf(t) });
         const row = h('div', {
           class: ['vlist-row', selected === t.name && 'selected'], role: 'option', 'aria-selected': String(selected === t.name),
           dataset: { tag: t.name }, tabindex: '-1',
@@ -215,7 +250,7 @@ export default {
       const quality = h('dd', { id: 'tag-quality' });
       const stamp = h('dd', { id: 'tag-timestamp' });
       detailBinder.on(t.name, (smp, connected) => {
-        showSample(value, smp, { units: t.units, kind: t.kind, live: connected });
+        showSample(value, smp, { units: t.units, kind: t.kind, live: connected, format: wordsOf(t) });
         const q = qualityOf(smp, connected);
         quality.textContent = q.cls === 'q-good' ? 'Good' : `${q.cls === 'q-uncertain' ? 'Uncertain' : 'Bad'}: ${q.reason}`;
         quality.className = q.cls === 'q-good' ? '' : q.cls === 'q-uncertain' ? 'badge badge-warn' : 'badge badge-bad';
@@ -230,7 +265,7 @@ export default {
           const v = await askValue(t, cur ? cur.value : undefined);
           if (v === undefined || (typeof v === 'number' && !Number.isFinite(v))) return;
           const r = await confirmedWrite(t, v);
-          if (r) readback.textContent = `Confirmed by the device: ${fmtValue(r.value)}${t.units ? ` ${t.units}` : ''} at ${fmtTime(r.timestamp, true)}`;
+          if (r) readback.textContent = `Confirmed by the device: ${fmtStated(t.states, r.value)}${t.units ? ` ${t.units}` : ''} at ${fmtTime(r.timestamp, true)}`;
         });
       }
       const readback = h('p', { class: 'hint', id: 'tag-readback', role: 'status' });
@@ -243,7 +278,9 @@ export default {
           h('dt', { text: 'Quality' }), quality,
           h('dt', { text: 'Timestamp' }), stamp,
           h('dt', { text: 'Type' }), h('dd', { text: t.kind }),
-          h('dt', { text: 'Writable' }), h('dd', { text: t.writable ? `yes, by ${t.write_role} and above` : 'no' })),
+          h('dt', { text: 'Writable' }), h('dd', { text: t.writable ? `yes, by ${t.write_role} and above` : 'no' }),
+          t.limits ? h('dt', { text: 'Engineering limits' }) : null,
+          t.limits ? h('dd', { id: 'tag-limits', text: `${limitsText(t.limits)}${t.units ? ` ${t.units}` : ''}` }) : null),
         h('h2', { text: 'Source' }),
         src ? h('dl', { class: 'kv', id: 'tag-source' },
           h('dt', { text: 'Device' }), h('dd', { text: `${src.device} (${protocolName(src.protocol)})` }),

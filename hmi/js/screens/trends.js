@@ -26,6 +26,13 @@ const PENS_KEY = 'gridscada.trend.pens';
 
 const dateValue = (d) => `${d.getFullYear()}-${pad(d.getMonth() + 1)}-${pad(d.getDate())}`;
 const timeValue = (d) => `${pad(d.getHours())}:${pad(d.getMinutes())}:${pad(d.getSeconds())}`;
+/** A point's width in time, as an operator says it: "2 s", "40 s", "3 min", "1 h". */
+function fmtEvery(ms) {
+  if (ms < 1000) return `${Math.max(1, Math.round(ms))} ms`;
+  if (ms < 60_000) return `${Math.round(ms / 1000)} s`;
+  if (ms < 3_600_000) return `${Math.round(ms / 60_000)} min`;
+  return `${Math.round(ms / 3_600_000)} h`;
+}
 
 /** A duration in words for the duration list ("37 min 30 s", "2 h 15 min", "3 d 4 h"). */
 function spanLabel(sec) {
@@ -66,7 +73,11 @@ export default {
 
     const now = new Date(Date.now() - 15 * 60_000);
     const startDate = h('input', { type: 'date', id: 'trend-start-date', value: dateValue(now) });
-    const startTime = h('input', { type: 'time', id: 'trend-start-time', step: 1, value: timeValue(now) });
+    // Typed as 24-hour text: a time input follows the browser's locale (09:22:38 AM).
+    const startTime = h('input', {
+      type: 'text', id: 'trend-start-time', value: timeValue(now), size: 8, inputmode: 'numeric', placeholder: 'HH:MM:SS',
+      pattern: '([01][0-9]|2[0-3]):[0-5][0-9](:[0-5][0-9])?', title: '24-hour time, HH:MM or HH:MM:SS',
+    });
     const site = siteChoice('trend-site', () => load());
     const duration = select({ id: 'trend-duration' }, DURATIONS.map(([s, l]) => [String(s), l]), String(15 * 60));
     const liveBox = h('input', { type: 'checkbox', id: 'trend-live', checked: true });
@@ -237,13 +248,15 @@ export default {
         const to = Date.now();
         return { from: to - dur, to };
       }
-      const from = new Date(`${startDate.value}T${startTime.value || '00:00:00'}`).getTime();
+      const time = (startTime.value || '00:00:00').trim();
+      if (!/^([01][0-9]|2[0-3]):[0-5][0-9](:[0-5][0-9])?$/.test(time)) return { from: NaN, to: NaN };
+      const from = new Date(`${startDate.value}T${time.length === 5 ? `${time}:00` : time}`).getTime();
       return { from, to: from + dur };
     }
 
     async function load() {
       const { from, to } = range();
-      if (!Number.isFinite(from)) { status.textContent = 'Set a valid start date and time.'; return; }
+      if (!Number.isFinite(from)) { status.textContent = 'Set a valid start date and a 24-hour start time (HH:MM:SS).'; return; }
       csvLink.href = pens.length ? apiUrl(`/api/trends.csv${qs({ tags: pens.map((p) => p.tag).join(','), from, to, site: site.value() })}`) : '#';
       if (!pens.length) { data = { from, to, series: [] }; chart.setData([], from, to); drawAxes(); drawTable(); return; }
       const points = Math.max(50, Math.min(2000, Math.round(canvas.clientWidth || 800)));
@@ -262,7 +275,7 @@ export default {
         canvas.dataset.to = String(to);
         drawAxes();
         const n = series.reduce((a, s) => a + s.buckets.reduce((b, k) => b + (k.count || 0), 0), 0);
-        status.textContent = `${fmtTime(from)} to ${fmtTime(to)}: ${n} samples in ${points} buckets per pen${liveBox.checked ? ' (live)' : ''}.`;
+        status.textContent = `${fmtTime(from)} to ${fmtTime(to)}: ${n} samples, drawn as one point every ${fmtEvery((to - from) / points)} (the average, in a band from the lowest to the highest)${liveBox.checked ? ' (live)' : ''}.`;
         drawTable();
       } catch (e) {
         if (seq === loadSeq) status.textContent = `Cannot load the trend: ${e.detail}`;

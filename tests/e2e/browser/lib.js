@@ -23,8 +23,11 @@ export function credentials() {
   return out;
 }
 
-/** Launches headless Chromium with a fresh profile; returns {browser, context, page, close}. */
-export async function launch(name) {
+/**
+ * Launches headless Chromium with a fresh profile; returns {browser, context, page, close}.
+ * `locale` (e.g. 'en-US') sets the browser's language and formats.
+ */
+export async function launch(name, { locale } = {}) {
   const profile = fs.mkdtempSync(path.join(os.tmpdir(), 'gridscada-chromium-'));
   const context = await chromium.launchPersistentContext(profile, {
     executablePath: process.env.CHROMIUM || '/usr/bin/chromium',
@@ -33,6 +36,7 @@ export async function launch(name) {
       '--disable-background-networking', '--disable-component-update', '--disable-sync'],
     viewport: { width: 1366, height: 768 },
     acceptDownloads: true,
+    ...(locale ? { locale } : {}),
   });
   const page = context.pages()[0] || await context.newPage();
   const problems = [];

@@ -74,6 +74,10 @@ pub fn plant_defs(plant: &Plant) -> Result<Vec<AlarmDef>, AlarmError> {
             tag_defs(tag, a, &mut defs)?;
         }
     }
+    let comm_states = Arc::new(std::collections::BTreeMap::from([
+        ("false".to_string(), "COMM LOST".to_string()),
+        ("true".to_string(), "CONNECTED".to_string()),
+    ]));
     for d in &plant.devices {
         let device = d.name.get_ref();
         defs.push(AlarmDef {
@@ -85,7 +89,8 @@ pub fn plant_defs(plant: &Plant) -> Result<Vec<AlarmDef>, AlarmError> {
             message: "Communication lost with {device}: {error}".into(),
             units: String::new(),
             device: Some(device.clone()),
-            states: None,
+            // The status in words, as every other state is shown.
+            states: Some(Arc::clone(&comm_states)),
             condition: Condition::CommLost,
             on_delay: Duration::from_secs_f64(*d.comm_alarm.on_delay_s.get_ref()),
             off_delay: Duration::from_secs_f64(*d.comm_alarm.off_delay_s.get_ref()),

@@ -31,8 +31,19 @@ pub struct TagView {
     pub source: Option<TagSource>,
     /// Words for the tag's values (`states` in the configuration).
     pub states: Option<std::collections::BTreeMap<String, String>>,
+    /// The engineering limits a write must respect, for a writable tag
+    /// with any (`Plant::write_limits`); the write dialog shows them.
+    pub limits: Option<WriteLimits>,
     #[serde(flatten)]
     pub sample: Sample,
+}
+
+/// A writable tag's engineering limits; either bound may be open (null).
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct WriteLimits {
+    pub min: Option<f64>,
+    pub max: Option<f64>,
 }
 
 /// The field register behind a tag.
@@ -177,6 +188,11 @@ impl WebState {
                     .map(str::to_owned),
             }),
             states: config.and_then(|t| t.states.as_ref().map(|s| s.get_ref().clone())),
+            limits: meta
+                .writable
+                .then(|| self.plant.write_limits(&meta.name))
+                .filter(|(min, max)| min.is_some() || max.is_some())
+                .map(|(min, max)| WriteLimits { min, max }),
             sample,
         })
     }

@@ -183,6 +183,9 @@ pub struct Tag {
     /// Words for the tag's values (keys "true"/"false" or whole numbers), e.g. {"false": "TRIPPED", "true": "CLOSED"}; null when none are configured
     #[schema(required = true)]
     pub states: Option<BTreeMap<String, String>>,
+    /// The engineering limits a write must respect (either bound may be null); null for a tag that is not writable or has none
+    #[schema(required = true)]
+    pub limits: Option<crate::api::tags::WriteLimits>,
 }
 
 /// `gridscada_store::UserSummary`.

@@ -37,12 +37,16 @@ test('the tag browser finds, explains and writes a tag', async () => {
     const api = await adminApi();
     const t = requireOk(await api.call('GET', '/api/tags/RTU1.Setpoint'), 'tag');
     assert.equal(t.value, 42.5);
-    // Outside its limits, the write is refused in words and nothing changes.
+    // Outside its limits, the write is refused in words and nothing changes: the dialog says so
+    // before anything is sent (the server would refuse it too, in the same words).
     await page.locator('#tag-write').click();
     await page.locator('#write-value').fill('500');
     await page.locator('dialog button[type="submit"]').click();
-    await page.locator('dialog button[type="submit"]', { hasText: 'Write' }).click();
-    await page.locator('.toast-error', { hasText: 'engineering limits' }).waitFor();
+    assert.match(await page.locator('#write-value').evaluate((e) => e.validationMessage), /engineering limits/);
+    await page.locator('dialog button', { hasText: 'Cancel' }).click();
+    const refused = await api.call('POST', '/api/tags/RTU1.Setpoint/write', { value: 500 });
+    assert.equal(refused.status, 400);
+    assert.match(JSON.stringify(refused.body), /engineering limits/);
     assert.equal(requireOk(await api.call('GET', '/api/tags/RTU1.Setpoint'), 'tag').value, 42.5);
     // "Add to trend" opens the trend with that pen.
     await page.locator('#tag-add-trend').click();

@@ -42,6 +42,9 @@ test('an administrator builds a screen; an operator uses it; a guest cannot', as
     await page.locator('#editor-new-id').fill(ID);
     await page.locator('#editor-new-name').fill('Feeder view');
     await page.locator('dialog button[type="submit"]').click();
+    // The picker names the new screen while it is not saved (issue 33, finding 11), never "No screens yet".
+    await until('the picker shows the new screen', async () => (await page.locator('#editor-screens option:checked').textContent()) === `Feeder view (${ID}), not saved yet`, 5_000);
+    assert.equal(await page.locator('#editor-screens option', { hasText: 'No screens yet' }).count(), 0, 'no "No screens yet" with a screen open');
 
     // A breaker bound to the first panel's ELCB, picked by search.
     await page.locator('[data-palette="breaker"]').click();

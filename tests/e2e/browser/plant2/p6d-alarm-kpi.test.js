@@ -53,6 +53,10 @@ test('a supervisor reads the alarm KPIs against the ISA-18.2 targets', async () 
     assert.ok(Number(shelvedKpi.measured) >= 1, `shelved counted: ${JSON.stringify(shelvedKpi)}`);
     assert.equal(kpis.find((k) => k.kpi === 'max-rate').target, '≤ 10');
     assert.equal(kpis.find((k) => k.kpi === 'chattering').ok, String(m.chattering.length === 0));
+    // The top-10 share is judged only from enough alarms, and says from how many (issue 33, finding 11).
+    const top10 = kpis.find((k) => k.kpi === 'top10');
+    assert.match(top10.measured, / of \d+ alarms?$/, `the share names its count: ${top10.measured}`);
+    if (m.total_activations < 50) assert.equal(top10.ok, 'unjudged', `a share of ${m.total_activations} alarms is not judged: ${JSON.stringify(top10)}`);
     // The comm alarm ranks among the most frequent, its selection is a position, and it is listed as shelved with its reason.
     await page.locator(`#kpi-top-table tr[data-key="${alarm.key}"]`).waitFor();
     await page.locator(`#kpi-positions-table tr[data-selection="${alarm.selection}"]`).waitFor();

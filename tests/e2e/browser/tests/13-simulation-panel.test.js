@@ -30,6 +30,12 @@ test('a trainer injects a zone fault from the Simulation panel; the sequence iso
     assert.ok((await toolbar(page)).includes('simulation'), 'the trainer has the Simulation screen');
     await page.goto(`${BASE}/#/simulation`);
     await page.locator('#sim-faults-table').waitFor();
+    // Panels by the plant's names (their screens' labels), not their ids (issue 33, finding 11).
+    const { screens } = (await api.call('GET', '/api/screens')).body;
+    const name = screens.find((e) => e.kind === 'panel' && (e.panel || e.id) === PANEL).label;
+    assert.notEqual(name, PANEL, 'the demo panel has a name apart from its id');
+    await page.locator(`#sim-faults-table tr[data-panel="${PANEL}"] th`, { hasText: name }).first().waitFor({ timeout: 10_000 });
+    assert.equal(await page.locator(`#sim-fault-panel option[value="${PANEL}"]`).textContent(), name, 'the panel picker names the panel');
     await b.screenshot('panel');
 
     await page.locator('#sim-fault-panel').selectOption(PANEL);
