@@ -161,3 +161,8 @@ export const seriousFindings = (violations) => violations.filter((v) => v.impact
 export async function settled(page) {
   await page.waitForFunction(() => !document.querySelector('#screen .loading') && document.querySelector('#screen').children.length > 0, null, { timeout: 15_000 });
 }
+
+/** A computed colour "rgb(r, g, b)" → [r, g, b]; transparent (and none) → null. */
+export const rgb = (c) => { const m = /rgba?\((\d+), (\d+), (\d+)(?:, ([\d.]+))?\)/.exec(c || ''); return m && (m[4] === undefined || Number(m[4]) > 0) ? m.slice(1, 4).map(Number) : null; };
+/** A saturated red: red well above green and blue. Takes a computed colour or [r, g, b]. */
+export const isRed = (c) => { const v = Array.isArray(c) ? c : rgb(c); return !!v && v[0] > 120 && v[0] - v[1] > 70 && v[0] - v[2] > 70; };

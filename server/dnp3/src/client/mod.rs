@@ -1,6 +1,7 @@
 //! The DNP3 master's I/O shell: one task per configured outstation
-//! (`protocol = "dnp3"`) that connects over TCP or opens its serial port, feeds the bytes to
-//! [`crate::master::Master`] and carries out its actions; the samples of
+//! (`protocol = "dnp3"`) that connects over TCP or opens its serial port,
+//! feeds the bytes to [`crate::master::Master`] and carries out its
+//! actions; the samples of
 //! its points in the tag database, its status tags and figures, and its
 //! commands (CROB, analog output; select-before-operate or direct)
 //! through [`gridscada_tagdb::TagWriter`].

@@ -1,8 +1,7 @@
-//! One outstation's task: the TCP connection or serial line (re-opened with
-//! back-off),
-//! the bytes both ways through [`Master`], its actions carried out (send,
-//! timers, measurements into the tag database, commands' outcomes, IIN
-//! reports), and the status tags.
+//! One outstation's task: the TCP connection or serial line (re-opened
+//! with back-off), the bytes both ways through [`Master`], its actions
+//! carried out (send, timers, measurements into the tag database, commands'
+//! outcomes, IIN reports), and the status tags.
 //!
 //! The task owns the write half and the master; the read half is read in
 //! the same `select!`, so every state change happens here, in order.

@@ -461,20 +461,7 @@ impl Station {
                     Some(Element::EndOfInit {
                         cause,
                         after_change,
-                    }) => format!(
-                        "{}{}",
-                        match cause {
-                            0 => "local power on".to_string(),
-                            1 => "local manual reset".to_string(),
-                            2 => "remote reset".to_string(),
-                            c => format!("cause {c}"),
-                        },
-                        if after_change {
-                            ", after a change of local parameters"
-                        } else {
-                            ""
-                        }
-                    ),
+                    }) => init_cause_words(cause, after_change),
                     _ => "cause not given".to_string(),
                 };
                 self.notices.send(
@@ -864,5 +851,20 @@ async fn read_frames(
                 return;
             }
         }
+    }
+}
+
+/// The cause of initialisation (COI) of an M_EI_NA_1, in words.
+fn init_cause_words(cause: u8, after_change: bool) -> String {
+    let cause = match cause {
+        0 => "local power on".to_string(),
+        1 => "local manual reset".to_string(),
+        2 => "remote reset".to_string(),
+        c => format!("cause {c}"),
+    };
+    if after_change {
+        format!("{cause}, after a change of local parameters")
+    } else {
+        cause
     }
 }

@@ -4,16 +4,12 @@
 // by the browser.
 import test from 'node:test';
 import assert from 'node:assert/strict';
-import { launch, login, credentials, adminApi, requireOk, until, BASE } from '../lib.js';
+import { launch, login, credentials, adminApi, requireOk, until, BASE, rgb, isRed } from '../lib.js';
 import { restorePanel } from '../fixtures.js';
 
 const PANEL = 'ss1';
 const ZONE = 3;
 
-/** "rgb(r, g, b)" → [r, g, b] (transparent and none → null). */
-const rgb = (c) => { const m = /rgba?\((\d+), (\d+), (\d+)(?:, ([\d.]+))?\)/.exec(c || ''); return m && (m[4] === undefined || Number(m[4]) > 0) ? m.slice(1, 4).map(Number) : null; };
-/** A saturated red: red well above green and blue. */
-const isRed = (c) => { const v = rgb(c); return !!v && v[0] > 120 && v[0] - v[1] > 70 && v[0] - v[2] > 70; };
 /** A grey (or black or white): no channel far from the others. */
 const isGrey = (c) => { const v = rgb(c); return !v || Math.max(...v) - Math.min(...v) <= 24; };
 const luminance = (c) => { const v = rgb(c).map((x) => x / 255).map((x) => (x <= 0.03928 ? x / 12.92 : ((x + 0.055) / 1.055) ** 2.4)); return 0.2126 * v[0] + 0.7152 * v[1] + 0.0722 * v[2]; };

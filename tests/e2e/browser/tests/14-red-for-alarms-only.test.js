@@ -6,13 +6,9 @@
 // alarm stay red (checked in 10-isa101-theme and here).
 import test from 'node:test';
 import assert from 'node:assert/strict';
-import { launch, login, credentials, BASE } from '../lib.js';
+import { launch, login, credentials, BASE, rgb, isRed } from '../lib.js';
 
-/** "rgb(r, g, b)" → [r, g, b] (transparent → null). */
-const rgb = (c) => { const m = /rgba?\((\d+), (\d+), (\d+)(?:, ([\d.]+))?\)/.exec(c || ''); return m && (m[4] === undefined || Number(m[4]) > 0) ? m.slice(1, 4).map(Number) : null; };
 const hex = (c) => [1, 3, 5].map((i) => parseInt(c.slice(i, i + 2), 16));
-/** A saturated red: red well above green and blue. */
-const isRed = (v) => !!v && v[0] > 120 && v[0] - v[1] > 70 && v[0] - v[2] > 70;
 const distance = (a, b) => Math.hypot(a[0] - b[0], a[1] - b[1], a[2] - b[2]);
 
 /** The page's alarm colours: red and the four priorities' colours. */
