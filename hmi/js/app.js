@@ -25,6 +25,7 @@ import tagBrowser from './screens/tags.js';
 import devices from './screens/devices.js';
 import editor from './screens/editor.js';
 import simulation from './screens/simulation.js';
+import network from './screens/network.js';
 import { customScreen } from './screens/custom.js';
 
 /** The built-in screens by id. Which exist, their order and labels come
@@ -34,6 +35,7 @@ const BUILTIN = {
   main: mainScreen,
   microgrid,
   units,
+  network,
   tags: tagBrowser,
   devices,
   alarms,

@@ -5,7 +5,9 @@
 # tests/e2e/browser/tests/*.test.js against the first and
 # tests/e2e/browser/plant2/*.test.js against the second, side by side, then
 # tests/e2e/browser/telecontrol/*.test.js against a third (the test plant
-# tests/plants/telecontrol, over IEC 104 and DNP3), stops them, and prints
+# tests/plants/telecontrol, over IEC 104 and DNP3) and
+# tests/e2e/browser/network/*.test.js against a fourth (tests/plants/network,
+# the switching network), stops them, and prints
 # "N passed, M failed". Screenshots, each run's report
 # (spec-NAME.log, results-NAME.tap) and the servers' logs go to
 # tests/e2e/artifacts/.
@@ -123,10 +125,15 @@ fi
 port3="$(free_port)"
 start telecontrol "$port3" --config "$root/tests/plants/telecontrol"
 run telecontrol "$port3" "$data" "$server_pid" telecontrol/*.test.js
+# Then the switching network: the demo's panels and microgrid on an 11 kV
+# ring (tests/plants/network), operated from the network screen.
+port4="$(free_port)"
+start network "$port4" --config "$root/tests/plants/network"
+run network "$port4" "$data" "$server_pid" network/*.test.js
 
 total_passed=0
 total_failed=0
-for name in demo plant2 telecontrol; do
+for name in demo plant2 telecontrol network; do
   echo "--- $name"
   cat "$artifacts/spec-$name.log" 2>/dev/null || true
   tap="$artifacts/results-$name.tap"

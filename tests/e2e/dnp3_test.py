@@ -53,7 +53,7 @@ import threading
 import time
 
 import checks
-from checks import check, free_port, note, wait_for
+from checks import Api, check, free_port, login, note, wait_for
 import http.cookiejar
 import urllib.error
 import urllib.request
@@ -463,58 +463,6 @@ class Hostile:
 # ---------------------------------------------------------------------------
 # gridscada's API.
 
-class Api:
-    def __init__(self, base):
-        self.base = base
-        self.opener = urllib.request.build_opener(
-            urllib.request.HTTPCookieProcessor(http.cookiejar.CookieJar()))
-
-    def call(self, method, path, body=None, timeout=30):
-        data = json.dumps(body).encode() if body is not None else None
-        req = urllib.request.Request(self.base + path, data=data, method=method, headers={
-            "Content-Type": "application/json", "Origin": self.base})
-        try:
-            with self.opener.open(req, timeout=timeout) as r:
-                return r.status, json.loads(r.read() or b"null")
-        except urllib.error.HTTPError as e:
-            return e.code, json.loads(e.read() or b"null")
-        except OSError as e:
-            return 0, {"error": str(e)}
-
-    def tag(self, name):
-        status, body = self.call("GET", f"/api/tags/{name}")
-        return body if status == 200 else None
-
-    def device(self, name):
-        status, body = self.call("GET", "/api/devices")
-        if status != 200:
-            return None, None
-        dev = next((d for d in body.get("devices", []) if d.get("name") == name), None)
-        link = next((l for l in body.get("links", []) if name in l.get("devices", [])), None)
-        return dev, link
-
-    def metrics(self):
-        try:
-            with urllib.request.urlopen(self.base + "/metrics", timeout=10) as r:
-                return r.read().decode()
-        except OSError as e:
-            return f"# unreadable: {e}"
-
-    def active_alarms(self):
-        """The keys of the active alarms."""
-        status, body = self.call("GET", "/api/alarms")
-        return sorted(a.get("key") for a in (body or {}).get("alarms", []) if a.get("active")) if status == 200 else None
-
-    def healthz(self):
-        try:
-            with urllib.request.urlopen(self.base + "/healthz", timeout=5) as r:
-                return r.status
-        except urllib.error.HTTPError as e:
-            return e.code
-        except OSError:
-            return 0
-
-
 def metric(text, name, label):
     """The value of `name` whose device (or link) label is `label`."""
     for l in text.splitlines():
@@ -702,17 +650,6 @@ data_dir = "data"
 [storage]
 url = "sqlite://gridscada.db"
 """
-
-
-def login(base, data, proc):
-    creds = os.path.join(data, "credentials.txt")
-    if not wait_for(lambda: (os.path.exists(creds) and os.path.getsize(creds) > 0) or proc.poll() is not None, 60):
-        return None, None
-    api = Api(base)
-    wait_for(lambda: api.healthz() in (200, 503), 30, 0.2)
-    user, password = next(l.split()[1:3] for l in open(creds) if l.startswith("administrator"))
-    status, _ = api.call("POST", "/api/session", {"username": user, "password": password})
-    return (api, user) if status == 200 else (None, None)
 
 
 def good(api, name, value=None):

@@ -298,6 +298,14 @@ command_ioa = 6003
 tag = "RTU1.Comm.Connected"
 ioa = 5004
 point = "M_SP"
+
+# Q1 in a switching network: a safety tag on it refuses the centre's
+# commands too (a negative ActCon, before anything reaches the RTU).
+[network]
+node = [{{ id = "infeed", busbar = true }}, {{ id = "feeder" }}]
+source = [{{ id = "grid", name = "Grid infeed", kind = "grid", node = "infeed" }}]
+switch = [{{ id = "q1", name = "Feeder breaker Q1", kind = "circuit_breaker", from = "infeed", to = "feeder", status = "RTU1.Q1.Closed", command = "RTU1.Q1.Closed" }}]
+load = [{{ id = "feeder_load", name = "Feeder load", node = "feeder", customers = 40 }}]
 """
 
 
@@ -428,6 +436,25 @@ def control_centre(api, rtu, centre_port):
         check(rtu.double_commands[len(before):] == ["select", "execute"],
               "control centre: the RTU received the command through gridscada (select, execute)",
               str(rtu.double_commands[len(before):]))
+        # A "Do not operate" safety tag on Q1 (placed through the API): the
+        # centre's select gets a negative ActCon at once, nothing reaches the
+        # RTU, and the refusal is in the event log with the tag's reason.
+        status, placed = api.call("POST", "/api/switching/tags", {
+            "device": "q1", "kind": "do_not_operate", "reason": "feeder out for work", "work_ref": "WO-104"})
+        check(status == 201, "control centre: a DO NOT OPERATE tag is placed on Q1", f"{status} {placed}")
+        before = list(rtu.double_commands)
+        q1_cmd.value = c104.Double.ON
+        sent = q1_cmd.transmit(cause=c104.Cot.ACTIVATION)
+        time.sleep(0.5)
+        check(not sent and rtu.double_commands == before,
+              "control centre: closing a tagged Q1 gets a negative ActCon to the select, nothing reaches the RTU",
+              f"transmit={sent} rtu={rtu.double_commands[len(before):]}")
+        status, body = api.call("GET", "/api/events?limit=50")
+        refused = [e["message"] for e in (body or {}).get("events", []) if e.get("kind") == "write_refused"]
+        check(any("IEC 104 control centre" in m and "DO NOT OPERATE" in m and "feeder out for work" in m for m in refused),
+              "control centre: the refusal is in the event log, naming the centre and the tag", str(refused[:3]))
+        if status == 200 and isinstance(placed, dict) and "id" in placed:
+            api.call("DELETE", f"/api/switching/tags/{placed['id']}", {"reason": "work done"})
         # Outside the engineering limits: refused, nothing goes to the RTU.
         n = len(rtu.commands)
         sp_cmd.value = 900.0

@@ -7,6 +7,9 @@
 # (tests/requirements.txt; `st` on PATH or SCHEMATHESIS=/path/to/st).
 # Bounded: ST_MAX_EXAMPLES (default 25) cases per operation, ST_MAX_TIME
 # (default 240) seconds in all.
+# The request timeout is generous (30 s): on CI the replay stage runs beside
+# this one on the same two cores, and the checks here are about what the
+# server answers, not how fast.
 # Prints "N passed, M failed" last; exits non-zero on any failure.
 set -uo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
@@ -68,7 +71,7 @@ esac
     --checks not_a_server_error,status_code_conformance,content_type_conformance,response_schema_conformance \
     --max-examples "${ST_MAX_EXAMPLES:-25}" \
     --max-time "${ST_MAX_TIME:-240}" \
-    --request-timeout 10 \
+    --request-timeout 30 \
     --workers 2 \
     --generation-database none \
     --exclude-path /api/live \
@@ -95,6 +98,12 @@ for f in glob.glob(sys.argv[1] + "/*.xml"):
         if bad:
             failed += 1
             print("FAIL", case.get("name"))
+            # What went wrong, in a few lines: the CI log keeps only a part
+            # of schemathesis' own report.
+            for el in list(case.iter("failure")) + list(case.iter("error")):
+                text = (el.get("message") or "") + "\n" + (el.text or "")
+                for line in [l for l in text.splitlines() if l.strip()][:25]:
+                    print("    " + line[:300])
         elif not skipped:
             passed += 1
 print(f"{passed} {failed}")
@@ -112,6 +121,10 @@ if ! kill -0 "$pid" 2>/dev/null; then
     echo "FAIL the server died during the run"
     tail -20 "$tmp/server.log"
     failed=$((failed + 1))
+fi
+if [ "$failed" -ne 0 ]; then
+    echo "--- the server's warnings and errors (last 40)"
+    grep -aE 'WARN|ERROR' "$tmp/server.log" | tail -40
 fi
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]

@@ -15,6 +15,7 @@ mod pair;
 mod replay;
 mod reports_cmd;
 mod runtime;
+mod scl_cmd;
 mod settings;
 mod sinks;
 mod users;
@@ -170,6 +171,43 @@ enum Command {
     Opcua {
         #[command(subcommand)]
         command: OpcuaCommand,
+    },
+    /// IEC 61850 SCL files (docs/IEC61850.md).
+    Scl {
+        #[command(subcommand)]
+        command: SclCommand,
+    },
+}
+
+#[derive(Subcommand)]
+enum SclCommand {
+    /// Write a tag file per IED of an SCL file (SCD, CID or ICD): its
+    /// statuses, measurands, counters and controllable objects, with types,
+    /// units and control models, and its report control blocks; and a
+    /// main file to run them when OUT has none.
+    Import {
+        /// The SCL file.
+        file: PathBuf,
+        /// Only this IED (repeat for more); all by default.
+        #[arg(long = "ied")]
+        ieds: Vec<String>,
+        /// The folder to write into.
+        #[arg(long, default_value = ".")]
+        out: PathBuf,
+        /// The least role that may operate the imported controls.
+        #[arg(long, default_value = "operator")]
+        write_role: String,
+        /// IED=host:port, instead of the SCL's address (repeatable).
+        #[arg(long = "address")]
+        addresses: Vec<String>,
+        /// Replace tag files (and screens) that exist.
+        #[arg(long)]
+        force: bool,
+        /// Also draw a screen per bay of the SCL's Substation section (per
+        /// IED where it has none): the switches with Open and Close, then
+        /// the measurands and statuses, into OUT/screens/.
+        #[arg(long)]
+        screens: bool,
     },
 }
 
@@ -441,6 +479,32 @@ fn main() -> ExitCode {
                 }
             }
         }
+        Command::Scl {
+            command:
+                SclCommand::Import {
+                    file,
+                    ieds,
+                    out,
+                    write_role,
+                    addresses,
+                    force,
+                    screens,
+                },
+        } => match scl_cmd::import(scl_cmd::Import {
+            file,
+            ieds,
+            out,
+            write_role,
+            addresses,
+            force,
+            screens,
+        }) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("error: {e:#}");
+                ExitCode::FAILURE
+            }
+        },
         Command::Cert {
             command:
                 CertCommand::SelfSigned {

@@ -223,6 +223,9 @@ pub(crate) fn all_tags(plant: &Plant) -> Vec<TagMeta> {
     if plant.microgrid.is_some() {
         tags.extend(dispatch::tags::dispatch_tags());
     }
+    if let Some(Ok(net)) = gridscada_network::Network::from_plant(plant) {
+        tags.extend(gridscada_network::network_tags(&net));
+    }
     tags
 }
 
@@ -295,6 +298,8 @@ pub struct Stack {
     pub writer: Arc<dyn gridscada_tagdb::TagWriter>,
     pub panels: Vec<PanelHandle>,
     pub dispatch: Option<watch::Receiver<DispatchStatus>>,
+    /// The switching network (`[network]`) and its live topology.
+    pub network: Option<gridscada_web::NetworkView>,
     pub simulator: Option<gridscada_sim::Simulator>,
     pub events: mpsc::Sender<NewEvent>,
     /// This server's part in a redundant pair (`[redundancy]`), if any.
@@ -559,6 +564,36 @@ impl Stack {
             }
             _ => (None, None),
         };
+        // The topology processor: section states from the devices'
+        // positions, on every server of a pair (it only derives tags).
+        let network = match gridscada_network::Network::from_plant(&plant) {
+            None => None,
+            Some(Err(e)) => return Err(anyhow!("the switching network: {e}")),
+            Some(Ok(net)) => {
+                let net = Arc::new(net);
+                // The standing safety tags: read before any command (the
+                // guard refuses every switching operation until they are);
+                // one of a pair reads them again every 2 s, so that tags
+                // placed on the other server hold here too (a server alone
+                // places and removes them itself).
+                let safety = gridscada_network::SafetyTags::default();
+                let loaded = sinks::load_safety_tags(&store, &safety).await;
+                if plant.redundancy.is_some() || !loaded {
+                    tasks.spawn(sinks::reload_safety_tags(store.clone(), safety.clone()));
+                }
+                let mut driver =
+                    gridscada_network::TopologyDriver::new(net.clone(), db.clone(), safety.clone());
+                let (live_tx, live_rx) = watch::channel(Arc::new(driver.update(clock.now())));
+                loops.spawn(driver.run(clock.clone(), live_tx));
+                let selections = gridscada_network::Selections::new(net.select_timeout);
+                Some(gridscada_web::NetworkView {
+                    network: net,
+                    live: live_rx,
+                    tags: safety,
+                    selections,
+                })
+            }
+        };
         let mut writer = field.writer();
         // A central Sparkplug host takes the writes of remote tags.
         let sparkplug_host = match sparkplug_host::start(
@@ -577,6 +612,19 @@ impl Stack {
             }
             None => None,
         };
+
+        // Every command of every path (HTTP, OPC UA, DCMD, the IEC 104
+        // server, the panel sequences, the dispatch) passes the switching
+        // guard: safety tags and interlocks.
+        if let Some(view) = &network {
+            writer = Arc::new(gridscada_network::SwitchingGuard::new(
+                view.network.clone(),
+                writer,
+                view.tags.clone(),
+                view.selections.clone(),
+                view.live.clone(),
+            ));
+        }
 
         // One fault-isolation sequence per panel.
         let (panel_notices_tx, panel_notices_rx) = mpsc::channel::<PanelNotice>(1024);
@@ -706,6 +754,7 @@ impl Stack {
             writer,
             panels,
             dispatch: dispatch_rx,
+            network,
             simulator,
             events: events_tx,
             pair,
@@ -1031,6 +1080,7 @@ pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
                 leadership: p.leadership.clone(),
                 view: p.view.clone(),
             }),
+            network: stack.network.clone(),
         },
         sim: stack.simulator.as_ref().map(|s| {
             Arc::new(SimAdapter(s.handle())) as Arc<dyn gridscada_web::api::sim::SimControl>

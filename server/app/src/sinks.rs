@@ -502,7 +502,7 @@ pub async fn historian_feed(
         start
             .changes
             .iter()
-            .filter_map(|(id, s)| recorder.offer(*id, s)),
+            .flat_map(|(id, s)| recorder.offer_rows(*id, s)),
     );
     // 0 keeps a roll-up level for ever.
     let level_days = |d: u32| (d > 0).then_some(d);
@@ -548,7 +548,7 @@ pub async fn historian_feed(
                     .batch()
                     .changes
                     .iter()
-                    .filter_map(|(id, s)| recorder.offer(*id, s))
+                    .flat_map(|(id, s)| recorder.offer_rows(*id, s))
                     .collect();
                 if recording() {
                     historian.push_all(samples);
@@ -592,9 +592,40 @@ pub async fn historian_feed(
             .batch()
             .changes
             .iter()
-            .filter_map(|(id, s)| recorder.offer(*id, s))
+            .flat_map(|(id, s)| recorder.offer_rows(*id, s))
             .collect();
         offered += historian.push_all(samples);
     }
     tracing::debug!(offered, "historian feed stopped");
+}
+
+/// Reads the standing safety tags from the store into `tags`; a store that
+/// does not answer leaves them as they were (and, at start, not loaded: the
+/// switching guard refuses every switching operation until they are).
+pub async fn load_safety_tags(store: &Store, tags: &gridscada_network::SafetyTags) -> bool {
+    match store.standing_safety_tags().await {
+        Ok(rows) => {
+            tags.replace(
+                rows.iter()
+                    .filter_map(gridscada_web::api::network::standing)
+                    .collect(),
+            );
+            true
+        }
+        Err(e) => {
+            tracing::warn!(error = %e, "reading the safety tags");
+            false
+        }
+    }
+}
+
+/// Reloads the safety tags every 2 s: tags placed or removed by the other
+/// server of a pair (or before a failover) hold here too.
+pub async fn reload_safety_tags(store: Store, tags: gridscada_network::SafetyTags) {
+    let mut tick = tokio::time::interval(Duration::from_secs(2));
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        tick.tick().await;
+        load_safety_tags(&store, &tags).await;
+    }
 }

@@ -22,3 +22,4 @@ pub use diag::{Diagnostic, SourceFile};
 pub use load::{load_path, load_with, Plant, TlsFiles};
 pub use model::*;
 pub use overrides::{apply_env, has_plaintext_password, EnvVar, Warning, ENV_VARS};
+pub use validate::iec61850::{parse_hex, parse_oid, rcb_parts};

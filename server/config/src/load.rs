@@ -54,6 +54,8 @@ pub struct Plant {
     pub suppression: Vec<SuppressionConfig>,
     /// `[reports]`: when reports are made on their own.
     pub reports: ReportsConfig,
+    /// `[network]`: the switching network, if configured.
+    pub network: Option<NetworkConfig>,
     /// Positions of the tags and devices by name, made at the first lookup.
     index: NameIndex,
 }
@@ -294,6 +296,7 @@ pub fn load_with(
         notify: main_cfg.notify,
         suppression: main_cfg.suppression,
         reports: main_cfg.reports,
+        network: main_cfg.network,
         index: NameIndex::default(),
     })
 }
@@ -398,6 +401,7 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
     let mut notify = vec![];
     let mut suppression = vec![];
     let mut reports = ReportsConfig::default();
+    let mut network = None;
     let before = diags.len();
     for (key, value) in root.iter() {
         match key.get_ref().as_ref() {
@@ -413,10 +417,11 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
             "notify" => notify = de_each(file, value, "notify", diags),
             "suppression" => suppression = de_each(file, value, "suppression", diags),
             "reports" => reports = de(file, value, "[reports]", diags).unwrap_or_default(),
+            "network" => network = de(file, value, "[network]", diags),
             other => diags.push(file.error_at(
                 key.span(),
                 format!(
-                    "unknown key '{other}' in the main file; expected one of tag_files, server, storage, panel, microgrid, mqtt, opcua, iec104_server, redundancy, notify, suppression, reports"
+                    "unknown key '{other}' in the main file; expected one of tag_files, server, storage, panel, microgrid, mqtt, opcua, iec104_server, redundancy, notify, suppression, reports, network"
                 ),
             )),
         }
@@ -447,6 +452,7 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
         notify,
         suppression,
         reports,
+        network,
     })
 }
 

@@ -120,6 +120,39 @@ impl StatusIds {
     }
 }
 
+/// Why a protocol has no write target for `name`: the tag exists but is
+/// read-only, or there is no such tag.
+pub fn no_write_target(db: &TagDb, name: &str) -> WriteError {
+    match db.id(name).and_then(|id| db.meta(id)) {
+        Some(_) => WriteError::ReadOnly(name.to_string()),
+        None => WriteError::UnknownTag(name.to_string()),
+    }
+}
+
+/// What a telecontrol device's task shows in its status tags.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StatusFigures {
+    pub connected: bool,
+    pub response_ms: f64,
+    pub requests: u64,
+    pub errors: u64,
+    pub timeouts: u64,
+}
+
+impl StatusIds {
+    /// Writes `f` into the status tags, stamped `ts`.
+    pub fn publish(&self, db: &TagDb, ts: gridscada_tagdb::Timestamp, f: StatusFigures) {
+        use gridscada_tagdb::Sample;
+        db.apply([
+            (self.connected, Sample::good(f.connected, ts)),
+            (self.response_ms, Sample::good(f.response_ms, ts)),
+            (self.requests, Sample::good(Value::from_u64(f.requests), ts)),
+            (self.errors, Sample::good(Value::from_u64(f.errors), ts)),
+            (self.timeouts, Sample::good(Value::from_u64(f.timeouts), ts)),
+        ]);
+    }
+}
+
 /// The communication status tags of every device, for the app to register
 /// before it builds the [`TagDb`].
 pub fn device_status_tags(plant: &Plant) -> Vec<TagMeta> {

@@ -109,7 +109,7 @@ fn transport_key(d: &DeviceConfig) -> Result<String, Error> {
             .as_ref()
             .map(|s| format!("rtu://{}", s.port.get_ref()))
             .ok_or_else(|| err("an rtu device needs a serial port")),
-        Protocol::Iec104 | Protocol::Dnp3 => Err(err("not a Modbus device")),
+        Protocol::Iec104 | Protocol::Dnp3 | Protocol::Iec61850 => Err(err("not a Modbus device")),
     }
 }
 
@@ -288,13 +288,15 @@ impl FieldIo {
             }
             let first = devs[0];
             let transport = match first.protocol {
-                Protocol::Tcp | Protocol::Iec104 | Protocol::Dnp3 => Transport::Tcp(TcpLine::new(
-                    first
-                        .address
-                        .as_ref()
-                        .map(|a| a.get_ref().clone())
-                        .unwrap_or_default(),
-                )),
+                Protocol::Tcp | Protocol::Iec104 | Protocol::Dnp3 | Protocol::Iec61850 => {
+                    Transport::Tcp(TcpLine::new(
+                        first
+                            .address
+                            .as_ref()
+                            .map(|a| a.get_ref().clone())
+                            .unwrap_or_default(),
+                    ))
+                }
                 Protocol::Rtu => {
                     let serial = first.serial.clone().ok_or_else(|| Error::Device {
                         device: first.name.get_ref().clone(),

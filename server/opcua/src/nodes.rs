@@ -398,6 +398,9 @@ impl TagNodes {
                 // A standby of a redundant pair commands nothing.
                 WriteError::NotActive(_) => StatusCode::BadServerNotConnected,
                 WriteError::BadValue { .. } => StatusCode::BadTypeMismatch,
+                // A safety tag or a switching interlock (the reason is in
+                // the audit trail: OPC UA carries no text).
+                WriteError::Blocked(_) => StatusCode::BadRequestNotAllowed,
                 // No other error is a refusal (WriteError::is_refusal).
                 _ => StatusCode::BadDeviceFailure,
             },

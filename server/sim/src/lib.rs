@@ -20,6 +20,7 @@ mod handle;
 mod image;
 mod map;
 mod microgrid;
+mod network;
 mod panel;
 mod plant;
 mod profile;

@@ -13,6 +13,7 @@ use gridscada_config::{Plant, Protocol, RegisterKind, UnitKind};
 
 use crate::codec::Binding;
 use crate::image::{Limits, RegisterImage};
+use crate::network::{NetworkSim, StatusShape};
 use crate::Error;
 
 /// A value the simulator produces (read by the master).
@@ -21,6 +22,9 @@ pub(crate) enum Source {
     Panel(usize, PanelOut),
     Unit(usize, UnitOut),
     Load(LoadOut),
+    /// A network device's position: device, how the tag shows it, whether
+    /// the tag is an integer double point.
+    Switch(usize, StatusShape, bool),
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -73,6 +77,8 @@ pub(crate) enum Target {
     Zone(usize, usize),
     Setpoint(usize),
     RunCmd(usize),
+    /// A network device's command.
+    Switch(usize),
 }
 
 /// One simulated device.
@@ -153,7 +159,7 @@ fn kind_index(k: RegisterKind) -> usize {
     }
 }
 
-pub(crate) fn build(plant: &Plant) -> Result<Layout, Error> {
+pub(crate) fn build(plant: &Plant, network: Option<&NetworkSim>) -> Result<Layout, Error> {
     // Devices: every Modbus TCP device with an address, and every IEC 104
     // station.
     let mut devices = vec![];
@@ -186,6 +192,9 @@ pub(crate) fn build(plant: &Plant) -> Result<Layout, Error> {
                     points: vec![],
                 });
             }
+            (Protocol::Iec61850, _) => unserved.push(format!(
+                "device '{name}' (IEC 61850: there is no simulated IED; gridscada connects to the IED at its address)"
+            )),
             _ => unserved.push(format!("device '{name}' (serial, or without an address)")),
         }
     }
@@ -378,6 +387,17 @@ pub(crate) fn build(plant: &Plant) -> Result<Layout, Error> {
         }
     }
 
+    // The network's own devices (the panels' breakers are bound above).
+    if let Some(net) = network {
+        for t in &plant.tags {
+            let name = t.name.get_ref();
+            if let Some((i, shape)) = net.status_of(name) {
+                let integer = t.value_kind() == gridscada_tagdb::ValueKind::Int;
+                out(name, Source::Switch(i, shape, integer), &mut used_names);
+            }
+        }
+    }
+
     // Commands: must sit on a table the master can write.
     let mut command = |name: &str, target: Target| -> Result<(), Error> {
         if let Some(&(si, pi)) = station_tags.get(name) {
@@ -416,6 +436,15 @@ pub(crate) fn build(plant: &Plant) -> Result<Layout, Error> {
             if u.kind == UnitKind::Diesel {
                 command(&io.run_cmd, Target::RunCmd(ui))?;
                 used_cmd.push(io.run_cmd.clone());
+            }
+        }
+    }
+    if let Some(net) = network {
+        for t in &plant.tags {
+            let name = t.name.get_ref();
+            if let Some(i) = net.command_of(name) {
+                command(name, Target::Switch(i))?;
+                used_cmd.push(name.clone());
             }
         }
     }

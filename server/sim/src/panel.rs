@@ -129,6 +129,10 @@ pub(crate) struct PanelModel {
     pub loads: Vec<ZoneLoad>,
     pub kwh: f64,
     pub last_trip: Option<TripRecord>,
+    /// The incomer has voltage (always, unless the switching network feeds
+    /// the panel and the topology says otherwise). Losing it does not trip
+    /// the ELCB: nothing flows.
+    pub supply: bool,
     last: Timestamp,
     delay: Duration,
 }
@@ -161,6 +165,7 @@ impl PanelModel {
             loads: (1..=zones).map(ZoneLoad::default_for).collect(),
             kwh: 0.0,
             last_trip: None,
+            supply: true,
             last: now,
             delay,
         }
@@ -171,7 +176,20 @@ impl PanelModel {
     }
 
     pub fn busbar_energised(&self) -> bool {
-        self.elcb_closed && self.mccb.closed
+        self.supply && self.elcb_closed && self.mccb.closed
+    }
+
+    /// The incomer gains or loses voltage at `now`. A fault on a closed
+    /// path trips the ELCB when the supply returns.
+    pub fn set_supply(&mut self, on: bool, now: Timestamp) {
+        if self.supply == on {
+            return;
+        }
+        self.integrate_to(now.max(self.last));
+        self.supply = on;
+        if on {
+            self.check_trip(now);
+        }
     }
 
     /// Zone `z` (1-based) has voltage.
@@ -296,7 +314,7 @@ impl PanelModel {
     /// Opens the ELCB if any faulted path is energised; transient faults that
     /// caused the trip are gone afterwards.
     fn check_trip(&mut self, t: Timestamp) {
-        if !self.elcb_closed {
+        if !self.elcb_closed || !self.supply {
             return;
         }
         let mut faulted = vec![];
@@ -375,7 +393,7 @@ impl PanelModel {
 
     /// What the power analyzer shows at time t.
     pub fn analyzer(&self, t: Timestamp) -> AnalyzerReading {
-        if !self.elcb_closed {
+        if !self.elcb_closed || !self.supply {
             return AnalyzerReading {
                 kwh: self.kwh,
                 ..Default::default()

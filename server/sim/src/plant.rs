@@ -17,6 +17,7 @@ use crate::map::{
     self, Device, GatewaySpec, LoadOut, PanelOut, Source, StationSpec, Target, UnitOut,
 };
 use crate::microgrid::{BalanceCounters, Microgrid, UnitCounters, UnitState};
+use crate::network::NetworkSim;
 use crate::panel::{AnalyzerReading, FaultKind, PanelModel, TripRecord, ZoneLoad};
 use crate::{Error, SimOptions};
 
@@ -33,6 +34,8 @@ pub(crate) struct PlantSim {
     /// Panel prefixes, parallel to `panels`.
     pub panel_prefixes: Vec<String>,
     pub microgrid: Option<Microgrid>,
+    /// The switching network's own devices and the panels' supply.
+    network: Option<NetworkSim>,
     outputs: Vec<(Binding, Source)>,
     inputs: Vec<(Binding, Target)>,
     pub unmodelled: Vec<String>,
@@ -42,7 +45,8 @@ pub(crate) struct PlantSim {
 
 impl PlantSim {
     pub fn new(plant: &Plant, opts: &SimOptions, now: Timestamp) -> Result<Self, Error> {
-        let layout = map::build(plant)?;
+        let network = NetworkSim::new(plant, opts.breaker_delay);
+        let layout = map::build(plant, network.as_ref())?;
         let panels = plant
             .panels
             .iter()
@@ -90,6 +94,7 @@ impl PlantSim {
                 .map(|p| p.prefix.get_ref().clone())
                 .collect(),
             microgrid,
+            network,
             outputs: layout.outputs,
             inputs: layout.inputs,
             unmodelled: layout.unmodelled,
@@ -118,6 +123,7 @@ impl PlantSim {
             Target::Zone(p, z) => bool_f(self.panels[p].zone[z - 1].cmd),
             Target::Setpoint(u) => self.unit(u).map(|u| u.setpoint_kw).unwrap_or(0.0),
             Target::RunCmd(u) => bool_f(self.unit(u).is_some_and(|u| u.run_cmd)),
+            Target::Switch(i) => bool_f(self.network.as_ref().is_some_and(|n| n.command_state(i))),
         }
     }
 
@@ -181,6 +187,9 @@ impl PlantSim {
         if let Some(mg) = &mut self.microgrid {
             mg.advance_to(now);
         }
+        if let Some(net) = &mut self.network {
+            net.advance_to(now, &mut self.panels, self.microgrid.as_ref());
+        }
         self.now = now;
         self.publish();
     }
@@ -191,7 +200,13 @@ impl PlantSim {
         let t = self.now;
         let readings: Vec<AnalyzerReading> = self.panels.iter().map(|p| p.analyzer(t)).collect();
         for (b, src) in &self.outputs {
-            if let Some(v) = output_value(&self.panels, self.microgrid.as_ref(), &readings, *src) {
+            if let Some(v) = output_value(
+                &self.panels,
+                self.microgrid.as_ref(),
+                self.network.as_ref(),
+                &readings,
+                *src,
+            ) {
                 write_value(&mut self.devices[b.device].image, b, v);
             }
         }
@@ -199,9 +214,13 @@ impl PlantSim {
             for &pi in &self.station_driven[si] {
                 let point = &self.stations[si].points[pi];
                 let v = match (point.source, point.target) {
-                    (Some(src), _) => {
-                        output_value(&self.panels, self.microgrid.as_ref(), &readings, src)
-                    }
+                    (Some(src), _) => output_value(
+                        &self.panels,
+                        self.microgrid.as_ref(),
+                        self.network.as_ref(),
+                        &readings,
+                        src,
+                    ),
                     (None, Some(target)) => Some(self.command_state(target)),
                     (None, None) => None,
                 };
@@ -265,6 +284,11 @@ impl PlantSim {
             Target::RunCmd(u) => {
                 if let Some(u) = self.microgrid.as_mut().and_then(|m| m.units.get_mut(u)) {
                     u.run_cmd = on;
+                }
+            }
+            Target::Switch(i) => {
+                if let Some(net) = &mut self.network {
+                    net.command(i, on, now);
                 }
             }
         }
@@ -382,10 +406,12 @@ impl PlantSim {
 fn output_value(
     panels: &[PanelModel],
     microgrid: Option<&Microgrid>,
+    network: Option<&NetworkSim>,
     readings: &[AnalyzerReading],
     src: Source,
 ) -> Option<f64> {
     Some(match src {
+        Source::Switch(i, shape, integer) => network?.status_value(i, shape, integer),
         Source::Panel(pi, o) => {
             let p = &panels[pi];
             let a = &readings[pi];

@@ -84,7 +84,7 @@ pub async fn audited_write(
             tracing::error!(%why, "command refused: its audit record cannot be made durable");
             CommandError::Unaudited(why)
         })?;
-    let outcome = writer.write(name, value.clone()).await;
+    let outcome = gridscada_tagdb::with_originator(label, writer.write(name, value.clone())).await;
     // The device may hold the value at its own resolution (a scaled
     // register): record what was asked and what it confirmed.
     let record = match &outcome {

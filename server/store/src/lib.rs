@@ -53,9 +53,11 @@ mod historian;
 mod lease;
 mod notifications;
 mod panels;
+mod programmes;
 mod recorder;
 mod report_samples;
 mod rollup;
+mod safety_tags;
 mod screens;
 #[macro_use]
 mod sessions;
@@ -78,7 +80,9 @@ pub use historian::{
 };
 pub use lease::{Fence, Lease, LeaseState};
 pub use notifications::{LastNotified, NewNotification, Notification, NotificationStatus};
+pub use programmes::{ProgrammeChange, ProgrammeRecord};
 pub use recorder::{RecordPolicy, Recorder};
+pub use safety_tags::SafetyTagRecord;
 pub use screens::{ScreenRecord, MAX_SCREEN_BYTES};
 pub use sessions::{SessionKey, SessionRecord, TicketRecord};
 pub use spool::{

@@ -7,6 +7,11 @@
 //! - its quality class changes (good / uncertain / bad);
 //! - its value moved more than the tag's deadband from the last *logged* value
 //!   (absolute; a deadband of 0 logs every change);
+//! - it is older than the last logged one (a device's buffered event that
+//!   arrives after an outage, at its own time): it is logged at that time,
+//!   and when its quality class differs from the last logged row's (Good
+//!   again after the outage's Bad), the return is logged too, just after
+//!   that row, so the trend does not stay Bad;
 //! - and, from [`Recorder::tick`], when nothing was logged for the tag's max
 //!   interval: the last seen value is logged again, stamped with the tick time,
 //!   so a flat trend still has points and "no data" means "no data".
@@ -73,6 +78,24 @@ struct TagState {
     policy: RecordPolicy,
     last_logged: Option<Seen>,
     last_seen: Option<Seen>,
+    /// The time of the last late row, so a device that sends the same old
+    /// timestamp at every integrity report does not rewrite it each time.
+    last_late: Option<Timestamp>,
+    /// When the last logged row is a return after an outage: the time of
+    /// the late sample it holds, so a later late sample updates it.
+    return_from: Option<Timestamp>,
+}
+
+/// The rows one sample asks for: its own, and at most one more.
+#[derive(Debug, Default)]
+pub struct Rows([Option<HistorySample>; 2]);
+
+impl IntoIterator for Rows {
+    type Item = HistorySample;
+    type IntoIter = std::iter::Flatten<std::array::IntoIter<Option<HistorySample>, 2>>;
+    fn into_iter(self) -> Self::IntoIter {
+        self.0.into_iter().flatten()
+    }
 }
 
 /// Per-tag logging policy and the memory it needs (last logged, last seen).
@@ -116,6 +139,8 @@ impl Recorder {
                 policy,
                 last_logged: None,
                 last_seen: None,
+                last_late: None,
+                return_from: None,
             });
     }
 
@@ -128,19 +153,43 @@ impl Recorder {
         self.tags.is_empty()
     }
 
-    /// Offers a new sample of a tag; returns the row to log, if any. Unknown
-    /// tags, disabled tags, string values and samples older than the last
-    /// logged one are not logged.
+    /// Offers a new sample of a tag; returns its own row to log, if any
+    /// (see [`Recorder::offer_rows`] for every row it asks for).
     pub fn offer(&mut self, id: TagId, sample: &Sample) -> Option<HistorySample> {
-        let t = self.tags.get_mut(&id)?;
+        self.offer_rows(id, sample).into_iter().next()
+    }
+
+    /// Offers a new sample of a tag; returns the rows to log. Unknown tags,
+    /// disabled tags, string values and never-read samples are not logged.
+    pub fn offer_rows(&mut self, id: TagId, sample: &Sample) -> Rows {
+        let Some(t) = self.tags.get_mut(&id) else {
+            return Rows::default();
+        };
+        Rows(t.offer(sample))
+    }
+}
+
+impl TagState {
+    fn row(&self, s: Seen) -> HistorySample {
+        HistorySample {
+            tag: self.name.clone(),
+            ts: s.ts,
+            value: s.value,
+            exact: s.exact,
+            quality: s.quality,
+        }
+    }
+
+    fn offer(&mut self, sample: &Sample) -> [Option<HistorySample>; 2] {
+        let t = self;
         if !t.policy.enabled || matches!(sample.value, Value::Str(_)) {
-            return None;
+            return [None, None];
         }
         // A tag never read yet has no history to log: logging its start
         // state would put a Bad sample at 1970-01-01 into every trend, for
         // retention to delete later.
         if sample.is_never_read() {
-            return None;
+            return [None, None];
         }
         // A Bad value is not a measurement: it is logged as a gap, so that
         // trend minima and averages never include it.
@@ -156,7 +205,25 @@ impl Recorder {
         };
         if let Some(l) = t.last_logged {
             if now.ts < l.ts {
-                return None;
+                if t.last_late == Some(now.ts) {
+                    return [None, None];
+                }
+                t.last_late = Some(now.ts);
+                let own = Some(t.row(now));
+                let back = match t.return_from {
+                    // The return row holds an older late sample: this one
+                    // is the newer state.
+                    Some(from) if now.ts > from => Seen { ts: l.ts, ..now },
+                    _ if l.quality != now.quality => Seen {
+                        ts: l.ts.add(std::time::Duration::from_millis(1)),
+                        ..now
+                    },
+                    _ => return [own, None],
+                };
+                t.return_from = Some(now.ts);
+                t.last_logged = Some(back);
+                t.last_seen = Some(back);
+                return [own, Some(t.row(back))];
             }
         }
         t.last_seen = Some(now);
@@ -170,18 +237,15 @@ impl Recorder {
             }
         };
         if !log {
-            return None;
+            return [None, None];
         }
         t.last_logged = Some(now);
-        Some(HistorySample {
-            tag: t.name.clone(),
-            ts: now.ts,
-            value: now.value,
-            exact: now.exact,
-            quality: now.quality,
-        })
+        t.return_from = None;
+        [Some(t.row(now)), None]
     }
+}
 
+impl Recorder {
     /// The periodic re-logs due at `now`: for each tag whose last logged row is
     /// at least its max interval old, the last seen value stamped `now`.
     pub fn tick(&mut self, now: Timestamp) -> Vec<HistorySample> {
@@ -345,7 +409,47 @@ mod tests {
     }
 
     #[test]
-    fn disabled_unknown_string_and_stale_samples_are_skipped() {
+    fn late_samples_are_logged_at_their_time_and_a_return_to_good_after_them() {
+        let mut r = rec(0.0, None);
+        let id = TagId(0);
+        assert!(r.offer(id, &at(100, 1.0)).is_some());
+        // The link drops: Bad at 200.
+        let lost = Sample {
+            value: Value::Float(1.0),
+            quality: Quality::bad("communication lost"),
+            timestamp: Timestamp::from_millis(200),
+        };
+        assert!(r.offer(id, &lost).is_some());
+        // Buffered events from during the outage arrive afterwards, at
+        // their own (earlier) times: each is logged there, and the first
+        // one also marks the return to Good just after the Bad row.
+        let rows: Vec<_> = r.offer_rows(id, &at(150, 2.0)).into_iter().collect();
+        assert_eq!(
+            rows.iter().map(|h| h.ts.as_millis()).collect::<Vec<_>>(),
+            vec![150, 201]
+        );
+        assert_eq!(rows[1].quality, QualityCode::Good);
+        // A later one of them: logged at its time, and the return row
+        // (rewritten at the same time) takes its value.
+        let rows: Vec<_> = r.offer_rows(id, &at(160, 3.0)).into_iter().collect();
+        assert_eq!(
+            rows.iter()
+                .map(|h| (h.ts.as_millis(), h.value))
+                .collect::<Vec<_>>(),
+            vec![(160, Some(3.0)), (201, Some(3.0))]
+        );
+        // The same old time again (an integrity report): not rewritten.
+        assert_eq!(r.offer_rows(id, &at(160, 3.0)).into_iter().count(), 0);
+        // Newer samples go on from the return.
+        assert!(
+            r.offer(id, &at(300, 3.0)).is_none(),
+            "same value as the return row"
+        );
+        assert!(r.offer(id, &at(301, 4.0)).is_some());
+    }
+
+    #[test]
+    fn disabled_unknown_and_string_samples_are_skipped() {
         let mut r = rec(0.0, Some(1));
         let id = TagId(0);
         assert!(r.offer(TagId(9), &at(0, 1.0)).is_none());
@@ -353,10 +457,6 @@ mod tests {
             .offer(id, &Sample::good("text", Timestamp::from_millis(0)))
             .is_none());
         assert!(r.offer(id, &at(100, 1.0)).is_some());
-        assert!(
-            r.offer(id, &at(50, 2.0)).is_none(),
-            "older than last logged"
-        );
         r.set_policy(
             id,
             "SS1.Zone1.V",

@@ -186,6 +186,16 @@ const SQLITE_MIGRATIONS: &[(i64, &str, &str)] = &[
         "failover tickets of their own",
         include_str!("../migrations/sqlite/0012_handover_tickets.sql"),
     ),
+    (
+        13,
+        "safety tags",
+        include_str!("../migrations/sqlite/0013_safety_tags.sql"),
+    ),
+    (
+        14,
+        "switching programmes",
+        include_str!("../migrations/sqlite/0014_switching_programmes.sql"),
+    ),
 ];
 const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
     (
@@ -247,6 +257,16 @@ const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
         12,
         "failover tickets of their own",
         include_str!("../migrations/postgres/0012_handover_tickets.sql"),
+    ),
+    (
+        13,
+        "safety tags",
+        include_str!("../migrations/postgres/0013_safety_tags.sql"),
+    ),
+    (
+        14,
+        "switching programmes",
+        include_str!("../migrations/postgres/0014_switching_programmes.sql"),
     ),
 ];
 

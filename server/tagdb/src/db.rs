@@ -309,7 +309,28 @@ impl TagDb {
         // Observed now: newer than anything observed before.
         let ticket = live.next_ticket;
         live.next_ticket += 1;
-        self.apply_locked(&mut live, batch.into_iter().map(|(id, s)| (id, s, ticket)))
+        self.apply_locked(
+            &mut live,
+            batch.into_iter().map(|(id, s)| (id, s, ticket)),
+            false,
+        )
+    }
+
+    /// Applies a batch of events a device reported (a buffered report's
+    /// entries, with the device's own times): unlike [`TagDb::apply`], a
+    /// sample whose value and quality equal the current one's but whose
+    /// time differs is published too, so an event replayed after an outage
+    /// (a breaker that opened, closed and opened again while the link was
+    /// down) reaches the historian even when it ends where it began.
+    pub fn apply_events(&self, batch: impl IntoIterator<Item = (TagId, Sample)>) -> usize {
+        let mut live = self.live.write();
+        let ticket = live.next_ticket;
+        live.next_ticket += 1;
+        self.apply_locked(
+            &mut live,
+            batch.into_iter().map(|(id, s)| (id, s, ticket)),
+            true,
+        )
     }
 
     /// A ticket that orders observations: take it when a value is read from
@@ -330,13 +351,16 @@ impl TagDb {
     /// ([`TagDb::apply`] observes "now").
     pub fn apply_observed(&self, batch: impl IntoIterator<Item = (TagId, Sample, u64)>) -> usize {
         let mut live = self.live.write();
-        self.apply_locked(&mut live, batch)
+        self.apply_locked(&mut live, batch, false)
     }
 
+    /// Applies samples under the lock; `events` publishes a sample that
+    /// differs from the current one only in its time.
     fn apply_locked(
         &self,
         live: &mut Live,
         batch: impl IntoIterator<Item = (TagId, Sample, u64)>,
+        events: bool,
     ) -> usize {
         let mut changes = Vec::new();
         // Slots beyond it are room not yet taken (set under this same lock).
@@ -354,7 +378,7 @@ impl TagDb {
                 continue;
             }
             *seen = ticket;
-            if slot.differs_from(&sample) {
+            if slot.differs_from(&sample) || (events && slot.timestamp != sample.timestamp) {
                 changes.push((id, sample.clone()));
             }
             *slot = sample;

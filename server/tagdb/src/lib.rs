@@ -20,4 +20,4 @@ pub use clock::{CivilTime, Clock, ScaledClock, SleepFuture, SystemClock, Timesta
 pub use db::{ChangeBatch, Subscription, TagDb, TagDbError, TagId, TagMeta, Update};
 pub use leadership::{Leadership, NotActive, Role};
 pub use value::{Quality, QualityCode, Sample, Value, ValueKind, NEVER_READ};
-pub use write::{TagWriter, WriteError, WriteFuture};
+pub use write::{originator, with_originator, Blocked, TagWriter, WriteError, WriteFuture};

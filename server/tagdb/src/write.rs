@@ -10,6 +10,22 @@ use std::pin::Pin;
 
 use crate::{Sample, Value};
 
+tokio::task_local! {
+    static ORIGINATOR: std::sync::Arc<str>;
+}
+
+/// Runs `write` on behalf of `who` (a user's name, or the system path a
+/// command came by): protocols whose commands carry their originator
+/// (IEC 61850's `orIdent`) read it with [`originator`].
+pub async fn with_originator<F: Future>(who: &str, write: F) -> F::Output {
+    ORIGINATOR.scope(std::sync::Arc::from(who), write).await
+}
+
+/// Who the write being made is for, if the caller said.
+pub fn originator() -> Option<std::sync::Arc<str>> {
+    ORIGINATOR.try_with(std::sync::Arc::clone).ok()
+}
+
 pub type WriteFuture<'a> = Pin<Box<dyn Future<Output = Result<Sample, WriteError>> + Send + 'a>>;
 
 /// Writes a tag's value to its device and confirms it by reading back.
@@ -17,6 +33,15 @@ pub trait TagWriter: Send + Sync {
     /// Writes `value` (in engineering units) to tag `name`. Resolves to the
     /// confirmed sample from the read-back.
     fn write<'a>(&'a self, name: &'a str, value: Value) -> WriteFuture<'a>;
+
+    /// Whether a write of `value` to `name` would be refused before it
+    /// reaches the device by a rule of the server's (a safety tag, a
+    /// switching interlock), without writing: for callers that must answer
+    /// before they write (a control centre's select) or must not command
+    /// what would be refused (the fault-isolation sequence).
+    fn precheck(&self, _name: &str, _value: &Value) -> Result<(), WriteError> {
+        Ok(())
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -55,6 +80,24 @@ pub enum WriteError {
     /// This server of a redundant pair does not hold the lease.
     #[error("{0}")]
     NotActive(crate::NotActive),
+    /// A switching operation refused by a safety tag or an interlock.
+    #[error("{0}")]
+    Blocked(Blocked),
+}
+
+/// A switching operation the server refuses: which rule, and why in words.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{operation} of {device} refused: {reason}")]
+pub struct Blocked {
+    /// The switching device's name.
+    pub device: String,
+    /// "open" or "close".
+    pub operation: &'static str,
+    /// The rule's id (safety_tag, closing_onto_earthed, ...).
+    pub rule: &'static str,
+    pub reason: String,
+    /// A supervisor may override it.
+    pub overridable: bool,
 }
 
 impl WriteError {
@@ -69,7 +112,8 @@ impl WriteError {
             | WriteError::ReadOnly(_)
             | WriteError::BadValue { .. }
             | WriteError::OutOfLimits { .. }
-            | WriteError::NotActive(_) => true,
+            | WriteError::NotActive(_)
+            | WriteError::Blocked(_) => true,
             WriteError::Device { .. }
             | WriteError::Mismatch { .. }
             | WriteError::Timeout(_)

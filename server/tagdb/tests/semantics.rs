@@ -201,3 +201,22 @@ async fn tags_added_at_run_time_fill_the_room_and_reach_subscribers() {
         Err(gridscada_tagdb::TagDbError::Full { room: 2, .. })
     ));
 }
+
+#[test]
+fn an_event_repeating_the_value_at_another_time_is_delivered() {
+    let db = db(1);
+    let id = TagId(0);
+    let mut sub = db.subscribe(&[id]);
+    let _ = sub.try_recv(); // the snapshot
+    db.apply([(id, Sample::good(1.0, ts(1000)))]);
+    assert!(sub.try_recv().is_some());
+    // A scan of the same value later: not a change.
+    db.apply([(id, Sample::good(1.0, ts(2000)))]);
+    assert!(sub.try_recv().is_none());
+    // A device's event of the same value at its own (earlier) time: delivered.
+    assert_eq!(db.apply_events([(id, Sample::good(1.0, ts(500)))]), 1);
+    let got = sub.try_recv().expect("the event");
+    assert_eq!(got.batch().changes[0].1.timestamp, ts(500));
+    // The same event again: nothing new.
+    assert_eq!(db.apply_events([(id, Sample::good(1.0, ts(500)))]), 0);
+}

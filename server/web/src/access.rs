@@ -34,6 +34,9 @@ const TOOLS: &[(&str, &str)] = &[
     ("users", "Users"),
 ];
 
+/// The switching network's single-line screen (a plant with `[network]`).
+pub const NETWORK: &str = "network";
+
 /// Screens only an Administrator's group gets by default.
 const ADMIN_ONLY: &[&str] = &["users", "editor", SIMULATION];
 
@@ -140,6 +143,9 @@ pub fn catalog(plant: &Plant, library: &ScreenLibrary) -> Vec<ScreenEntry> {
         out.push(builtin("microgrid", "Microgrid"));
         out.push(builtin("units", "Units"));
     }
+    if plant.network.is_some() {
+        out.push(builtin(NETWORK, "Network"));
+    }
     for s in library.all() {
         out.push(ScreenEntry {
             id: s.access_id(),
@@ -179,7 +185,7 @@ pub fn default_screens(plant: &Plant, library: &ScreenLibrary, role: Role) -> Ve
                 .contains(&e.id.as_str()),
             Role::Guest | Role::Display => {
                 matches!(e.kind, ScreenKind::Builtin)
-                    && ["main", "microgrid", "alarms", "trends"].contains(&e.id.as_str())
+                    && ["main", "microgrid", NETWORK, "alarms", "trends"].contains(&e.id.as_str())
             }
         })
         .map(|e| e.id)
@@ -254,6 +260,17 @@ impl Readable {
         r.prefixes.sort();
         r.prefixes.dedup();
         r
+    }
+
+    /// The network screen's tags: the network's own (under its prefix)
+    /// and its devices' status and command tags.
+    pub fn add_network(&mut self, net: &gridscada_network::Network) {
+        self.prefixes.push(format!("{}.", net.prefix));
+        self.names.extend(
+            net.input_tags()
+                .map(String::from)
+                .chain(net.command.iter().flatten().map(|c| c.tag().to_string())),
+        );
     }
 
     /// Everything (for tests and tools).

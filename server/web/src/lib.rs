@@ -30,6 +30,7 @@ use gridscada_config::Plant;
 use gridscada_store::Store;
 use gridscada_tagdb::{Clock, TagDb, TagWriter};
 
+pub use api::network::NetworkView;
 pub use api::Components;
 pub use auth::Auth;
 pub use proxy::ClientInfo;

@@ -508,6 +508,126 @@ pub fn table() -> Vec<Route> {
             || post(api::panels::breaker),
             doc::<api::panels::__path_breaker>,
         ),
+        // The switching network.
+        r(
+            Method::GET,
+            "/api/network",
+            Perm::LoggedIn,
+            || get(api::network::model),
+            doc::<api::network::__path_model>,
+        ),
+        r(
+            Method::GET,
+            "/api/network/topology",
+            Perm::LoggedIn,
+            || get(api::network::topology),
+            doc::<api::network::__path_topology>,
+        ),
+        r(
+            Method::GET,
+            "/api/switching/tags",
+            Perm::LoggedIn,
+            || get(api::network::tags),
+            doc::<api::network::__path_tags>,
+        ),
+        r(
+            Method::POST,
+            "/api/switching/tags",
+            Perm::Role(Operator),
+            || post(api::network::place),
+            doc::<api::network::__path_place>,
+        ),
+        r(
+            Method::DELETE,
+            "/api/switching/tags/{id}",
+            Perm::Role(Operator),
+            || delete(api::network::remove),
+            doc::<api::network::__path_remove>,
+        ),
+        r(
+            Method::GET,
+            "/api/switching/selections",
+            Perm::LoggedIn,
+            || get(api::network::selections),
+            doc::<api::network::__path_selections>,
+        ),
+        r(
+            Method::POST,
+            "/api/switching/selections",
+            Perm::Role(Operator),
+            || post(api::network::select),
+            doc::<api::network::__path_select>,
+        ),
+        r(
+            Method::POST,
+            "/api/switching/selections/{id}/execute",
+            Perm::Role(Operator),
+            || post(api::network::execute),
+            doc::<api::network::__path_execute>,
+        ),
+        r(
+            Method::POST,
+            "/api/switching/selections/{id}/override",
+            Perm::Role(Supervisor),
+            || post(api::network::override_selection),
+            doc::<api::network::__path_override_selection>,
+        ),
+        r(
+            Method::DELETE,
+            "/api/switching/selections/{id}",
+            Perm::Role(Operator),
+            || delete(api::network::cancel),
+            doc::<api::network::__path_cancel>,
+        ),
+        r(
+            Method::GET,
+            "/api/switching/programmes",
+            Perm::LoggedIn,
+            || get(api::programmes::list),
+            doc::<api::programmes::__path_list>,
+        ),
+        r(
+            Method::POST,
+            "/api/switching/programmes",
+            Perm::Role(Supervisor),
+            || post(api::programmes::create),
+            doc::<api::programmes::__path_create>,
+        ),
+        r(
+            Method::GET,
+            "/api/switching/programmes/{id}",
+            Perm::LoggedIn,
+            || get(api::programmes::one),
+            doc::<api::programmes::__path_one>,
+        ),
+        r(
+            Method::POST,
+            "/api/switching/programmes/{id}/approve",
+            Perm::Role(Supervisor),
+            || post(api::programmes::approve),
+            doc::<api::programmes::__path_approve>,
+        ),
+        r(
+            Method::POST,
+            "/api/switching/programmes/{id}/step",
+            Perm::Role(Operator),
+            || post(api::programmes::step),
+            doc::<api::programmes::__path_step>,
+        ),
+        r(
+            Method::POST,
+            "/api/switching/programmes/{id}/state",
+            Perm::Role(Operator),
+            || post(api::programmes::set_state),
+            doc::<api::programmes::__path_set_state>,
+        ),
+        r(
+            Method::GET,
+            "/api/network/preview",
+            Perm::LoggedIn,
+            || get(api::network::preview_operation),
+            doc::<api::network::__path_preview_operation>,
+        ),
         // Dispatch.
         r(
             Method::GET,
@@ -1060,7 +1180,13 @@ impl WebState {
 
     /// The tags `who` may read.
     pub fn readable(&self, who: &Principal) -> crate::access::Readable {
-        crate::access::Readable::of(who, &self.plant, &self.screens)
+        let mut r = crate::access::Readable::of(who, &self.plant, &self.screens);
+        if who.screens.iter().any(|s| s == crate::access::NETWORK) {
+            if let Some(v) = &self.components.network {
+                r.add_network(&v.network);
+            }
+        }
+        r
     }
 
     /// Whether tag `name` is in `who`'s area for writes: one they may read,

@@ -15,6 +15,7 @@ pub(crate) struct Field {
     modbus: gridscada_modbus::FieldIo,
     iec104: gridscada_iec104::Iec104Io,
     dnp3: gridscada_dnp3::Dnp3Io,
+    iec61850: gridscada_iec61850::client::Iec61850Io,
     writer: Arc<dyn TagWriter>,
     stats: StatsHandle,
 }
@@ -40,11 +41,19 @@ impl Field {
         let mut iec104 =
             gridscada_iec104::Iec104Io::start(plant, db.clone(), clock.clone(), leadership.clone())
                 .context("starting the IEC 104 client")?;
-        let mut dnp3 = gridscada_dnp3::Dnp3Io::start(plant, db, clock.clone(), leadership)
-            .context("starting the DNP3 master")?;
-        for notices in [iec104.take_notices(), dnp3.take_notices()]
-            .into_iter()
-            .flatten()
+        let mut dnp3 =
+            gridscada_dnp3::Dnp3Io::start(plant, db.clone(), clock.clone(), leadership.clone())
+                .context("starting the DNP3 master")?;
+        let mut iec61850 =
+            gridscada_iec61850::client::Iec61850Io::start(plant, db, clock.clone(), leadership)
+                .context("starting the IEC 61850 client")?;
+        for notices in [
+            iec104.take_notices(),
+            dnp3.take_notices(),
+            iec61850.take_notices(),
+        ]
+        .into_iter()
+        .flatten()
         {
             tokio::spawn(record_notices(notices, events.clone(), clock.clone()));
         }
@@ -58,16 +67,22 @@ impl Field {
                 dnp3.writer(),
                 Router::tags_of(plant, |p| p == Protocol::Dnp3),
             ),
+            (
+                iec61850.writer(),
+                Router::tags_of(plant, |p| p == Protocol::Iec61850),
+            ),
         ]));
         let stats = StatsHandle::new(vec![
             modbus.stats_source(),
             iec104.stats_source(),
             dnp3.stats_source(),
+            iec61850.stats_source(),
         ]);
         Ok(Field {
             modbus,
             iec104,
             dnp3,
+            iec61850,
             writer,
             stats,
         })
@@ -89,6 +104,7 @@ impl Field {
         self.modbus.shutdown().await;
         self.iec104.shutdown().await;
         self.dnp3.shutdown().await;
+        self.iec61850.shutdown().await;
     }
 }
 

@@ -31,12 +31,13 @@ fn demo_plant() -> Plant {
     let tags = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tags");
     let mut plant = gridscada_config::load_path(&tags)
         .unwrap_or_else(|d| panic!("the demo plant does not load: {d:?}"));
-    // The microgrid alone: the panels play no part here.
+    // The microgrid alone: the panels and the 11 kV ring play no part here.
     plant.panels.clear();
+    plant.network = None;
     plant
         .devices
         .retain(|d| d.name.get_ref().starts_with("MG."));
-    plant.tags.retain(|t| t.name.get_ref().starts_with("MG."));
+    plant.tags.retain(|t| t.device.get_ref().starts_with("MG."));
     plant
 }
 

@@ -76,12 +76,13 @@ impl Rig {
         t0.elapsed()
     }
 
-    /// Every tag of every device except `except` is Good.
+    /// Every tag of every Modbus device (what this rig polls) except
+    /// `except` is Good.
     fn others_good(&self, except: &[&str]) -> bool {
         self.plant
             .devices
             .iter()
-            .filter(|d| !except.contains(&d.name.get_ref().as_str()))
+            .filter(|d| d.protocol.is_modbus() && !except.contains(&d.name.get_ref().as_str()))
             .all(|d| self.all_have(&self.tags_of(d.name.get_ref()), QualityCode::Good))
     }
 }

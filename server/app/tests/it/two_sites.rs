@@ -121,7 +121,12 @@ fn two_sites_share_a_database_and_read_each_others_history() {
     });
     // Both servers' recorders have had time to write (states, history).
     std::thread::sleep(Duration::from_secs(3));
-    assert_eq!(devices_connected(&mut n, north_ports.clone()), Some(true));
+    // The north's devices still answer. On a loaded machine (the whole suite
+    // runs beside this test) one of its hundred may miss a poll deadline for a
+    // moment, so the north is given the time it takes to read them again.
+    wait_for("north's devices online", Duration::from_secs(30), || {
+        devices_connected(&mut n, north_ports.clone()).filter(|c| *c)
+    });
     assert_eq!(common::alarm(&mut n, COMM)["active"], false);
     // The same alarm key in each site's own state row: the north's normal
     // state did not overwrite the south's standing alarm.

@@ -17,6 +17,8 @@ pub enum Protocol {
     Iec104,
     /// DNP3 over TCP or a serial line (`[device.dnp3]`).
     Dnp3,
+    /// IEC 61850 MMS over TCP (`[device.iec61850]`).
+    Iec61850,
 }
 
 impl Protocol {
@@ -30,6 +32,7 @@ impl Protocol {
             Protocol::Rtu => "rtu",
             Protocol::Iec104 => "iec104",
             Protocol::Dnp3 => "dnp3",
+            Protocol::Iec61850 => "iec61850",
         }
     }
 }
@@ -90,6 +93,9 @@ pub struct DeviceConfig {
     /// DNP3 session settings, for protocol = "dnp3".
     #[serde(default)]
     pub dnp3: Option<super::Dnp3DeviceConfig>,
+    /// IEC 61850 association and reports, for protocol = "iec61850".
+    #[serde(default)]
+    pub iec61850: Option<super::Iec61850DeviceConfig>,
 }
 
 /// A device's communication-failure alarm (`[device.comm_alarm]`): active

@@ -19,8 +19,10 @@ mod alarms;
 mod devices;
 mod dnp3;
 mod iec104;
+mod iec61850;
 mod microgrid;
 mod mqtt;
+mod network;
 mod notify;
 mod opcua;
 mod panels;
@@ -34,8 +36,10 @@ pub use alarms::*;
 pub use devices::*;
 pub use dnp3::*;
 pub use iec104::*;
+pub use iec61850::*;
 pub use microgrid::*;
 pub use mqtt::*;
+pub use network::*;
 pub use notify::*;
 pub use opcua::*;
 pub use panels::*;
@@ -72,6 +76,8 @@ pub struct MainFile {
     /// `[reports]`: the report schedule.
     #[serde(default)]
     pub reports: ReportsConfig,
+    /// `[network]`: the switching network, if configured.
+    pub network: Option<NetworkConfig>,
 }
 
 /// A tag file: devices and the tags read from them.

@@ -114,6 +114,9 @@ pub struct TagConfig {
     /// The DNP3 point (DNP3 devices).
     #[serde(default)]
     pub dnp3: Option<Dnp3TagConfig>,
+    /// The IEC 61850 data attribute (IEC 61850 devices).
+    #[serde(default)]
+    pub iec61850: Option<Iec61850TagConfig>,
     /// Bit within a register (0 = least significant), for bool tags on registers.
     pub bit: Option<Spanned<u8>>,
     /// Wire type; `bool` by default for coils and discrete inputs, `u16` for registers.

@@ -24,7 +24,7 @@ pub(super) fn check_device(cx: &mut Ctx<'_>, f: usize, d: &DeviceConfig) {
         }
     }
     match d.protocol {
-        Protocol::Tcp | Protocol::Iec104 => {
+        Protocol::Tcp | Protocol::Iec104 | Protocol::Iec61850 => {
             check_tcp_address(cx, f, d);
             if d.serial.is_some() {
                 cx.err(
@@ -78,6 +78,16 @@ pub(super) fn check_device(cx: &mut Ctx<'_>, f: usize, d: &DeviceConfig) {
             f,
             link.common_address.span(),
             format!("device '{name}': [device.iec104] is only for protocol = \"iec104\""),
+        ),
+        (_, None) => {}
+    }
+    match (d.protocol, &d.iec61850) {
+        (Protocol::Iec61850, Some(s)) => super::iec61850::check_iec61850_device(cx, f, name, s),
+        (Protocol::Iec61850, None) => {}
+        (_, Some(s)) => cx.err(
+            f,
+            s.response_timeout_ms.span(),
+            format!("device '{name}': [device.iec61850] is only for protocol = \"iec61850\""),
         ),
         (_, None) => {}
     }

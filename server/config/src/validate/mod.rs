@@ -8,7 +8,7 @@
 //! device clocks `clocks.rs`, panels `panels.rs`, the microgrid
 //! `microgrid.rs`, the redundant pair and the site `redundancy.rs`, the MQTT northbound `mqtt.rs` and
 //! `mqtt_host.rs`, the OPC UA server `opcua.rs`, alarm notification
-//! routes `notify.rs`.
+//! routes `notify.rs`, the switching network `network.rs`.
 
 use std::collections::HashMap;
 use std::net::SocketAddr;
@@ -23,9 +23,11 @@ use crate::model::*;
 mod alarms;
 mod clocks;
 mod devices;
+pub mod iec61850;
 mod microgrid;
 mod mqtt;
 mod mqtt_host;
+mod network;
 mod notify;
 mod opcua;
 mod overlaps;
@@ -122,6 +124,7 @@ pub(crate) fn check(
     check_overlaps(&mut cx, tags);
     check_ioa_reuse(&mut cx, tags);
     check_dnp3_index_reuse(&mut cx, tags);
+    iec61850::check_against_scl(&mut cx, devices, tags);
     check_time_tags(&mut cx, devices, tags, &device_by_name, &tag_by_name);
 
     let lookup = |name: &str| tag_by_name.get(name).map(|(_, t)| *t);
@@ -146,6 +149,9 @@ pub(crate) fn check(
     }
     if let Some(server) = &main.iec104_server {
         telecontrol::check_iec104_server(&mut cx, server, &lookup);
+    }
+    if let Some(net) = &main.network {
+        network::check_network(&mut cx, net, main, &lookup);
     }
     alarms::check_suppression(&mut cx, &main.suppression, tags, &lookup, &|d| {
         device_by_name.contains_key(d)

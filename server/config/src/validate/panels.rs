@@ -75,6 +75,10 @@ pub(super) fn check_dwell_vs_elcb_latency<'t, 'd>(
     // change when it happens.
     let (scan_ms, timeout_ms, read) = match dev.protocol {
         Protocol::Iec104 => return,
+        // Reported by the IED when its report control blocks are enabled.
+        Protocol::Iec61850 if dev.iec61850.as_ref().is_some_and(|s| !s.reports.is_empty()) => {
+            return
+        }
         Protocol::Dnp3 => {
             let d = dev.dnp3.clone().unwrap_or_default();
             if d.unsolicited {
@@ -90,7 +94,7 @@ pub(super) fn check_dwell_vs_elcb_latency<'t, 'd>(
                 "polled for events",
             )
         }
-        Protocol::Tcp | Protocol::Rtu => (
+        Protocol::Tcp | Protocol::Rtu | Protocol::Iec61850 => (
             tag.scan_ms
                 .as_ref()
                 .map_or(*dev.scan_ms.get_ref(), |s| *s.get_ref()),

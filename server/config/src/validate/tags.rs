@@ -33,8 +33,22 @@ pub(super) fn check_tag(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, device: Optio
         Some(d) => Some(d.protocol),
         None if t.iec104.is_some() => Some(Protocol::Iec104),
         None if t.dnp3.is_some() => Some(Protocol::Dnp3),
+        None if t.iec61850.is_some() => Some(Protocol::Iec61850),
         None => None,
     };
+    if protocol != Some(Protocol::Iec61850) {
+        if let Some(p) = &t.iec61850 {
+            cx.err(
+                f,
+                p.reference.span(),
+                format!(
+                    "tag '{}': iec61850 is for tags of protocol = \"iec61850\" devices, and device '{}' is not one",
+                    t.name.get_ref(),
+                    t.device.get_ref()
+                ),
+            );
+        }
+    }
     if protocol != Some(Protocol::Dnp3) {
         if let Some(p) = &t.dnp3 {
             cx.err(
@@ -52,6 +66,8 @@ pub(super) fn check_tag(cx: &mut Ctx<'_>, f: usize, t: &TagConfig, device: Optio
         check_iec104_point(cx, f, t, device);
     } else if protocol == Some(Protocol::Dnp3) {
         check_dnp3_point(cx, f, t, device);
+    } else if protocol == Some(Protocol::Iec61850) {
+        super::iec61850::check_iec61850_point(cx, f, t, device);
     } else {
         check_modbus_register(cx, f, t, device);
     }

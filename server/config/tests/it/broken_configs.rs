@@ -75,7 +75,7 @@ fn unknown_key_in_main_file() {
     assert_problems(
         main,
         DEVICE,
-        &["DIR/gridscada.toml:2:1: error: unknown key 'http' in the main file; expected one of tag_files, server, storage, panel, microgrid, mqtt, opcua, iec104_server, redundancy, notify, suppression, reports"],
+        &["DIR/gridscada.toml:2:1: error: unknown key 'http' in the main file; expected one of tag_files, server, storage, panel, microgrid, mqtt, opcua, iec104_server, redundancy, notify, suppression, reports, network"],
     );
 }
 

@@ -6,6 +6,7 @@
 mod broken_configs;
 mod lookup;
 mod mqtt_host;
+mod network;
 mod notify;
 mod redundancy_config;
 mod reports;

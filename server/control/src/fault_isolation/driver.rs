@@ -21,8 +21,8 @@ use serde::Serialize;
 use tokio::sync::{mpsc, oneshot, watch};
 
 use super::machine::{
-    Breaker, CommandError, Input, Metrics, Mode, OperatorCommand, Output, Reading, Retained,
-    Sequence, Settings, Snapshot, Takeover, Timer,
+    BlockedOperation, Breaker, CommandError, Input, Metrics, Mode, OperatorCommand, Output,
+    Reading, Retained, Sequence, Settings, Snapshot, Takeover, Timer,
 };
 
 /// An operator command for one panel, with the user for the audit trail.
@@ -360,6 +360,7 @@ impl Driver {
                 .outputs
                 .iter()
                 .all(|id| self.db.get(*id).is_some_and(|s| s.quality.is_good())),
+            blocked: self.blocked(),
         }
     }
 
@@ -524,17 +525,59 @@ impl Driver {
 
     /// Writes one command. Errors carry the reason and whether it was a
     /// communication failure.
-    async fn write(&self, breaker: Breaker, value: bool) -> Result<(), (String, bool)> {
-        let tag: &str = match breaker {
-            Breaker::Elcb => &self.io.elcb_reset,
-            Breaker::Mccb => &self.io.mccb_cmd,
-            Breaker::Zone(n) => match usize::from(n)
+    /// The command output of `breaker` (the ELCB's: its reset).
+    fn command_tag(&self, breaker: Breaker) -> Option<&str> {
+        match breaker {
+            Breaker::Elcb => Some(&self.io.elcb_reset),
+            Breaker::Mccb => Some(&self.io.mccb_cmd),
+            Breaker::Zone(n) => usize::from(n)
                 .checked_sub(1)
                 .and_then(|i| self.io.zone_cmd.get(i))
-            {
-                Some(t) => t,
-                None => return Err((format!("panel has no zone {n}"), false)),
-            },
+                .map(String::as_str),
+        }
+    }
+
+    /// The operations the stack's writer would refuse now (a safety tag, a
+    /// switching interlock), so the sequence does not command them.
+    fn blocked(&self) -> Vec<BlockedOperation> {
+        let zones = self.io.zone_cmd.len() as u8;
+        let breakers = [Breaker::Elcb, Breaker::Mccb]
+            .into_iter()
+            .chain((1..=zones).map(Breaker::Zone));
+        let mut out = Vec::new();
+        for b in breakers {
+            let Some(tag) = self.command_tag(b) else {
+                continue;
+            };
+            // The ELCB is only ever reset (closed) by its output.
+            let ops: &[bool] = if b == Breaker::Elcb {
+                &[true]
+            } else {
+                &[true, false]
+            };
+            for &close in ops {
+                if let Err(WriteError::Blocked(why)) =
+                    self.writer.precheck(tag, &Value::Bool(close))
+                {
+                    out.push(BlockedOperation {
+                        breaker: b,
+                        close,
+                        // A safety tag's text says it is one.
+                        reason: if why.rule == "safety_tag" {
+                            why.reason
+                        } else {
+                            format!("interlock {}: {}", why.rule, why.reason)
+                        },
+                    });
+                }
+            }
+        }
+        out
+    }
+
+    async fn write(&self, breaker: Breaker, value: bool) -> Result<(), (String, bool)> {
+        let Some(tag) = self.command_tag(breaker) else {
+            return Err((format!("panel has no breaker {breaker}"), false));
         };
         if value && breaker != Breaker::Elcb {
             let elcb = self.reading(self.ids.elcb_closed);

@@ -32,6 +32,10 @@ pub(super) struct Panel {
     pub(super) trip_armed: bool,
     /// The loads energised when the ELCB last tripped.
     pub(super) energised_at_trip: Vec<u8>,
+    /// Operations the server refuses (safety tags): the snapshot carries
+    /// them, and a command to one of them is refused like the guard does.
+    pub(super) blocked: Vec<BlockedOperation>,
+    pub(super) refused_commands: u32,
 }
 
 impl Panel {
@@ -53,6 +57,8 @@ impl Panel {
             late_trip: false,
             trip_armed: false,
             energised_at_trip: Vec::new(),
+            blocked: Vec::new(),
+            refused_commands: 0,
         }
     }
 
@@ -100,6 +106,10 @@ impl Panel {
     }
 
     pub(super) fn apply(&mut self, b: Breaker, v: bool) {
+        if self.blocked.iter().any(|x| x.breaker == b && x.close == v) {
+            self.refused_commands += 1;
+            return;
+        }
         if self.stuck.contains(&b) {
             return;
         }
@@ -129,6 +139,7 @@ impl Panel {
 
     fn snapshot(&self) -> Snapshot {
         let mut s = Snapshot::good(self.elcb, self.mccb, &self.zones);
+        s.blocked.clone_from(&self.blocked);
         if !self.comm_ok {
             s.elcb.good = false;
         }
@@ -2024,4 +2035,92 @@ fn raised_alarms(out: &[Output]) -> Vec<String> {
             _ => None,
         })
         .collect()
+}
+
+fn tag(breaker: Breaker, close: bool) -> BlockedOperation {
+    BlockedOperation {
+        breaker,
+        close,
+        reason: "safety tag DO NOT CLOSE placed by alice for WO-7".into(),
+    }
+}
+
+/// A zone tagged "do not close" is never closed by OLUC or OLDC: the
+/// sequence passes over it, says why, and restores the rest around it.
+#[test]
+fn a_zone_tagged_do_not_close_is_left_open_and_the_rest_restored() {
+    for (tagged, faulty) in [(2u8, None), (2, Some(3u8)), (4, Some(1)), (3, Some(3))] {
+        let mut h = Harness::new(settings(4));
+        h.panel.blocked.push(tag(Breaker::Zone(tagged), true));
+        h.fault(&faulty.map_or(vec![2], |f| vec![f]));
+        if faulty.is_none() {
+            h.clear_faults(); // a transient fault on zone 2
+        }
+        h.run();
+        let ctx = format!("tagged {tagged}, faulty {faulty:?}");
+        assert_eq!(
+            h.panel.refused_commands, 0,
+            "{ctx}: the sequence commanded a refused close"
+        );
+        assert!(
+            !h.panel.zones[usize::from(tagged) - 1],
+            "{ctx}: the tagged zone was closed"
+        );
+        for z in 1..=4u8 {
+            if z != tagged && Some(z) != faulty {
+                assert!(
+                    h.panel.zones[usize::from(z) - 1],
+                    "{ctx}: healthy zone {z} not restored"
+                );
+            }
+        }
+        assert!(h.panel.elcb && h.panel.mccb, "{ctx}");
+        assert_ne!(h.seq.step(), Step::Lockout, "{ctx}");
+        let said = h.events.iter().any(|(k, m)| {
+            *k == "load_blocked"
+                && m.contains(&format!("zone {tagged}"))
+                && m.contains("DO NOT CLOSE")
+        });
+        assert!(said || Some(tagged) == faulty, "{ctx}: {:?}", h.events);
+    }
+}
+
+/// A zone tagged "do not operate" is not opened after a trip either (the
+/// server would refuse it); a tagged MCCB ends the sequence with the loads
+/// off, saying why, without a lockout; a tagged ELCB locks out.
+#[test]
+fn tags_on_the_mccb_and_the_elcb_end_the_sequence_saying_why() {
+    let mut h = Harness::new(settings(4));
+    h.panel.blocked.push(tag(Breaker::Zone(4), false));
+    h.panel.blocked.push(tag(Breaker::Zone(4), true));
+    h.fault(&[1]);
+    h.run();
+    assert_eq!(h.panel.refused_commands, 0);
+    assert!(h.panel.zones[3], "zone 4 (do not operate) was opened");
+    assert!(h.has_event("breaker_blocked"), "{:?}", h.events);
+    assert!(h.panel.healthy_on(), "zone 1 isolated, 2-4 on");
+
+    let mut h = Harness::new(settings(4));
+    h.panel.blocked.push(tag(Breaker::Mccb, true));
+    h.fault(&[2]);
+    h.run();
+    assert_eq!(h.panel.refused_commands, 0);
+    assert!(!h.panel.mccb);
+    assert_ne!(h.seq.step(), Step::Lockout);
+    assert!(h
+        .events
+        .iter()
+        .any(|(k, m)| *k == "load_blocked" && m.contains("main MCCB")));
+
+    let mut h = Harness::new(settings(4));
+    h.panel.blocked.push(tag(Breaker::Elcb, true));
+    h.fault(&[2]);
+    h.run();
+    assert_eq!(h.panel.refused_commands, 0);
+    assert_eq!(h.seq.step(), Step::Lockout);
+    assert!(
+        h.alarms.iter().any(|(k, a)| k.contains("lockout") && *a),
+        "{:?}",
+        h.alarms
+    );
 }

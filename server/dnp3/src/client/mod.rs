@@ -425,12 +425,10 @@ impl TagWriter for Dnp3Writer {
     fn write<'a>(&'a self, name: &'a str, value: Value) -> WriteFuture<'a> {
         Box::pin(async move {
             let shared = &self.shared;
-            let target = shared.targets.get(name).ok_or_else(|| {
-                match shared.db.id(name).and_then(|id| shared.db.meta(id)) {
-                    Some(_) => WriteError::ReadOnly(name.to_string()),
-                    None => WriteError::UnknownTag(name.to_string()),
-                }
-            })?;
+            let target = shared
+                .targets
+                .get(name)
+                .ok_or_else(|| gridscada_field::no_write_target(&shared.db, name))?;
             shared.leadership.permit().map_err(WriteError::NotActive)?;
             check_limits(name, &value, target.limits)?;
             // Refused here, before anything goes out, if it cannot be encoded.

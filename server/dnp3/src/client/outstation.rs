@@ -488,24 +488,18 @@ impl Outstation {
 
     /// The status tags from the counters.
     fn publish_status(&mut self) {
-        let ts = self.clock.now();
         let c = &self.counters;
-        let n = |a: &std::sync::atomic::AtomicU64| {
-            gridscada_tagdb::Value::from_u64(a.load(Ordering::Relaxed))
-        };
-        let st = &self.status;
-        self.db.apply([
-            (
-                st.connected,
-                Sample::good(c.connected.load(Ordering::Relaxed), ts),
-            ),
-            (
-                st.response_ms,
-                Sample::good(c.response_us.load(Ordering::Relaxed) as f64 / 1000.0, ts),
-            ),
-            (st.requests, Sample::good(n(&c.requests), ts)),
-            (st.errors, Sample::good(n(&c.errors), ts)),
-            (st.timeouts, Sample::good(n(&c.timeouts), ts)),
-        ]);
+        let get = |a: &std::sync::atomic::AtomicU64| a.load(Ordering::Relaxed);
+        self.status.publish(
+            &self.db,
+            self.clock.now(),
+            gridscada_field::StatusFigures {
+                connected: c.connected.load(Ordering::Relaxed),
+                response_ms: get(&c.response_us) as f64 / 1000.0,
+                requests: get(&c.requests),
+                errors: get(&c.errors),
+                timeouts: get(&c.timeouts),
+            },
+        );
     }
 }

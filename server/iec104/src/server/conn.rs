@@ -10,7 +10,7 @@ use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::Instant;
 
-use gridscada_store::command::{audited_write, CommandError, Commander};
+use gridscada_store::command::{audit_refused, audited_write, CommandError, Commander};
 use gridscada_tagdb::{Sample, Update};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
@@ -435,6 +435,23 @@ impl Conn {
             shared.limits.get(&e.tag).copied().unwrap_or((None, None)),
         ) {
             return refuse(self, err.to_string());
+        }
+        // What the switching guard would say of it now (a safety tag, an
+        // operator's selection, an interlock): the centre gets a negative
+        // ActCon at once, to the select as to the execute, and the refusal
+        // is on record.
+        if let Err(err) = shared.ctx.writer.precheck(&e.tag, &value) {
+            if err.is_refusal() {
+                let why = err.to_string();
+                let (on_record, tag, label, reason) =
+                    (Arc::clone(&shared), e.tag.clone(), who.clone(), why.clone());
+                tokio::spawn(async move {
+                    let commander = Commander { user: None, label };
+                    let ctx = &on_record.ctx;
+                    audit_refused(&*ctx.audit, ctx.clock.now(), &commander, &tag, &reason).await;
+                });
+                return refuse(self, why);
+            }
         }
         let now = Instant::now();
         if select {

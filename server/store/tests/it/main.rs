@@ -11,6 +11,7 @@ mod durability;
 mod exports;
 mod lease;
 mod notifications;
+mod programmes;
 mod rollups;
 mod sessions;
 mod store;

@@ -43,12 +43,12 @@ pub struct DeviceView {
     /// until it answers again.
     pub backing_off: bool,
     pub last_error: String,
-    /// A telecontrol station's link (IEC 104); null for Modbus devices.
+    /// A telecontrol station's link (IEC 104, DNP3, IEC 61850); null for Modbus devices.
     #[schema(required = true)]
     pub telecontrol: Option<TelecontrolView>,
 }
 
-/// The link of a telecontrol station (IEC 104).
+/// The link of a telecontrol station (IEC 104, DNP3, IEC 61850).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct TelecontrolView {

@@ -6,8 +6,10 @@ pub mod dispatch;
 pub mod events;
 pub mod live;
 pub mod misc;
+pub mod network;
 pub mod pair;
 pub mod panels;
+pub mod programmes;
 pub mod reports;
 pub mod screens;
 pub mod session;
@@ -51,6 +53,8 @@ pub struct Components {
     pub dispatch: Option<tokio::sync::watch::Receiver<gridscada_control::dispatch::DispatchStatus>>,
     /// This server's part in a redundant pair, if it is one of a pair.
     pub pair: Option<pair::Pair>,
+    /// The switching network and its live topology, if configured.
+    pub network: Option<network::NetworkView>,
 }
 
 fn audit_event(

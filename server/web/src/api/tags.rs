@@ -419,21 +419,25 @@ pub async fn write(
     body: Result<Json<WriteBody>, axum::extract::rejection::JsonRejection>,
 ) -> ApiResult<Json<TagView>> {
     let Json(body) = body.map_err(|e| ApiError::bad_request(e.body_text()))?;
-    let refused = |e: WriteRefused| match e {
+    write_tag(&s, &who, &name, body.value, "")
+        .await
+        .map_err(write_refused)?;
+    s.db.id(&name)
+        .and_then(|id| s.tag_view(id, s.db.meta(id)?))
+        .map(Json)
+        .ok_or_else(|| ApiError::not_found(format!("no tag named '{name}'")))
+}
+
+/// A refused or failed write as the HTTP API answers it.
+pub fn write_refused(e: WriteRefused) -> ApiError {
+    match e {
         WriteRefused::UnknownTag(why) => ApiError::not_found(why),
         WriteRefused::Forbidden(why) => ApiError::forbidden(why),
         WriteRefused::BadValue(why) => ApiError::bad_request(why),
         WriteRefused::NoFieldIo => ApiError::unavailable("field I/O is not running"),
         WriteRefused::Unaudited(why) => refused_unaudited(why),
         WriteRefused::Failed(e) => write_error(e),
-    };
-    write_tag(&s, &who, &name, body.value, "")
-        .await
-        .map_err(refused)?;
-    s.db.id(&name)
-        .and_then(|id| s.tag_view(id, s.db.meta(id)?))
-        .map(Json)
-        .ok_or_else(|| ApiError::not_found(format!("no tag named '{name}'")))
+    }
 }
 
 pub fn write_error(e: WriteError) -> ApiError {
@@ -445,8 +449,11 @@ pub fn write_error(e: WriteError) -> ApiError {
         WriteError::Timeout(_) => StatusCode::GATEWAY_TIMEOUT,
         WriteError::Closed => StatusCode::SERVICE_UNAVAILABLE,
         WriteError::NotActive(_) => StatusCode::SERVICE_UNAVAILABLE,
+        WriteError::Blocked(_) => StatusCode::CONFLICT,
     };
     let code = match &e {
+        // The rule's own id: safety_tag, closing_onto_earthed, ...
+        WriteError::Blocked(b) => b.rule,
         WriteError::OutOfLimits { .. } => "out_of_limits",
         WriteError::BadValue { .. } => "bad_value",
         WriteError::NotActive(_) => "standby",

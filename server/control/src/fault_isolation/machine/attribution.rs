@@ -33,6 +33,14 @@ impl Sequence {
             if closed(c) {
                 continue;
             }
+            // A zone the server will not close is passed over (the walk
+            // says so when it gets there); the MCCB ends the batch.
+            if self.blocked_reason(Breaker::load(c), true).is_some() {
+                if c == 0 {
+                    return loads;
+                }
+                continue;
+            }
             if !self.is_proven(c) {
                 return loads;
             }
@@ -40,7 +48,10 @@ impl Sequence {
         }
         if let Some(stop) = stop.filter(|s| *s > 0) {
             for d in (stop + 1..=n).rev() {
-                if self.faulty.contains(&d) || closed(d) {
+                if self.faulty.contains(&d)
+                    || closed(d)
+                    || self.blocked_reason(Breaker::Zone(d), true).is_some()
+                {
                     continue;
                 }
                 if !self.is_proven(d) {

@@ -9,6 +9,7 @@ use super::{Mode, Sequence};
 
 impl Sequence {
     pub(super) fn on_snapshot(&mut self, s: &Snapshot, now_s: f64, out: &mut Vec<Output>) {
+        self.blocked.clone_from(&s.blocked);
         if !s.all_good(self.settings.zones) {
             self.comm_good = false;
             if self.step.is_running() {

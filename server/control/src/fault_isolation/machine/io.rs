@@ -137,6 +137,18 @@ pub struct Snapshot {
     /// Whether the command outputs (reset and command coils) read back with
     /// Good quality, i.e. the output modules are reachable.
     pub outputs_good: bool,
+    /// Operations the server would refuse now (a safety tag, a switching
+    /// interlock), with the reason: the sequence does not command them.
+    pub blocked: Vec<BlockedOperation>,
+}
+
+/// An operation of a breaker the server refuses.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BlockedOperation {
+    pub breaker: Breaker,
+    /// Closing (for the ELCB: its reset) or opening.
+    pub close: bool,
+    pub reason: String,
 }
 
 impl Snapshot {
@@ -147,6 +159,7 @@ impl Snapshot {
             mccb: Reading::good(mccb),
             zones: zones.iter().map(|z| Reading::good(*z)).collect(),
             outputs_good: true,
+            blocked: Vec::new(),
         }
     }
 

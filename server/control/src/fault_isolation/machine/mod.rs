@@ -256,8 +256,8 @@ pub use gridscada_config::PanelMode as Mode;
 
 pub use alarms::{priority, ELCB_TRIP_ALARM};
 pub use io::{
-    Breaker, CommandError, Input, OperatorCommand, Output, PanelState, Reading, Settings, Snapshot,
-    Timer,
+    BlockedOperation, Breaker, CommandError, Input, OperatorCommand, Output, PanelState, Reading,
+    Settings, Snapshot, Timer,
 };
 pub use retained::{Progress, Retained, Takeover};
 pub use step::{Metrics, Outcome, Step};
@@ -300,6 +300,11 @@ pub struct Sequence {
     /// Proven loads commanded closed together, zones first with the MCCB
     /// open, then the MCCB (see "Proven loads"); empty when closing one load.
     closing_batch: Vec<u8>,
+    /// Operations the server refuses now (safety tags, interlocks), from
+    /// the latest snapshot.
+    blocked: Vec<io::BlockedOperation>,
+    /// Loads this sequence left open because closing them is refused.
+    left_open: BTreeSet<u8>,
     /// The reclose delay of the last trip has run out (the ELCB is reset as
     /// soon as every open is confirmed).
     reclose_due: bool,
@@ -374,6 +379,8 @@ impl Sequence {
             closing_proven: false,
             settling: false,
             closing_batch: Vec::new(),
+            blocked: Vec::new(),
+            left_open: BTreeSet::new(),
             reclose_due: false,
             dwell_due: false,
             faulty: BTreeSet::new(),

@@ -41,6 +41,7 @@ impl Sequence {
         self.closing_proven = false;
         self.settling = false;
         self.closing_batch.clear();
+        self.left_open.clear();
         self.dwell_due = false;
         self.reclose_due = false;
         let Some(known) = self.known.clone() else {
@@ -108,6 +109,13 @@ impl Sequence {
         // The reset output must not stay set either: "while true" recloses.
         self.emit(Breaker::Elcb, false, out);
         for b in known.loads().collect::<Vec<_>>() {
+            if let Some(why) = self.blocked_reason(b, false) {
+                // The server refuses to open it: leave it as it is.
+                if known.closed(b) {
+                    event(out, "breaker_blocked", format!("{b} left closed: {why}"));
+                }
+                continue;
+            }
             // Written even when already open, so no command output stays set.
             self.emit(b, false, out);
             self.pending.retain(|(p, _)| *p != b);
@@ -214,6 +222,10 @@ impl Sequence {
 
     pub(super) fn enter_elcb_reset(&mut self, out: &mut Vec<Output>) {
         self.reclose_due = false;
+        if let Some(why) = self.blocked_reason(Breaker::Elcb, true) {
+            self.lock_out(&format!("the ELCB cannot be reset: {why}"), out);
+            return;
+        }
         self.set_step(Step::ElcbReset, "resetting the ELCB", out);
         self.pulse_reset(out);
         self.start_confirm_if_pending(out);
@@ -260,6 +272,27 @@ impl Sequence {
                 self.count_c = c + 1; // already on, and the ELCB holds: healthy
                 continue;
             }
+            if let Some(why) = self.blocked_reason(b, true) {
+                self.left_open.insert(c);
+                if c == 0 {
+                    event(
+                        out,
+                        "load_blocked",
+                        format!("OLUC cannot close the main MCCB: {why}; no zone can be restored"),
+                    );
+                    if !self.settle_if_owed(out) {
+                        self.finish(now_s, out);
+                    }
+                    return;
+                }
+                event(
+                    out,
+                    "load_blocked",
+                    format!("OLUC leaves zone {c} open: {why}"),
+                );
+                self.count_c = c + 1;
+                continue;
+            }
             let proven = self.is_proven(c);
             if c == 0 && proven {
                 // The MCCB is open: the proven zones can be closed dead.
@@ -295,6 +328,17 @@ impl Sequence {
             }
             let b = Breaker::Zone(d);
             if self.faulty.contains(&d) || self.known.as_ref().is_some_and(|k| k.closed(b)) {
+                self.oldc = d - 1;
+                continue;
+            }
+            if let Some(why) = self.blocked_reason(b, true) {
+                if self.left_open.insert(d) {
+                    event(
+                        out,
+                        "load_blocked",
+                        format!("OLDC leaves zone {d} open: {why}"),
+                    );
+                }
                 self.oldc = d - 1;
                 continue;
             }
@@ -355,6 +399,14 @@ impl Sequence {
         self.start(Timer::Dwell, self.settings.dwell_s, out);
     }
 
+    /// Why the server would refuse to close (or open) `b` now, if it would.
+    pub(super) fn blocked_reason(&self, b: Breaker, close: bool) -> Option<String> {
+        self.blocked
+            .iter()
+            .find(|x| x.breaker == b && x.close == close)
+            .map(|x| x.reason.clone())
+    }
+
     pub(super) fn interlock_ok(&mut self, b: Breaker, out: &mut Vec<Output>) -> bool {
         if self.known.as_ref().is_some_and(|k| k.elcb) {
             return true;
@@ -381,9 +433,25 @@ impl Sequence {
             Some(s) => format!(" in {s:.1} s"),
             None => String::new(),
         };
-        if faulty.is_empty() {
+        let left: Vec<String> = self
+            .left_open
+            .iter()
+            .map(|l| match l {
+                0 => "the main MCCB".to_string(),
+                z => format!("zone {z}"),
+            })
+            .collect();
+        let took = if left.is_empty() {
+            took
+        } else {
+            format!("{took}; {} left open (closing refused)", left.join(", "))
+        };
+        if faulty.is_empty() && self.left_open.is_empty() {
             self.metrics.outcome = Outcome::Restored;
             self.set_rest_step(&format!("all loads restored{took}"), out);
+        } else if faulty.is_empty() {
+            self.metrics.outcome = Outcome::Restored;
+            self.set_rest_step(&format!("loads restored{took}"), out);
         } else {
             self.metrics.outcome = Outcome::Isolated;
             let list: Vec<String> = faulty.iter().map(|z| z.to_string()).collect();

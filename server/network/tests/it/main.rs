@@ -1,0 +1,5 @@
+mod cases;
+mod guard;
+mod oracle;
+mod programmes;
+mod rules;
