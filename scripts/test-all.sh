@@ -59,10 +59,12 @@ root_cmd=()
 
 # --- 1. Debian packages the tests use ------------------------------------
 # gcc and libc6-dev: the linker and C compiler that rustc and build scripts
-# call; ca-certificates: cargo and pip over HTTPS.
+# call; ca-certificates: cargo and pip over HTTPS; chromium: the browser
+# tests, and reports.sh's PDF, which runs before them (a clean machine has no
+# browser until this installs it).
 debian_packages=(postgresql socat mbpoll libmodbus-dev pkg-config curl python3-venv nginx
     gcc libc6-dev ca-certificates mosquitto
-    poppler-utils tshark)
+    poppler-utils tshark chromium)
 # Debian's nodejs comes without npm (the browser tests install playwright-core with it).
 command -v npm >/dev/null 2>&1 || debian_packages+=(npm)
 missing=()
