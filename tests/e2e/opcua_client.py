@@ -7,7 +7,8 @@ PHASE "plant" (the embedded demo plant): browse the address space (folders
 follow the dotted names, one variable per tag), read every tag and compare
 value and status with /api/tags, subscribe and receive changes within a
 scan, a user whose role may not write a tag is refused (and audited), a
-wrong password is refused (and audited), anonymous sessions are refused,
+switching device with a "Do not close" safety tag refuses a close (in the
+tag's words, audited), a wrong password is refused (and audited), anonymous sessions are refused,
 Basic256Sha256 Sign and SignAndEncrypt work, and /metrics counts it all.
 
 PHASE "write" (tests/plants/three-panels, no dispatch loop writing
@@ -378,6 +379,8 @@ async def phase_plant(base, url, creds, tmp):
         ev = [e for e in api.events(sp) if e["kind"] == "write_refused" and "OPC UA" in e["message"]]
         check("the refused write is in the event log", ev and ev[0]["user"] == operator[0], ev[:1])
 
+    await safety_tag_refuses_write(api, url, operator, tags)
+
     # A wrong password, and no anonymous sessions.
     try:
         async with client(url, admin[0], admin[1] + "x"):
@@ -540,6 +543,40 @@ async def phase_write(base, url, creds, tmp):
             check(f"writing read-only {ro} is refused", False, "Good")
         except ua.UaStatusCodeError as e:
             check(f"writing read-only {ro} is refused (BadNotWritable)", e.code == ua.StatusCodes.BadNotWritable, str(e))
+
+
+async def safety_tag_refuses_write(api, url, operator, tags):
+    """A "Do not close" safety tag on a switching device refuses an OPC UA
+    write that would close it (BadRequestNotAllowed), in the tag's words in
+    the event log, like every other command path (docs/NETWORK.md)."""
+    st, _, model = api.call("GET", "/api/network")
+    if not check("the demo has a switching network (/api/network)", st == 200, st):
+        return
+    switch = next((w for w in model["switches"]
+                   if w.get("command_tag") and tags.get(w["command_tag"], {}).get("write_role") == "operator"), None)
+    if not check("a switching device an operator may command", switch is not None, model["switches"][:2]):
+        return
+    cmd = switch["command_tag"]
+    st, _, placed = api.call("POST", "/api/switching/tags", {
+        "device": switch["id"], "kind": "do_not_close",
+        "reason": "OPC UA test: out for work", "work_ref": "WO-UA"})
+    if not check(f"a do_not_close tag is placed on {switch['id']}", st in (200, 201), (st, placed)):
+        return
+    before = api.tags()[cmd]["value"]
+    async with client(url, *operator) as c:
+        ns = await c.get_namespace_index(NS_URI)
+        try:
+            await c.get_node(ua.NodeId(cmd, ns)).write_value(ua.DataValue(ua.Variant(True, ua.VariantType.Boolean)))
+            check(f"closing {switch['id']} through OPC UA is refused by its safety tag", False, "the write returned Good")
+        except ua.UaStatusCodeError as e:
+            check(f"closing {switch['id']} through OPC UA is refused by its safety tag (BadRequestNotAllowed)",
+                  e.code == ua.StatusCodes.BadRequestNotAllowed, str(e))
+    ev = [e for e in api.events(cmd) if e["kind"] == "write_refused" and "DO NOT CLOSE" in e["message"]]
+    check("the refusal is in the event log, naming the safety tag", bool(ev) and "OPC UA test: out for work" in ev[0]["message"],
+          api.events(cmd)[:2])
+    check(f"{cmd} unchanged", api.tags()[cmd]["value"] == before, api.tags()[cmd])
+    st, _, _ = api.call("DELETE", f"/api/switching/tags/{placed['id']}", {"reason": "OPC UA test done"})
+    check("the safety tag is removed", st == 200, st)
 
 
 def main():

@@ -12,7 +12,9 @@ payload declared through protobuf's descriptors (sparkplug_edge_sim.Payload). It
   and timestamp;
 - commands: a DCMD writes a simulated device's coil (confirmed by /api/tags
   and the event log); DCMDs to read-only, unknown, not-allowed tags,
-  malformed and oversized payloads change nothing and are counted;
+  malformed and oversized payloads change nothing and are counted; a DCMD
+  closing a zone MCB with a "Do not close" safety tag is refused with the
+  tag's words and nothing goes out;
 - outage: the broker is killed for OUTAGE seconds and restarted; the edge
   comes back with a new bdSeq, and every change of a tag that changes every
   scan is there as historical data, without a gap;
@@ -29,6 +31,7 @@ import socket
 import subprocess
 import threading
 import time
+import urllib.error
 import urllib.request
 
 import paho.mqtt.client as mqtt
@@ -201,6 +204,16 @@ class Api:
         req = urllib.request.Request(self.base + path, data=b"", method="POST", headers={"Origin": self.base})
         with self.opener.open(req, timeout=20) as r:
             return r.status
+
+    def send(self, method, path, body):
+        """A JSON request; (status, decoded answer), an HTTP error included."""
+        req = urllib.request.Request(self.base + path, data=json.dumps(body).encode(), method=method,
+                                     headers={"Origin": self.base, "Content-Type": "application/json"})
+        try:
+            with self.opener.open(req, timeout=20) as r:
+                return r.status, json.loads(r.read() or b"null")
+        except urllib.error.HTTPError as e:
+            return e.code, json.loads(e.read() or b"null")
 
     def tags(self):
         return {t["name"]: t for t in self.get("/api/tags")["tags"]}
@@ -448,6 +461,35 @@ def commands(args, host, api, tags):
           "30 more metrics of one DCMD" in text and text.count("may not write alias 9000000") == 20,
           text.count("may not write alias 9000000"))
     check("the edge is still up after bad input", wait_for(lambda: api.metrics().get("gridscada_mqtt_connected") == 1.0, 5), "")
+    safety_tag_refuses_dcmd(host, api, device, alias, target)
+
+
+def safety_tag_refuses_dcmd(host, api, device, alias, target):
+    """A "Do not close" safety tag on the zone's MCB refuses a DCMD that
+    would close it, like every other command path (docs/NETWORK.md)."""
+    try:
+        model = api.get("/api/network")
+    except urllib.error.HTTPError as e:
+        check("the demo has a switching network (/api/network)", False, e.code)
+        return
+    switch = next((w for w in model.get("switches", []) if w.get("command_tag") == target), None)
+    if not check(f"{target} commands a switching device of the network", switch is not None,
+                 [w.get("command_tag") for w in model.get("switches", [])][:8]):
+        return
+    st, placed = api.send("POST", "/api/switching/tags", {
+        "device": switch["id"], "kind": "do_not_close",
+        "reason": "Sparkplug test: zone out for work", "work_ref": "WO-SPB"})
+    if not check(f"a do_not_close tag is placed on {switch['id']}", st in (200, 201), (st, placed)):
+        return
+    before = api.tags()[target]["value"]
+    host.command("DCMD", device, dcmd_payload(alias=alias, value=True))
+    time.sleep(2)
+    text = json.dumps(api.get("/api/events?limit=100"))
+    check("a DCMD closing the tagged zone is refused, naming the safety tag, and nothing goes out",
+          "write_refused" in text and "DO NOT CLOSE" in text and "Sparkplug test: zone out for work" in text
+          and api.tags()[target]["value"] == before, text[:600])
+    st, _ = api.send("DELETE", f"/api/switching/tags/{placed['id']}", {"reason": "Sparkplug test done"})
+    check("the safety tag is removed", st == 200, st)
 
 
 def messages_since(host, n, kind, device=None):

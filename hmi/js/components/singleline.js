@@ -14,6 +14,8 @@ const MIN_W = 640;
 const H = 400;
 /** Room per zone, so labels stay legible from 1 to 32 zones (wide panels scroll). */
 const ZONE_W = 100;
+/** A safety tag's short mark beside its device (as on the network screen). */
+export const TAG_SHORT = { 'DO NOT OPERATE': 'DNO', 'DO NOT CLOSE': 'DNC', INFORMATION: 'i' };
 
 /** Breaker state from its feedback and (if any) its command tag. */
 export function breakerState(closed, cmd, connected, isElcb = false) {
@@ -39,7 +41,7 @@ export function singleLine(binder, { prefix, title, zones = 4, devices = [], onB
   svg.append(s('title', {}, `Single-line diagram of ${title}`));
   // What the panel's sequence says (set through box.panelStatus): faulty
   // zones it isolated, and manual mode (automatic isolation off).
-  const marks = { faulty: new Set(), manual: false };
+  const marks = { faulty: new Set(), manual: false, safety: {} };
   const redraws = [];
   const manualText = s('text', { x: 12, y: 76, class: 'sl-manual', visibility: 'hidden' });
   replaceText(manualText, [['MANUAL ', 0], ['automatic ', 15], ['isolation off', 14]], 12);
@@ -55,8 +57,10 @@ export function singleLine(binder, { prefix, title, zones = 4, devices = [], onB
     const g = s('g', { class: 'sl-breaker', dataset: { breaker: name } });
     const rect = s('rect', { x: x - 13, y: y - 13, width: 26, height: 26, rx: 3 });
     const stateText = s('text', { x: x + 20, y: y + 15, class: 'sl-state' }, '');
+    // A safety tag on the breaker (the network's): DNO / DNC below it, left of the wire, as on the network screen.
+    const tagText = s('text', { x: x - 6, y: y + 32, class: 'net-tag-mark sl-end' }, '');
     const tip = s('title', {}, '');
-    g.append(tip, rect, s('text', { x: x + 20, y: y - 1, class: 'sl-label' }, label), stateText);
+    g.append(tip, rect, s('text', { x: x + 20, y: y - 1, class: 'sl-label' }, label), stateText, tagText);
     if (onBreaker) {
       g.setAttribute('tabindex', '0');
       g.setAttribute('role', 'button');
@@ -66,13 +70,18 @@ export function singleLine(binder, { prefix, title, zones = 4, devices = [], onB
     }
     const draw = (_x, connected) => {
       const st = breakerState(binder.sample(closedTag), cmdTag ? binder.sample(cmdTag) : null, connected, isElcb);
-      g.setAttribute('class', `sl-breaker ${st.cls}${onBreaker ? ' sl-clickable' : ''}`);
+      const safety = marks.safety[name];
+      const tagged = safety && safety.kind !== 'information';
+      g.setAttribute('class', `sl-breaker ${st.cls}${onBreaker ? ' sl-clickable' : ''}${tagged ? ' sl-tagged' : ''}`);
+      g.dataset.tag = safety ? safety.label : '';
+      tagText.textContent = safety ? (TAG_SHORT[safety.label] || '') : '';
       stateText.textContent = st.label === 'UNKNOWN' ? '? UNKNOWN' : st.label;
-      tip.textContent = `${label}: ${st.label}${st.reason ? ` (${st.reason})` : ''}`;
+      tip.textContent = `${label}: ${st.label}${st.reason ? ` (${st.reason})` : ''}${safety ? `; ${(safety.tags || []).join('; ')}` : ''}`;
       g.setAttribute('aria-label', tip.textContent);
     };
     binder.on(closedTag, draw);
     if (cmdTag) binder.on(cmdTag, draw);
+    redraws.push(() => draw(null, live.connected));
     return g;
   };
 
@@ -176,15 +185,21 @@ export function singleLine(binder, { prefix, title, zones = 4, devices = [], onB
   box.setAttribute('role', 'group');
   box.setAttribute('aria-label', `${title}: diagram`);
   box.append(svg);
-  /** Marks the faulty zones the sequence isolated, and manual mode, from the panel's status. */
+  /**
+   * Marks the faulty zones the sequence isolated, manual mode, and the safety
+   * tags on the breakers (with a switching network), from the panel's status.
+   */
   box.panelStatus = (status) => {
     if (!status) return;
     const faulty = new Set((status.faulty_zones || []).map(Number));
     const manual = status.mode === 'manual';
-    const changed = manual !== marks.manual || faulty.size !== marks.faulty.size || [...faulty].some((z) => !marks.faulty.has(z));
+    const safety = status.safety_tags || {};
+    const changed = manual !== marks.manual || faulty.size !== marks.faulty.size || [...faulty].some((z) => !marks.faulty.has(z))
+      || JSON.stringify(safety) !== JSON.stringify(marks.safety);
     if (!changed) return;
     marks.faulty = faulty;
     marks.manual = manual;
+    marks.safety = safety;
     manualText.setAttribute('visibility', manual ? 'visible' : 'hidden');
     svg.classList.toggle('sl-is-manual', manual);
     for (const f of redraws) f();

@@ -8,6 +8,7 @@ import { fmtTime, fmtValue, qualityOf, roleAtLeast, showSample } from '../format
 import { Binder } from '../ui.js';
 import { TrendChart, PEN_COLORS } from '../components/chart.js';
 import { singleLine } from '../components/singleline.js';
+import { STATE_CLASSES, levelClass, levelsOf, stateClass } from '../components/netstate.js';
 import { devicesUnder, panelPrefix } from './common.js';
 import { confirmedWrite } from './tags.js';
 
@@ -37,6 +38,27 @@ function timeOf(binder, tag) {
   return t;
 }
 
+/**
+ * A line bound to a network section (its state tag, NET.Sec.<id>.State):
+ * coloured as the network screen colours the section, its state in words
+ * in the tooltip (colour is never the only signal).
+ */
+function sectionColours(box, line, e, live) {
+  const m = /\.Sec\.(.+)\.State$/.exec(e.section_tag);
+  const section = m ? m[1] : e.section_tag;
+  const net = live.network;
+  line.classList.add('net-wire', net ? levelClass(net.model, net.levels, section) : 'net-lvl-0', 'net-unknown');
+  box.dataset.section = section;
+  live.binder.on(e.section_tag, (smp, connected) => {
+    const q = qualityOf(smp, connected);
+    const state = q.usable && smp ? String(smp.value) : 'UNKNOWN';
+    line.classList.remove(...STATE_CLASSES);
+    line.classList.add(stateClass(state));
+    box.dataset.state = state;
+    box.title = `Section ${section}: ${state}${q.reason ? ` (${q.reason})` : ''}`;
+  });
+}
+
 /** An element's label: always a span (empty and hidden without text). */
 const label = (text, cls = 'el-label') => h('span', { class: cls, text: text || '', hidden: !text });
 
@@ -58,10 +80,12 @@ export function drawElement(e, i, live) {
       // Along the longer side of its box: a busbar or a wire, horizontal or vertical.
       const horizontal = e.w >= e.h;
       const svg = s('svg', { width: e.w, height: e.h, class: 'el-line-svg', 'aria-hidden': 'true' });
-      svg.append(s('line', horizontal
+      const line = s('line', horizontal
         ? { x1: 0, y1: e.h / 2, x2: e.w, y2: e.h / 2, class: e.busbar ? 'sl-bus' : 'sl-wire' }
-        : { x1: e.w / 2, y1: 0, x2: e.w / 2, y2: e.h, class: e.busbar ? 'sl-bus' : 'sl-wire' }));
+        : { x1: e.w / 2, y1: 0, x2: e.w / 2, y2: e.h, class: e.busbar ? 'sl-bus' : 'sl-wire' });
+      svg.append(line);
       box.append(svg);
+      if (e.section_tag) sectionColours(box, line, e, live);
       break;
     }
     case 'rect': {
@@ -214,11 +238,20 @@ export async function drawScreen(canvas, screen, session, { editing = false, cac
   const tags = await tagsOf(screen, cache);
   // A newer drawing started meanwhile: leave the canvas to it.
   if (!current()) return () => {};
+  // Lines bound to network sections take their voltage level's colour from the model.
+  let network = null;
+  if ((screen.elements || []).some((e) => e.type === 'line' && e.section_tag)) {
+    try {
+      const model = await get('/api/network');
+      network = { model, levels: levelsOf(model) };
+    } catch { /* no network, or not readable: the lines use the first level's colour */ }
+    if (!current()) return () => {};
+  }
   const binder = new Binder();
   const cleanups = [];
   canvas.style.width = `${screen.width}px`;
   canvas.style.height = `${screen.height}px`;
-  replace(canvas, (screen.elements || []).map((e, i) => drawElement(e, i, { binder, session, tags, editing, cleanups })));
+  replace(canvas, (screen.elements || []).map((e, i) => drawElement(e, i, { binder, session, tags, editing, cleanups, network })));
   return () => { binder.dispose(); for (const c of cleanups) c(); };
 }
 

@@ -352,7 +352,17 @@ export default {
         h('div', { class: 'filters' }, ['x', 'y', 'w', 'h'].map((k) => numberField(k, e[k], (v) => { e[k] = v; }, `prop-${k}`)))];
       const text = (k, lab) => textField(lab, e[k] ?? '', (v) => { e[k] = v; }, `prop-${k}`);
       if (e.type === 'text') rows.push(text('text', 'Text'), numberField('Size (px)', e.size ?? 16, (v) => { e.size = v; }, 'prop-size'));
-      if (e.type === 'line') rows.push(h('label', { class: 'field field-inline' }, checkbox(e.busbar, (v) => { e.busbar = v; }), 'Busbar (thick)'));
+      if (e.type === 'line') {
+        rows.push(h('label', { class: 'field field-inline' }, checkbox(e.busbar, (v) => { e.busbar = v; }), 'Busbar (thick)'));
+        // Coloured live by a network section's state, as on the network screen.
+        rows.push(h('div', { class: 'field' }, h('span', { class: 'field-label', text: 'Network section' }),
+          h('span', { class: 'prop-tag', id: 'prop-section', text: e.section_tag || '(none: drawn in the wire colour)' }),
+          h('button', { type: 'button', class: 'btn btn-small', id: 'prop-pick-section', text: 'Pick section…', onclick: async () => {
+            const t = await pickTag('Network section for the line (its state tag)', (x) => x.kind === 'str' && /\.Sec\.[^.]+\.State$/.test(x.name));
+            if (t) change(() => { e.section_tag = t.name; });
+          } }),
+          e.section_tag ? h('button', { type: 'button', class: 'btn btn-small', id: 'prop-clear-section', text: 'Clear', onclick: () => change(() => { delete e.section_tag; }) }) : null));
+      }
       if (['rect', 'breaker', 'value', 'bar', 'multistate', 'button', 'trend', 'link'].includes(e.type)) rows.push(text('label', 'Label'));
       if (NEEDS_TAG.has(e.type)) {
         const accept = e.type === 'breaker' ? (t) => t.kind === 'bool'

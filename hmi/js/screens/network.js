@@ -15,6 +15,8 @@ import { get, post, del, enc } from '../api.js';
 import { h, s, replace } from '../dom.js';
 import { fmtTime, qualityOf, roleAtLeast } from '../format.js';
 import { Binder, attempt, formDialog, toast } from '../ui.js';
+import { TAG_SHORT } from '../components/singleline.js';
+import { STATE_CLASSES, levelClass, levelsOf, stateClass } from '../components/netstate.js';
 
 const COL_W = 190;
 const ROW_H = 74;
@@ -26,7 +28,6 @@ const KIND_WORDS = {
   circuit_breaker: 'circuit breaker', load_break_switch: 'load-break switch',
   disconnector: 'disconnector', earth_switch: 'earth switch', fuse: 'fuse',
 };
-const TAG_SHORT = { 'DO NOT OPERATE': 'DNO', 'DO NOT CLOSE': 'DNC', INFORMATION: 'i' };
 
 /**
  * Places each section: column = hops from the nearest source section over
@@ -90,17 +91,6 @@ export function layout(model) {
   return { pos, cols, maxRows };
 }
 
-/** The CSS class of a section state. */
-function stateClass(state) {
-  switch (state) {
-    case 'ENERGISED': return 'net-energised';
-    case 'DEAD': return 'net-dead';
-    case 'EARTHED': return 'net-earthed';
-    case 'ENERGISED+EARTHED': return 'net-energised-earthed';
-    default: return 'net-unknown';
-  }
-}
-
 export default {
   mount(el, ctx) {
     const canOperate = roleAtLeast(ctx.session.role, 'operator');
@@ -126,7 +116,7 @@ export default {
       const { pos, cols, maxRows } = layout(model);
       const W = 80 + cols * COL_W;
       const H = 60 + maxRows * ROW_H;
-      const levels = [...new Set(model.sections.map((x) => x.kv).filter((k) => typeof k === 'number'))].sort((a, b) => b - a);
+      const levels = levelsOf(model);
       const svg = s('svg', { viewBox: `0 0 ${W} ${H}`, class: 'single-line net-sld', role: 'group', 'aria-label': 'Network single-line diagram' });
       // Drawn to scale and scrolled (CSSOM, which the CSP allows, not a style attribute).
       svg.style.width = `${W}px`;
@@ -146,11 +136,7 @@ export default {
       svg.append(wires, nodes, devices, marks);
       const secParts = new Map(); // section id -> [elements coloured by its state]
       const part = (sec, elx) => { if (!secParts.has(sec)) secParts.set(sec, []); secParts.get(sec).push(elx); return elx; };
-      const levelOf = (sec) => {
-        const kv = (model.sections.find((x) => x.id === sec) || {}).kv;
-        const i = levels.indexOf(kv);
-        return i < 0 ? 'net-lvl-x' : `net-lvl-${Math.min(i, 3)}`;
-      };
+      const levelOf = (sec) => levelClass(model, levels, sec);
       // Sections: a bar each, with its customers.
       for (const x of model.sections) {
         const p = at(x.id);
@@ -164,13 +150,13 @@ export default {
         binder.on(x.state_tag, (sample, connected) => {
           const q = qualityOf(sample, connected);
           const state = q.usable && sample ? String(sample.value) : 'UNKNOWN';
-          g.classList.remove('net-energised', 'net-dead', 'net-earthed', 'net-energised-earthed', 'net-unknown');
+          g.classList.remove(...STATE_CLASSES);
           g.classList.add(stateClass(state));
           g.dataset.state = state;
           stateText.textContent = state === 'UNKNOWN' ? '? UNKNOWN' : state;
           tip.textContent = `${x.id}: ${state}${q.reason ? ` (${q.reason})` : ''}`;
           for (const e of secParts.get(x.id) || []) {
-            e.classList.remove('net-energised', 'net-dead', 'net-earthed', 'net-energised-earthed', 'net-unknown');
+            e.classList.remove(...STATE_CLASSES);
             e.classList.add(stateClass(state));
           }
         });

@@ -585,6 +585,11 @@ impl Stack {
                     gridscada_network::TopologyDriver::new(net.clone(), db.clone(), safety.clone());
                 let (live_tx, live_rx) = watch::channel(Arc::new(driver.update(clock.now())));
                 loops.spawn(driver.run(clock.clone(), live_tx));
+                tasks.spawn(sinks::network_alarms(
+                    net.clone(),
+                    live_rx.clone(),
+                    alarms.clone(),
+                ));
                 let selections = gridscada_network::Selections::new(net.select_timeout);
                 Some(gridscada_web::NetworkView {
                     network: net,
@@ -623,6 +628,7 @@ impl Stack {
                 view.tags.clone(),
                 view.selections.clone(),
                 view.live.clone(),
+                clock.clone(),
             ));
         }
 

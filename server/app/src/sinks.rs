@@ -629,3 +629,38 @@ pub async fn reload_safety_tags(store: Store, tags: gridscada_network::SafetyTag
         load_safety_tags(&store, &tags).await;
     }
 }
+
+/// The network's system alarms (`gridscada_network::alarms`): after every
+/// recompute of the topology, raises what newly stands (or stands with new
+/// words) and clears what no longer does.
+pub async fn network_alarms(
+    net: Arc<gridscada_network::Network>,
+    mut live: watch::Receiver<Arc<gridscada_network::Live>>,
+    alarms: Arc<AlarmEngine>,
+) {
+    let mut raised: HashMap<String, String> = HashMap::new();
+    loop {
+        let now = {
+            let l = live.borrow_and_update();
+            gridscada_network::alarms::standing(&net.model, &l.inputs, &l.topology)
+        };
+        for gone in raised
+            .keys()
+            .filter(|k| !now.iter().any(|a| &a.key == *k))
+            .cloned()
+            .collect::<Vec<_>>()
+        {
+            system_alarm(&alarms, &gone, false, 0, &net.prefix, "");
+            raised.remove(&gone);
+        }
+        for a in now {
+            if raised.get(&a.key) != Some(&a.message) {
+                system_alarm(&alarms, &a.key, true, a.priority, &net.prefix, &a.message);
+                raised.insert(a.key, a.message);
+            }
+        }
+        if live.changed().await.is_err() {
+            return;
+        }
+    }
+}

@@ -77,6 +77,10 @@ pub enum ElementKind {
     Line {
         #[serde(default)]
         busbar: bool,
+        /// Coloured live by a network section: its state tag
+        /// (`NET.Sec.<section>.State`), as on the network screen.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        section_tag: Option<String>,
     },
     Rect {
         #[serde(default)]
@@ -181,6 +185,10 @@ impl Screen {
                 | ElementKind::Multistate { tag, .. }
                 | ElementKind::Button { tag, .. } => out.push(tag),
                 ElementKind::Trend { pens, .. } => out.extend(pens.iter().map(String::as_str)),
+                ElementKind::Line {
+                    section_tag: Some(t),
+                    ..
+                } => out.push(t),
                 _ => {}
             }
         }
@@ -382,6 +390,26 @@ impl Element {
                     ));
                 }
             }
+            ElementKind::Line {
+                section_tag: Some(t),
+                ..
+            } => {
+                let found = plant.tag(t);
+                let is_state = t.contains(".Sec.") && t.ends_with(".State");
+                if !is_state || found.is_some_and(|(kind, _)| kind != ValueKind::Str) {
+                    errs.push(format!(
+                        "{}: '{}' is not a network section's state tag (<prefix>.Sec.<section>.State)",
+                        at("section_tag"),
+                        clip(t)
+                    ));
+                } else if found.is_none() {
+                    errs.push(format!(
+                        "{}: no network section state tag named '{}'",
+                        at("section_tag"),
+                        clip(t)
+                    ));
+                }
+            }
             ElementKind::Text { .. } | ElementKind::Line { .. } | ElementKind::Rect { .. } => {}
         }
     }
@@ -498,6 +526,7 @@ mod tests {
                 "A.Cmd" => Some((ValueKind::Bool, true)),
                 "A.P_kW" => Some((ValueKind::Float, false)),
                 "A.Setpoint" => Some((ValueKind::Float, true)),
+                "NET.Sec.c2.State" | "A.Words" => Some((ValueKind::Str, false)),
                 _ => None,
             }
         }
@@ -560,6 +589,38 @@ mod tests {
             "{all}"
         );
         assert!(all.contains("element 4 (button) value"), "{all}");
+    }
+
+    #[test]
+    fn a_line_bound_to_a_section_shows_its_state_tag_and_a_bad_binding_is_named() {
+        let s = screen(serde_json::json!([
+            {"type": "line", "x": 0, "y": 0, "w": 200, "h": 10, "busbar": true, "section_tag": "NET.Sec.c2.State"},
+            {"type": "line", "x": 0, "y": 20, "w": 200, "h": 10}
+        ]));
+        assert_eq!(s.validate(&View), Vec::<String>::new());
+        assert_eq!(s.tags(), vec!["NET.Sec.c2.State"]);
+        let back: Screen = serde_json::from_str(&serde_json::to_string(&s).unwrap()).unwrap();
+        assert_eq!(back, s);
+        let bad = screen(serde_json::json!([
+            {"type": "line", "x": 0, "y": 0, "w": 200, "h": 10, "section_tag": "A.Words"},
+            {"type": "line", "x": 0, "y": 0, "w": 200, "h": 10, "section_tag": "NET.Sec.c9.State"},
+            {"type": "line", "x": 0, "y": 0, "w": 200, "h": 10, "section_tag": "A.Closed"}
+        ]));
+        let all = bad.validate(&View).join("\n");
+        assert!(
+            all.contains(
+                "element 0 (line) section_tag: 'A.Words' is not a network section's state tag"
+            ),
+            "{all}"
+        );
+        assert!(
+            all.contains("element 1 (line) section_tag: no network section state tag named 'NET.Sec.c9.State'"),
+            "{all}"
+        );
+        assert!(
+            all.contains("element 2 (line) section_tag: 'A.Closed'"),
+            "{all}"
+        );
     }
 
     #[test]

@@ -9,10 +9,10 @@
 
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use gridscada_config::{CommandBinding, Normally};
-use gridscada_tagdb::{Blocked, TagWriter, Value, WriteError, WriteFuture};
+use gridscada_tagdb::{Blocked, Clock, TagWriter, Timestamp, Value, WriteError, WriteFuture};
 use tokio::sync::watch;
 
 use crate::driver::Live;
@@ -22,8 +22,10 @@ use crate::safety::SafetyTags;
 use crate::selection::Selections;
 use crate::topology::{compute, Pos};
 
-/// How long a confirmed operation still counts as in flight while the
-/// topology catches up with the device's new position.
+/// How long (plant time) a confirmed operation still counts as in flight
+/// while the topology catches up with the device's new position. Plant
+/// time, not wall time: a replay at `--max` must judge the same write the
+/// same way on every run, however loaded the machine.
 const SETTLE: Duration = Duration::from_secs(1);
 
 pub struct SwitchingGuard {
@@ -32,12 +34,13 @@ pub struct SwitchingGuard {
     tags: SafetyTags,
     selections: Selections,
     live: watch::Receiver<Arc<Live>>,
+    clock: Arc<dyn Clock>,
     /// Command tag -> device.
     by_command: HashMap<String, usize>,
     /// Operations checked and on their way: device -> its target position,
     /// and once the write is confirmed, until when it still counts (the
     /// topology has not shown the new position yet).
-    pending: Mutex<HashMap<usize, (Pos, Option<Instant>)>>,
+    pending: Mutex<HashMap<usize, (Pos, Option<Timestamp>)>>,
 }
 
 impl SwitchingGuard {
@@ -47,6 +50,7 @@ impl SwitchingGuard {
         tags: SafetyTags,
         selections: Selections,
         live: watch::Receiver<Arc<Live>>,
+        clock: Arc<dyn Clock>,
     ) -> SwitchingGuard {
         let by_command = net
             .command
@@ -60,6 +64,7 @@ impl SwitchingGuard {
             tags,
             selections,
             live,
+            clock,
             by_command,
             pending: Mutex::default(),
         }
@@ -89,7 +94,7 @@ impl SwitchingGuard {
         &self,
         i: usize,
         op: Operation,
-        pending: &mut HashMap<usize, (Pos, Option<Instant>)>,
+        pending: &mut HashMap<usize, (Pos, Option<Timestamp>)>,
     ) -> Result<(), Blocked> {
         let m = &self.net.model;
         let device = &m.switches[i];
@@ -121,7 +126,7 @@ impl SwitchingGuard {
             return Ok(());
         }
         let live = self.live.borrow().clone();
-        let now = Instant::now();
+        let now = self.clock.now();
         pending.retain(|&d, (target, until)| {
             until.is_none_or(|t| t > now) && live.inputs.switches.get(d) != Some(target)
         });
@@ -176,7 +181,7 @@ impl TagWriter for SwitchingGuard {
             if result.is_ok() {
                 // Until the topology shows the device at its new position
                 // (or a while has passed), the operation still counts.
-                pending.insert(i, (op.target(), Some(Instant::now() + SETTLE)));
+                pending.insert(i, (op.target(), Some(self.clock.now().add(SETTLE))));
             } else {
                 pending.remove(&i);
             }

@@ -10,12 +10,15 @@
 //! ([`guard`]) every command passes, which refuses what a safety tag
 //! ([`safety`]), another operator's selection ([`selection`]) or an
 //! interlock forbids. Switching programmes are checked step by step against
-//! the topology ([`programme`]).
+//! the topology ([`programme`]). What stands wrong in the network however it
+//! came about (an earth switch closed on a live section, sources in a
+//! forbidden parallel) is a system alarm ([`alarms`]).
 //!
 //! **Must not touch:** field protocols, SQL or HTTP. The live shell reads
 //! switch states from the tag database and publishes section states back as
 //! tags; commands go out through the stack's `TagWriter` like every other.
 
+pub mod alarms;
 pub mod driver;
 mod dsu;
 pub mod guard;
@@ -28,6 +31,7 @@ pub mod safety;
 pub mod selection;
 pub mod topology;
 
+pub use alarms::NetworkAlarm;
 pub use driver::{network_tags, Live, TopologyDriver};
 pub use guard::SwitchingGuard;
 pub use model::{

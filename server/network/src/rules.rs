@@ -82,7 +82,8 @@ fn section_name(model: &Model, s: u32) -> &str {
     &model.sections[s as usize].id
 }
 
-fn sources_in_words(model: &Model, groups: &[usize]) -> String {
+/// Source groups in words: "grid + microgrid".
+pub(crate) fn sources_in_words(model: &Model, groups: &[usize]) -> String {
     groups
         .iter()
         .map(|&g| model.groups[g].as_str())

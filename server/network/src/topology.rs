@@ -196,11 +196,17 @@ fn strictest(model: &Model, groups: &[usize]) -> ParallelPermission {
     worst
 }
 
-fn parallel_of(model: &Model, mut sources: Vec<usize>, certain: bool, section: SecIdx) -> Parallel {
-    sources.sort_unstable();
+/// The source groups of these sources, sorted, each once.
+pub fn groups_of(model: &Model, sources: &[usize]) -> Vec<usize> {
     let mut groups: Vec<usize> = sources.iter().map(|&s| model.sources[s].group).collect();
     groups.sort_unstable();
     groups.dedup();
+    groups
+}
+
+fn parallel_of(model: &Model, mut sources: Vec<usize>, certain: bool, section: SecIdx) -> Parallel {
+    sources.sort_unstable();
+    let groups = groups_of(model, &sources);
     Parallel {
         permission: strictest(model, &groups),
         sources,

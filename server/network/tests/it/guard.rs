@@ -91,6 +91,7 @@ fn rig_of(model: Model, open: &[&str]) -> Rig {
         tags.clone(),
         selections.clone(),
         rx,
+        Arc::new(gridscada_tagdb::SystemClock),
     ));
     Rig {
         guard,

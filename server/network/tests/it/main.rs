@@ -1,3 +1,4 @@
+mod alarms;
 mod cases;
 mod guard;
 mod oracle;

@@ -30,8 +30,51 @@ fn view(s: &WebState, status: &PanelStatus) -> Value {
     let mut v = serde_json::to_value(status).unwrap_or_default();
     if let Some(p) = s.plant.panels.iter().find(|p| *p.id.get_ref() == status.id) {
         v["prefix"] = json!(p.prefix.get_ref());
+        if let Some(net) = &s.components.network {
+            v["safety_tags"] = safety_tags(net, p);
+        }
     }
     v
+}
+
+/// The standing safety tags on the panel's breakers that are switching
+/// devices of the network, by breaker ("elcb", "mccb", "zone2"): the
+/// strongest tag's label and every tag in words, so the diagrams flag a
+/// tagged breaker as the network screen does.
+fn safety_tags(
+    net: &crate::api::network::NetworkView,
+    panel: &gridscada_config::PanelConfig,
+) -> Value {
+    use gridscada_config::StatusBinding;
+    let io = panel.io();
+    let breaker_of = |tag: &str| -> Option<String> {
+        if tag == io.elcb_closed {
+            return Some("elcb".into());
+        }
+        if tag == io.mccb_closed {
+            return Some("mccb".into());
+        }
+        let z = io.zone_closed.iter().position(|z| z == tag)?;
+        Some(format!("zone{}", z + 1))
+    };
+    let mut out = serde_json::Map::new();
+    for (w, status) in net.network.model.switches.iter().zip(&net.network.status) {
+        let Some(StatusBinding::Tag(tag)) = status else {
+            continue;
+        };
+        let Some(breaker) = breaker_of(tag) else {
+            continue;
+        };
+        let Some(strongest) = net.tags.strongest(&w.id) else {
+            continue;
+        };
+        let texts: Vec<String> = net.tags.on(&w.id).iter().map(|t| t.describe()).collect();
+        out.insert(
+            breaker,
+            json!({ "device": w.id, "kind": strongest.as_str(), "label": strongest.label(), "tags": texts }),
+        );
+    }
+    Value::Object(out)
 }
 
 fn find<'a>(s: &'a WebState, id: &str) -> ApiResult<&'a PanelHandle> {

@@ -314,6 +314,12 @@ pub struct PanelStatus {
     /// Tag prefix of the panel's I/O, e.g. SS1
     #[schema(required = false)]
     pub prefix: String,
+    /// With a switching network: the standing safety tags on the panel's
+    /// breakers, by breaker ("elcb", "mccb", "zone2"): `device` (the
+    /// network's id), `kind` and `label` of the strongest, `tags` (each in
+    /// words)
+    #[schema(required = false, value_type = Object)]
+    pub safety_tags: (),
 }
 
 #[derive(ToSchema)]

@@ -1,6 +1,5 @@
-// Switching on the network screen (the test plant tests/plants/network: an
-// 11 kV ring with two normally-open points feeding the two LV panels and
-// the microgrid). Select-before-operate from the HMI: the preview names the
+// Switching on the network screen (the demo plant's 11 kV ring: two
+// normally-open points, feeding the two LV panels and the microgrid). Select-before-operate from the HMI: the preview names the
 // customers who lose supply, and the downstream sections turn grey as the
 // feeder breaker's status changes; a selection reserves the device (another
 // operator is refused and sees who holds it) and times out; a cable taken
@@ -9,33 +8,8 @@
 // every step is in the event log.
 import test from 'node:test';
 import assert from 'node:assert/strict';
-import { launch, login, credentials, Api, requireOk, until, runAxe, seriousFindings, BASE } from '../lib.js';
-
-async function apiAs(role) {
-  const c = credentials()[role];
-  const api = new Api();
-  const r = await api.login(c.user, c.password);
-  if (r.status !== 200) throw new Error(`${role} login failed: ${r.status} ${r.text}`);
-  return api;
-}
-
-const state = async (api, tag) => (await api.call('GET', `/api/tags/${tag}`)).body;
-
-/** Select and execute through the API; answers the execute's response. */
-async function operateApi(api, device, operation) {
-  const sel = await api.call('POST', '/api/switching/selections', { device, operation });
-  if (sel.status !== 201) return sel;
-  return api.call('POST', `/api/switching/selections/${sel.body.id}/execute`);
-}
-
-/** Puts a device where it should be (through the API), waiting for its read-back. */
-async function ensure(api, device, position) {
-  const pos = async () => (await state(api, `NET.Sw.${device}.Position`)).value;
-  if ((await pos()) !== position) {
-    requireOk(await operateApi(api, device, position === 'CLOSED' ? 'close' : 'open'), `${device} to ${position}`);
-  }
-  await until(`${device} ${position}`, async () => (await pos()) === position);
-}
+import { launch, login, credentials, requireOk, until, runAxe, seriousFindings, BASE } from '../lib.js';
+import { apiAs, state, operateApi, ensure } from './net.js';
 
 async function openNetwork(role, name) {
   const c = credentials()[role];
