@@ -3,8 +3,9 @@
 # connects to `gridscada demo --opcua PORT` and checks what it browses,
 # reads, receives and writes against the HTTP API and the event log
 # (tests/e2e/opcua_client.py says what each phase covers). Two demos: the
-# embedded plant (browse, read every tag, subscriptions, refusals, security
-# modes, /metrics) and tests/plants/three-panels (a confirmed setpoint write:
+# demo plant with its 11 kV ring, tests/plants/network (browse, read every
+# tag, subscriptions, refusals, a safety tag's refusal, security modes,
+# /metrics) and tests/plants/three-panels (a confirmed setpoint write:
 # no dispatch loop there rewrites setpoints). Then idle and half-Hello
 # connections against the caps and the handshake timeout (opcua_slow.py),
 # and docs/NORTHBOUND.md's client certificate trust procedure, step by
@@ -209,7 +210,10 @@ trust_phase() {
     stop_server trust
 }
 
-phase plant
+# The demo's plant with its 11 kV ring (tests/plants/network: the demo's
+# tag files and a switching network), so that a safety tag's refusal is seen
+# through OPC UA too.
+phase plant --config "$root/tests/plants/network"
 phase write --config "$root/tests/plants/three-panels"
 slow_phase
 trust_phase
