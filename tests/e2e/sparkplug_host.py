@@ -473,13 +473,15 @@ def safety_tag_refuses_dcmd(host, api, device, alias, target):
         check("the demo has a switching network (/api/network)", False, e.code)
         return
     switch = next((w for w in model.get("switches", []) if w.get("command_tag") == target), None)
-    if not check(f"{target} commands a switching device of the network", switch is not None,
-                 [w.get("command_tag") for w in model.get("switches", [])][:8]):
+    check(f"{target} commands a switching device of the network", switch is not None,
+          [w.get("command_tag") for w in model.get("switches", [])][:8])
+    if switch is None:
         return
     st, placed = api.send("POST", "/api/switching/tags", {
         "device": switch["id"], "kind": "do_not_close",
         "reason": "Sparkplug test: zone out for work", "work_ref": "WO-SPB"})
-    if not check(f"a do_not_close tag is placed on {switch['id']}", st in (200, 201), (st, placed)):
+    check(f"a do_not_close tag is placed on {switch['id']}", st in (200, 201), (st, placed))
+    if st not in (200, 201):
         return
     before = api.tags()[target]["value"]
     host.command("DCMD", device, dcmd_payload(alias=alias, value=True))
