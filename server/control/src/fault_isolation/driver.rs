@@ -288,7 +288,13 @@ pub async fn run_panel(
                 d.feed_snapshot().await;
             }
             cmd = commands.recv() => match cmd {
-                Some(cmd) => d.on_command(cmd).await,
+                Some(cmd) => {
+                    // What the writer would refuse may have changed without
+                    // a breaker moving (a safety tag removed, the network
+                    // switched): a Reset must see it as it is now.
+                    d.feed_snapshot().await;
+                    d.on_command(cmd).await
+                }
                 None => return Ok(()),
             },
             _ = sleep => {

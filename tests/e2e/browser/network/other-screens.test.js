@@ -85,7 +85,7 @@ test('a line drawn in the editor and bound to a section is coloured by its state
     assert.equal(await b.page.locator('.pick-tag[data-tag="NET.Sec.c1.Energised"]').count(), 0);
     await b.page.locator('.pick-tag[data-tag="NET.Sec.c1.State"]').click();
     await b.page.locator('#pick-search').waitFor({ state: 'detached' });
-    assert.equal(await b.page.locator('#prop-section').textContent(), 'NET.Sec.c1.State');
+    await b.page.locator('#prop-section', { hasText: 'NET.Sec.c1.State' }).waitFor();
     await b.page.locator('#editor-save').click();
     await b.page.locator('#editor-status', { hasText: 'as version 1' }).waitFor();
     const saved = requireOk(await admin.call('GET', `/api/screens/${ID}`), 'saved screen');

@@ -34,10 +34,13 @@ test('opening the feeder breaker by select-before-operate: the preview names the
   await ensure(api, 'f1', 'CLOSED');
   // Every device read at least once (just after start some are not yet):
   // the preview's figures are then those the screen will show.
-  await until('no section of unknown state', async () => {
+  // Every customer on supply too (an earlier test may have left a panel's
+  // zone to be restored): the preview counts those F1 would take off.
+  await until('no section of unknown state, every customer on supply', async () => {
     const u = await state(api, 'NET.CustomersUnknown');
-    return u && u.value === 0 && (await state(api, 'NET.Sec.c1.State')).value === 'ENERGISED';
-  });
+    const off = await state(api, 'NET.CustomersOff');
+    return u && u.value === 0 && off && off.value === 0 && (await state(api, 'NET.Sec.c1.State')).value === 'ENERGISED';
+  }, 60_000);
   const expected = requireOk(await api.call('GET', '/api/network/preview?device=f1&operation=open'), 'preview');
   assert.ok(expected.customers_lose > 0, 'opening F1 takes customers off supply');
   const b = await openNetwork('operator', 'net1');
