@@ -2,7 +2,8 @@
 // 1. A "Do not close" tag on a panel's zone MCB is flagged on the panel
 //    screen (DNC, the tag in words), and when a fault on another zone trips
 //    the panel, the fault-isolation sequence restores every healthy zone
-//    but the tagged one, and says why (load_blocked in the event log).
+//    but the tagged one, and says why (load_blocked in the event log); once
+//    the tag is removed, Reset closes it.
 // 2. A line drawn in the screen editor and bound to a section is coloured
 //    by the section's state: energised, then grey when the feeder breaker
 //    feeding it opens.
@@ -53,6 +54,18 @@ test('a tagged zone MCB: flagged on the panel screen, left open by the fault-iso
     await zone2.locator('.sl-state', { hasText: 'OPEN' }).waitFor({ timeout: 5000 });
     assert.equal(await zone2.locator('.net-tag-mark').textContent(), 'DNC');
     await b.screenshot('zone2-left-open');
+
+    // The work is done: the tag removed and zone 3 repaired, Reset closes
+    // both, and the flag is gone.
+    requireOk(await sup.call('DELETE', `/api/switching/tags/${placed.id}`, { reason: 'jointing complete' }), 'removing the tag');
+    requireOk(await admin.call('DELETE', `/api/sim/faults/${PANEL}/3`), 'repair');
+    requireOk(await sup.call('POST', `/api/panels/${PANEL}/reset`), 'reset');
+    await until('zones 2 and 3 closed by the Reset', async () => {
+      const s = requireOk(await sup.call('GET', `/api/panels/${PANEL}`), 'panel');
+      return s.breakers.zone2.closed && s.breakers.zone3.closed && s.step === 'idle';
+    }, 60_000, 500);
+    await b.page.locator('.panel-left .sl-breaker[data-breaker="zone2"]:not(.sl-tagged)').waitFor({ timeout: 5000 });
+    assert.equal(await zone2.locator('.net-tag-mark').textContent(), '');
     assert.deepEqual(b.problems, []);
   } finally {
     await b.close();
