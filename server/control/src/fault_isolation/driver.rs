@@ -267,6 +267,7 @@ pub async fn run_panel(
         notices,
         base: PanelStatus::initial(&panel),
         last_derived: None,
+        last_blocked: Vec::new(),
     };
     d.execute(restored, None).await;
     d.publish();
@@ -291,8 +292,11 @@ pub async fn run_panel(
                 Some(cmd) => {
                     // What the writer would refuse may have changed without
                     // a breaker moving (a safety tag removed, the network
-                    // switched): a Reset must see it as it is now.
-                    d.feed_snapshot().await;
+                    // switched): a Reset must see it as it is now. Only
+                    // then: a plant without refusals is fed as before.
+                    if d.blocked() != d.last_blocked {
+                        d.feed_snapshot().await;
+                    }
                     d.on_command(cmd).await
                 }
                 None => return Ok(()),
@@ -323,6 +327,8 @@ struct Driver {
     notices: mpsc::Sender<PanelNotice>,
     base: PanelStatus,
     last_derived: Option<(String, String, u8, u8, String, bool)>,
+    /// The refusals the sequence was last told of (`Snapshot::blocked`).
+    last_blocked: Vec<BlockedOperation>,
 }
 
 fn timer_index(t: Timer) -> usize {
@@ -372,6 +378,7 @@ impl Driver {
 
     async fn feed_snapshot(&mut self) {
         let snap = self.snapshot();
+        self.last_blocked.clone_from(&snap.blocked);
         let out = self.seq.handle(Input::Snapshot(snap), self.now_s());
         self.execute(out, None).await;
     }
