@@ -522,6 +522,18 @@ impl Stack {
         ));
         let mut loops = JoinSet::new();
 
+        // The standing safety tags, read before any command (the guard
+        // refuses every switching operation until they are), and before
+        // the field I/O starts: between the first scans and the control
+        // loops' start nothing may wait on the store's thread, or a replay
+        // at --max starts its loops before or after the first readings as
+        // that thread is quick or slow, and two runs part.
+        let safety = gridscada_network::SafetyTags::default();
+        let safety_loaded = match plant.network {
+            Some(_) => sinks::load_safety_tags(&store, &safety).await,
+            None => true,
+        };
+
         let field = field::Field::start(
             &plant,
             db.clone(),
@@ -571,14 +583,10 @@ impl Stack {
             Some(Err(e)) => return Err(anyhow!("the switching network: {e}")),
             Some(Ok(net)) => {
                 let net = Arc::new(net);
-                // The standing safety tags: read before any command (the
-                // guard refuses every switching operation until they are);
-                // one of a pair reads them again every 2 s, so that tags
-                // placed on the other server hold here too (a server alone
-                // places and removes them itself).
-                let safety = gridscada_network::SafetyTags::default();
-                let loaded = sinks::load_safety_tags(&store, &safety).await;
-                if plant.redundancy.is_some() || !loaded {
+                // One of a pair reads the safety tags again every 2 s, so
+                // that tags placed on the other server hold here too (a
+                // server alone places and removes them itself).
+                if plant.redundancy.is_some() || !safety_loaded {
                     tasks.spawn(sinks::reload_safety_tags(store.clone(), safety.clone()));
                 }
                 let mut driver =

@@ -94,14 +94,17 @@ async fn wait_for_first_reading(cfg: &MicrogridConfig, db: &TagDb, clock: &dyn C
     let give_up = clock
         .now()
         .add(Duration::from_secs_f64(cfg.stale_after_s.max(0.0)));
-    while clock.now() < give_up {
+    loop {
+        // Looked at after a first wait, never at once: when this task first
+        // runs, the first scans may or may not have landed, and a replay
+        // must start the loop at the same plant time either way.
+        clock.sleep(Duration::from_millis(100)).await;
         let read_once = ids
             .iter()
             .all(|id| db.get(*id).is_some_and(|s| s.timestamp.as_millis() > 0));
-        if read_once {
+        if read_once || clock.now() >= give_up {
             return;
         }
-        clock.sleep(Duration::from_millis(100)).await;
     }
 }
 
