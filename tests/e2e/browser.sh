@@ -6,8 +6,8 @@
 # tests/e2e/browser/plant2/*.test.js against the second, side by side, then
 # tests/e2e/browser/telecontrol/*.test.js against a third (the test plant
 # tests/plants/telecontrol, over IEC 104 and DNP3) and
-# tests/e2e/browser/network/*.test.js against a fourth (tests/plants/network,
-# the switching network), stops them, and prints
+# tests/e2e/browser/network/*.test.js against a fourth (the demo again, on
+# its own: the switching network's tests change its state), stops them, and prints
 # "N passed, M failed". Screenshots, each run's report
 # (spec-NAME.log, results-NAME.tap) and the servers' logs go to
 # tests/e2e/artifacts/.
@@ -125,10 +125,11 @@ fi
 port3="$(free_port)"
 start telecontrol "$port3" --config "$root/tests/plants/telecontrol"
 run telecontrol "$port3" "$data" "$server_pid" telecontrol/*.test.js
-# Then the switching network: the demo's panels and microgrid on an 11 kV
-# ring (tests/plants/network), operated from the network screen.
+# Then the switching network: the demo's 11 kV ring round its panels and
+# microgrid, operated from the network screen, on a demo of its own (the
+# tests open feeders, earth cables and trip panels).
 port4="$(free_port)"
-start network "$port4" --config "$root/tests/plants/network"
+start network "$port4"
 run network "$port4" "$data" "$server_pid" network/*.test.js
 
 total_passed=0

@@ -3,7 +3,7 @@
 # connects to `gridscada demo --opcua PORT` and checks what it browses,
 # reads, receives and writes against the HTTP API and the event log
 # (tests/e2e/opcua_client.py says what each phase covers). Two demos: the
-# demo plant with its 11 kV ring, tests/plants/network (browse, read every
+# embedded demo plant with its 11 kV ring (browse, read every
 # tag, subscriptions, refusals, a safety tag's refusal, security modes,
 # /metrics) and tests/plants/three-panels (a confirmed setpoint write:
 # no dispatch loop there rewrites setpoints). Then idle and half-Hello
@@ -210,10 +210,9 @@ trust_phase() {
     stop_server trust
 }
 
-# The demo's plant with its 11 kV ring (tests/plants/network: the demo's
-# tag files and a switching network), so that a safety tag's refusal is seen
-# through OPC UA too.
-phase plant --config "$root/tests/plants/network"
+# The embedded demo (its 11 kV ring too: a safety tag's refusal is seen
+# through OPC UA).
+phase plant
 phase write --config "$root/tests/plants/three-panels"
 slow_phase
 trust_phase

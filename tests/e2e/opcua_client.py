@@ -3,7 +3,7 @@ running `gridscada demo --opcua PORT`, checked against the HTTP API.
 
 Usage: opcua_client.py PHASE BASE_URL OPC_URL CREDENTIALS TMPDIR
 
-PHASE "plant" (the demo plant with its 11 kV ring, tests/plants/network): browse the address space (folders
+PHASE "plant" (the embedded demo plant, with its 11 kV ring): browse the address space (folders
 follow the dotted names, one variable per tag), read every tag and compare
 value and status with /api/tags, subscribe and receive changes within a
 scan, a user whose role may not write a tag is refused (and audited), a

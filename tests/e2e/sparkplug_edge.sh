@@ -51,10 +51,9 @@ message_size_limit 0
 CONF
 
 # gridscada first: it retries the broker until the host has started it.
-# The demo's plant with its 11 kV ring (tests/plants/network: the demo's tag
-# files and a switching network), so that a safety tag's refusal of a DCMD is
+# The embedded demo, with its 11 kV ring: a safety tag's refusal of a DCMD is
 # seen too.
-"$bin" demo --config "$root/tests/plants/network" --http "127.0.0.1:$hport" --data "$tmp/data" \
+"$bin" demo --http "127.0.0.1:$hport" --data "$tmp/data" \
     --mqtt "mqtt://127.0.0.1:$mport" >"$tmp/server.log" 2>&1 &
 pid=$!
 for _ in $(seq 1 150); do

@@ -24,6 +24,7 @@ const FILES: &[(&str, &str)] = &[
         "microgrid.toml",
         include_str!("../../../tags/microgrid.toml"),
     ),
+    ("mv-ring.toml", include_str!("../../../tags/mv-ring.toml")),
 ];
 
 /// Loads and checks the embedded demo plant.

@@ -139,11 +139,9 @@ panel = [{ panel = "ss9", supply = "b_bb" }]
 }
 
 #[test]
-fn the_ring_network_has_its_sections_and_devices() {
-    let plant = load_path(
-        &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/plants/network"),
-    )
-    .expect("the network plant loads");
+fn the_demo_ring_network_has_its_sections_and_devices() {
+    let plant = load_path(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tags"))
+        .expect("the demo plant loads");
     let net = plant.network.as_ref().expect("the plant has a network");
     let e = net.elements(&plant.panels, plant.microgrid.as_ref(), &|t| {
         plant.tag(t).is_some()

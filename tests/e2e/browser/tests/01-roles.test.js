@@ -5,10 +5,10 @@ import { launch, login, toolbar, credentials, adminApi, BASE } from '../lib.js';
 import { ensureGuest } from '../fixtures.js';
 
 const EXPECTED = {
-  administrator: ['main', 'ss1', 'css1', 'microgrid', 'units', 'tags', 'devices', 'alarms', 'alarmkpi', 'events', 'trends', 'reports', 'editor', 'users', 'simulation'],
-  supervisor: ['main', 'ss1', 'css1', 'microgrid', 'units', 'tags', 'devices', 'alarms', 'alarmkpi', 'events', 'trends', 'reports'],
-  operator: ['main', 'ss1', 'css1', 'microgrid', 'units', 'tags', 'devices', 'alarms', 'events', 'trends'],
-  guest: ['main', 'microgrid', 'alarms', 'trends'],
+  administrator: ['main', 'ss1', 'css1', 'microgrid', 'units', 'network', 'tags', 'devices', 'alarms', 'alarmkpi', 'events', 'trends', 'reports', 'editor', 'users', 'simulation'],
+  supervisor: ['main', 'ss1', 'css1', 'microgrid', 'units', 'network', 'tags', 'devices', 'alarms', 'alarmkpi', 'events', 'trends', 'reports'],
+  operator: ['main', 'ss1', 'css1', 'microgrid', 'units', 'network', 'tags', 'devices', 'alarms', 'events', 'trends'],
+  guest: ['main', 'microgrid', 'network', 'alarms', 'trends'],
 };
 
 test('each role sees exactly its screens; anonymous sees only the login', async () => {
