@@ -26,8 +26,11 @@ use crate::auth::{token_from_cookies, Principal};
 use crate::error::ApiError;
 use crate::WebState;
 
-/// Longest a client message may be.
-const MAX_MESSAGE: usize = 64 * 1024;
+/// Longest a client message may be. A subscription names every tag a screen
+/// binds: a network screen of 20,000 sections and 10,000 devices names
+/// about 40,000 (1.1 MB); the socket is a logged-in user's, and their
+/// number is capped (`auth.sockets`).
+const MAX_MESSAGE: usize = 2 * 1024 * 1024;
 /// How often a socket sends its heartbeat and alarm summary and checks its
 /// session.
 const TICK: Duration = Duration::from_millis(100);
@@ -163,8 +166,14 @@ pub async fn upgrade(
     ws.max_message_size(MAX_MESSAGE)
         .on_upgrade(move |socket| async move {
             let _slot = slot;
-            if let Err(e) = run(s, who, token, socket).await {
-                tracing::debug!(error = %e, "live socket closed");
+            if let Err(e) = run(s, who.clone(), token, socket).await {
+                // A message over the limit ends the socket, and the screen
+                // would show nothing live, again at every reconnect: said.
+                if e.to_string().contains("Message too long") {
+                    tracing::warn!(user = ?who.user, error = %e, "live socket closed: a message over {MAX_MESSAGE} bytes");
+                } else {
+                    tracing::debug!(error = %e, "live socket closed");
+                }
             }
         })
 }

@@ -78,6 +78,22 @@ async fn live_push_follows_the_session() {
         ]})
     );
 
+    // A screen of a large plant names every tag it binds: a network screen
+    // of 20,000 sections and 10,000 devices, about 40,000 names (1.1 MB),
+    // is one subscription. Over 64 KiB it once ended the socket, and the
+    // screen showed every section UNKNOWN, again at every reconnect.
+    let mut many: Vec<String> = (0..40_000)
+        .map(|i| format!("NET.Sec.r{}u{}_lv{}.State", i / 400, i % 20, i % 6))
+        .collect();
+    many.push(TAG_RO.to_string());
+    let text = json!({"subscribe": {"tags": many}}).to_string();
+    assert!(text.len() > 1_000_000, "{}", text.len());
+    ws.send(Message::Text(text.into())).await.unwrap();
+    let snap = next_message(&mut ws).await.unwrap();
+    assert_eq!(snap["type"], "tags");
+    assert_eq!(snap["snapshot"], true);
+    assert_eq!(snap["values"][0]["name"], TAG_RO);
+
     // A bad message gets an error, and the socket stays open.
     ws.send(Message::Text("{\"subscribe\": 5}".into()))
         .await
