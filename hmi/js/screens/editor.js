@@ -9,6 +9,7 @@ import { get, put, del, qs, enc } from '../api.js';
 import { h, replace, field, select } from '../dom.js';
 import { attempt, confirmDialog, formDialog, toast } from '../ui.js';
 import { drawScreen } from './custom.js';
+import { placement } from './network.js';
 
 const GRID = 10;
 const snap = (v) => Math.max(0, Math.round(v / GRID) * GRID);
@@ -80,11 +81,14 @@ export default {
     const fileInput = h('input', { type: 'file', accept: 'application/json,.json', hidden: true, id: 'editor-import-file' });
     const btn = (id, text, onclick, cls = 'btn btn-small') => h('button', { type: 'button', class: cls, id, text, onclick });
     const undoBtn = btn('editor-undo', 'Undo', () => step(undo, redo));
+    // Shown when the plant has a switching network (see loadList).
+    const fromNetworkBtn = btn('editor-from-network', 'From network…', fromNetwork);
+    fromNetworkBtn.hidden = true;
     const redoBtn = btn('editor-redo', 'Redo', () => step(redo, undo));
     el.append(h('h1', { class: 'screen-title', text: 'Screen editor' }),
       h('div', { class: 'card editor-bar' },
         h('div', { class: 'btn-row' }, field('Screen', picker),
-          btn('editor-new', 'New…', newScreen), btn('editor-rename', 'Rename…', rename), btn('editor-copy', 'Copy…', copy),
+          btn('editor-new', 'New…', newScreen), fromNetworkBtn, btn('editor-rename', 'Rename…', rename), btn('editor-copy', 'Copy…', copy),
           btn('editor-delete', 'Delete…', remove), btn('editor-export', 'Export', exportJson), btn('editor-import', 'Import…', () => fileInput.click()),
           undoBtn, redoBtn, btn('editor-save', 'Save', save, 'btn btn-primary'), fileInput),
         status),
@@ -100,6 +104,7 @@ export default {
         const cat = await get('/api/screens');
         screens = cat.screens.filter((x) => x.kind === 'custom').map((x) => ({ id: x.id.slice('custom:'.length), label: x.label }));
         panels = cat.screens.filter((x) => x.kind === 'panel').map((x) => x.panel);
+        fromNetworkBtn.hidden = !cat.screens.some((x) => x.id === 'network' && x.kind === 'builtin');
       } catch (e) {
         status.textContent = `Cannot list the screens: ${e.detail}`;
         return;
@@ -150,6 +155,31 @@ export default {
       undo = []; redo = []; selected = -1; dirty = true;
       draw();
       status.textContent = `New screen "${r.name}": place elements, then Save.`;
+      fillPicker();
+    }
+
+    /**
+     * A new screen with the network screen's automatic layout: a line per
+     * section, bound to it (coloured live), where the network screen draws
+     * it. Saved as "network", it is the network screen's layout: moving a
+     * line here moves its section there (docs/NETWORK.md).
+     */
+    async function fromNetwork() {
+      let model;
+      try { model = await get('/api/network'); } catch (e) { toast(`The network model: ${e.detail}`, 'error'); return; }
+      const r = await askIdName('New screen from the network', 'network', 'Network layout');
+      if (!r) return;
+      if (screens.some((x) => x.id === r.id)) { toast(`A screen "${r.id}" exists already: open it, or delete it first.`, 'error'); return; }
+      const { at, W, H, SEC_W, SEC_H } = placement({ ...model, layout: null });
+      const elements = model.sections.map((x) => {
+        const p = at.get(x.id);
+        return { type: 'line', x: p.x, y: Math.max(0, p.y - SEC_H / 2), w: SEC_W, h: SEC_H, busbar: x.busbar, section_tag: x.state_tag };
+      });
+      if (elements.length > 2000) { toast(`The network has ${elements.length} sections; a screen holds at most 2000 elements.`, 'error'); return; }
+      screen = { id: r.id, name: r.name, version: 0, width: Math.min(10000, Math.max(1200, W)), height: Math.min(10000, Math.max(700, H)), elements };
+      undo = []; redo = []; selected = -1; dirty = true;
+      draw();
+      status.textContent = `New screen "${r.name}" from the network's automatic layout: move the sections' lines${r.id === 'network' ? ', then Save: the network screen draws its sections where this screen puts them' : ', then Save'}.`;
       fillPicker();
     }
 

@@ -91,6 +91,30 @@ export function layout(model) {
   return { pos, cols, maxRows };
 }
 
+/**
+ * Where each section's bar starts (its left end, its middle height), in
+ * pixels: from the drawn screen an administrator adjusted in the screen
+ * editor (`model.layout`: a line bound to a section places it), else from
+ * the automatic layout. Also the drawing's size. The editor's "From
+ * network" starts from the same places.
+ */
+export function placement(model) {
+  const { pos, cols, maxRows } = layout(model);
+  const auto = (id) => {
+    const p = pos.get(id) || { col: 0, row: 0 };
+    return { x: 50 + p.col * COL_W, y: 40 + p.row * ROW_H };
+  };
+  const drawn = (model.layout && model.layout.sections) || {};
+  const at = new Map(model.sections.map((x) => {
+    const d = drawn[x.id];
+    return [x.id, d ? { x: d.x, y: d.y + Math.round(d.h / 2) } : auto(x.id)];
+  }));
+  let W = 80 + cols * COL_W;
+  let H = 60 + maxRows * ROW_H;
+  for (const p of at.values()) { W = Math.max(W, p.x + SEC_W + 60); H = Math.max(H, p.y + 50); }
+  return { at, W, H, SEC_W, SEC_H };
+}
+
 export default {
   mount(el, ctx) {
     const canOperate = roleAtLeast(ctx.session.role, 'operator');
@@ -113,9 +137,8 @@ export default {
     if (!canOperate) el.insertBefore(h('p', { class: 'note', text: `View only: your role (${ctx.session.role}) may not operate the network.` }), summary);
 
     function draw() {
-      const { pos, cols, maxRows } = layout(model);
-      const W = 80 + cols * COL_W;
-      const H = 60 + maxRows * ROW_H;
+      const placed = placement(model);
+      const { W, H } = placed;
       const levels = levelsOf(model);
       const svg = s('svg', { viewBox: `0 0 ${W} ${H}`, class: 'single-line net-sld', role: 'group', 'aria-label': 'Network single-line diagram' });
       // Drawn to scale and scrolled (CSSOM, which the CSP allows, not a style attribute).
@@ -125,10 +148,7 @@ export default {
       const defs = s('defs', {}, s('pattern', { id: 'net-hatch', patternUnits: 'userSpaceOnUse', width: 6, height: 6, patternTransform: 'rotate(45)' },
         s('line', { x1: 0, y1: 0, x2: 0, y2: 6, class: 'net-hatch-line' })));
       svg.append(defs);
-      const at = (id) => {
-        const p = pos.get(id) || { col: 0, row: 0 };
-        return { x: 50 + p.col * COL_W, y: 40 + p.row * ROW_H };
-      };
+      const at = (id) => placed.at.get(id) || { x: 50, y: 40 };
       const wires = s('g', { class: 'net-wires' });
       const nodes = s('g', { class: 'net-sections' });
       const devices = s('g', { class: 'net-devices' });

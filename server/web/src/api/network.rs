@@ -2,6 +2,7 @@
 //! (which section is energised, dead, earthed or unknown, and why), and the
 //! preview of one switching operation with the interlocks that refuse it.
 
+use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use axum::extract::{Path, Query, State};
@@ -103,6 +104,65 @@ pub struct NetworkModel {
     pub transformers: Vec<TransformerInfo>,
     pub sources: Vec<SourceInfo>,
     pub loads: Vec<LoadInfo>,
+    /// The layout an administrator adjusted in the screen editor: the drawn
+    /// screen [`LAYOUT_SCREEN`], whose lines bound to a section place that
+    /// section; none while no such screen is saved (the automatic layout).
+    pub layout: Option<NetworkLayout>,
+}
+
+/// The drawn screen whose lines place the network screen's sections.
+pub const LAYOUT_SCREEN: &str = "network";
+
+/// Where the drawn screen [`LAYOUT_SCREEN`] puts sections.
+#[derive(Serialize, ToSchema)]
+pub struct NetworkLayout {
+    pub screen: String,
+    pub version: i64,
+    pub width: i64,
+    pub height: i64,
+    /// Section id -> the box of the line bound to it (the first, if several).
+    pub sections: BTreeMap<String, PlacedSection>,
+}
+
+#[derive(Serialize, ToSchema)]
+pub struct PlacedSection {
+    pub x: i64,
+    pub y: i64,
+    pub w: i64,
+    pub h: i64,
+}
+
+/// The sections the drawn layout screen places, by their state tags.
+fn drawn_layout(s: &WebState, prefix: &str) -> Option<NetworkLayout> {
+    let screen = s.screens.get(LAYOUT_SCREEN)?;
+    let mut sections = BTreeMap::new();
+    for e in &screen.elements {
+        if let gridscada_config::screen::ElementKind::Line {
+            section_tag: Some(tag),
+            ..
+        } = &e.kind
+        {
+            let id = tag
+                .strip_prefix(prefix)
+                .and_then(|t| t.strip_prefix(".Sec."))
+                .and_then(|t| t.strip_suffix(".State"));
+            if let Some(id) = id {
+                sections.entry(id.to_string()).or_insert(PlacedSection {
+                    x: e.x,
+                    y: e.y,
+                    w: e.w,
+                    h: e.h,
+                });
+            }
+        }
+    }
+    Some(NetworkLayout {
+        screen: screen.id.clone(),
+        version: screen.version,
+        width: screen.width,
+        height: screen.height,
+        sections,
+    })
 }
 
 #[utoipa::path(get, path = "/api/network", tag = "network", summary = "The switching network model",
@@ -190,6 +250,7 @@ pub async fn model(State(s): State<WebState>) -> ApiResult<Json<NetworkModel>> {
                 customers: l.customers,
             })
             .collect(),
+        layout: drawn_layout(&s, &net.prefix),
     }))
 }
 
