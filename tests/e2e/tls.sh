@@ -81,7 +81,10 @@ mkdir -p "$tmp/other"
 "$bin" cert self-signed --out "$tmp/other" --host localhost >/dev/null 2>&1 || fail_setup "second pair"
 sed -e 's#^key = "key.pem"#key = "'"$tmp"'/other/key.pem"#' -e 's#^cert = "cert.pem"#cert = "'"$conf"'/cert.pem"#' \
     "$conf/gridscada.toml" >"$tmp/mismatch.toml"
-cp "$conf"/substation-*.toml "$conf/microgrid.toml" "$tmp/"
+# The tag files beside it, whatever the plant's are.
+for f in "$conf"/*.toml; do
+    [ "$(basename "$f")" = gridscada.toml ] || cp "$f" "$tmp/"
+done
 "$bin" check "$tmp/mismatch.toml" >"$tmp/mismatch.out" 2>&1
 check "check refuses a key of another certificate, naming the file" \
     grep -q "\[server.tls\] key $tmp/other/key.pem: does not belong to the certificate" "$tmp/mismatch.out"
