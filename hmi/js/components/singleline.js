@@ -32,8 +32,12 @@ export function breakerState(closed, cmd, connected, isElcb = false) {
  * Builds the diagram of the panel whose tags start with `prefix`; `binder`
  * keeps it live. `devices` are the I/O modules and analyzer shown with their
  * communication status. `onBreaker(name)` (optional) makes breakers clickable.
+ * `configured` (a set of tag names) leaves out the signals a plant does not
+ * have: a zone load without an Energised tag shows no state, a panel without
+ * a door contact no door, an analyzer only its configured readings.
  */
-export function singleLine(binder, { prefix, title, zones = 4, devices = [], onBreaker }) {
+export function singleLine(binder, { prefix, title, zones = 4, devices = [], onBreaker, configured }) {
+  const has = (tag) => !configured || configured.has(tag);
   const W = Math.max(MIN_W, 90 + zones * ZONE_W);
   const svg = s('svg', { viewBox: `0 0 ${W} ${H}`, class: 'single-line', role: 'img', 'aria-label': `Single-line diagram of ${title}`, dataset: { zones: String(zones) } });
   // Wider than the standard panel: keep the text size and let it scroll.
@@ -109,6 +113,7 @@ export function singleLine(binder, { prefix, title, zones = 4, devices = [], onB
     const tip = s('title', {}, '');
     load.append(tip, tri, txt);
     const energisedTag = `${prefix}.Zone${z}.Energised`;
+    const measured = has(energisedTag);
     const drawLoad = (smp, connected) => {
       const q = qualityOf(smp, connected);
       const on = q.usable && smp.value === true;
@@ -119,12 +124,20 @@ export function singleLine(binder, { prefix, title, zones = 4, devices = [], onB
         tip.textContent = `Zone ${z}: found faulty and isolated by the sequence; repair it before Reset`;
         return;
       }
+      if (!measured) {
+        // No voltage signal on this zone's load: the breaker above says all there is.
+        load.setAttribute('class', 'sl-load io-unmeasured');
+        txt.textContent = '';
+        tip.textContent = `Zone ${z} load (no voltage signal configured)`;
+        return;
+      }
       // Energised and dead are normal states (grey, filled or hollow): a zone opened on purpose is not an alarm.
       load.setAttribute('class', `sl-load ${!q.usable ? 'io-unknown' : on ? 'io-true io-energised' : 'io-dead'}`);
       txt.textContent = !q.usable ? '? UNKNOWN' : on ? 'ENERGISED' : 'DEAD';
       tip.textContent = `Zone ${z} load: ${txt.textContent}${q.reason ? ` (${q.reason})` : ''}`;
     };
-    binder.on(energisedTag, drawLoad);
+    if (measured) binder.on(energisedTag, drawLoad);
+    else drawLoad(null, true);
     redraws.push(() => drawLoad(binder.sample(energisedTag), live.connected));
     svg.append(load);
   }
@@ -133,13 +146,15 @@ export function singleLine(binder, { prefix, title, zones = 4, devices = [], onB
   const pa = s('g', { class: 'sl-pa' });
   pa.append(s('rect', { x: 260, y: 20, width: 210, height: 140, rx: 4, class: 'sl-box' }),
     s('text', { x: 270, y: 38, class: 'sl-label sl-bold' }, 'Power analyzer'));
-  const rows = [['V L1', 'V_L1', 'V'], ['V L2', 'V_L2', 'V'], ['V L3', 'V_L3', 'V'], ['I L1', 'I_L1', 'A'], ['I L2', 'I_L2', 'A'], ['I L3', 'I_L3', 'A'], ['P', 'P_kW', 'kW']];
-  rows.forEach(([label, tag, units], i) => {
-    const col = i < 3 ? 0 : i < 6 ? 1 : 2;
-    const row = i < 3 ? i : i < 6 ? i - 3 : 0;
+  // Voltages in the first column, currents in the second, power below; a
+  // reading the plant does not configure leaves its place empty.
+  const rows = [['V L1', 'V_L1', 'V', 0, 0], ['V L2', 'V_L2', 'V', 0, 1], ['V L3', 'V_L3', 'V', 0, 2],
+    ['I L1', 'I_L1', 'A', 1, 0], ['I L2', 'I_L2', 'A', 1, 1], ['I L3', 'I_L3', 'A', 1, 2], ['P', 'P_kW', 'kW', 0, 3]]
+    .filter(([, tag]) => has(`${prefix}.PA.${tag}`));
+  rows.forEach(([label, tag, units, col, row]) => {
     const x = 270 + col * 105;
-    const y = 60 + (col === 2 ? 3 : row) * 22;
-    const t = s('text', { x: col === 2 ? 270 : x, y, class: 'sl-value' }, '');
+    const y = 60 + row * 22;
+    const t = s('text', { x, y, class: 'sl-value' }, '');
     const tip = s('title', {}, '');
     t.append(tip);
     binder.on(`${prefix}.PA.${tag}`, (smp, connected) => {
@@ -152,12 +167,13 @@ export function singleLine(binder, { prefix, title, zones = 4, devices = [], onB
     });
     pa.append(t);
   });
-  svg.append(pa);
+  if (rows.length) svg.append(pa);
 
   // Door and communication status of each module.
   const status = s('g', { class: 'sl-status' });
   // An open door is abnormal (amber); a lost module is an alarm (red).
   const items = [{ label: 'Door', tag: `${prefix}.Door.Open`, text: (v) => (v ? 'OPEN' : 'CLOSED'), good: (v) => !v, notGood: 'io-abnormal' }]
+    .filter((it) => has(it.tag))
     .concat(devices.map((d) => ({ label: d.replace(`${prefix}.`, ''), tag: `${d}.Comm.Connected`, text: (v) => (v ? 'COMM OK' : 'COMM LOST'), good: (v) => !!v, notGood: 'io-false' })));
   items.forEach((it, i) => {
     const x = 20 + i * 122;

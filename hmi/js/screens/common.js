@@ -12,6 +12,15 @@ export async function tagList() {
   return tagListCache;
 }
 
+/**
+ * The names of the configured tags, as a set: a screen draws a signal only
+ * where the plant configures it ("?" is for a configured signal whose value
+ * is not known, never for one that does not exist).
+ */
+export async function configuredTags() {
+  return new Set((await tagList()).map((t) => t.name));
+}
+
 /** The tag-name prefix of a panel (the API names the panel by id, the tags by prefix). */
 export function panelPrefix(panel) {
   return panel.prefix || String(panel.id).toUpperCase();

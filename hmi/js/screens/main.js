@@ -6,7 +6,7 @@ import { get } from '../api.js';
 import { h, replace } from '../dom.js';
 import { Binder } from '../ui.js';
 import { singleLine } from '../components/singleline.js';
-import { devicesUnder, panelPrefix } from './common.js';
+import { configuredTags, devicesUnder, panelPrefix } from './common.js';
 
 const POLL_MS = 2000;
 
@@ -42,6 +42,7 @@ export default {
     (async () => {
       try {
         const { panels } = await get('/api/panels');
+        const configured = await configuredTags();
         const cards = [];
         for (const p of panels) {
           const prefix = panelPrefix(p);
@@ -49,7 +50,7 @@ export default {
           const open = ctx.session.screens.includes(p.id)
             ? h('a', { class: 'btn btn-small', href: `#/${p.id}`, 'aria-label': `Open panel: ${p.name}`, text: 'Open panel' }) : null;
           const badge = modeBadge(p.id);
-          const diagram = singleLine(binder, { prefix, title: p.name, zones: p.zones, devices });
+          const diagram = singleLine(binder, { prefix, title: p.name, zones: p.zones, devices, configured });
           shown.set(p.id, { badge, diagram });
           showPanelStatus(badge, diagram, p);
           cards.push(h('section', { class: 'card panel-card', 'aria-label': p.name, dataset: { panel: p.id } },

@@ -8,7 +8,7 @@ import { fmtDuration, qualityOf, roleAtLeast } from '../format.js';
 import { Binder, attempt, confirmDialog, formDialog, toast, valueEl } from '../ui.js';
 import { breakerState, singleLine } from '../components/singleline.js';
 import { live } from '../live.js';
-import { devicesUnder, panelPrefix } from './common.js';
+import { configuredTags, devicesUnder, panelPrefix } from './common.js';
 
 const POLL_MS = 1000;
 
@@ -265,13 +265,18 @@ export function panelScreen(id) {
         title.textContent = status.name;
         for (const k of ['Step', 'count_L_cur_c', 'count_L_cur_sv']) binder.on(`${prefix}.Seq.${k}`, drawSeq);
         const devices = await devicesUnder(prefix).catch(() => []);
-        diagram = singleLine(binder, { prefix, title: status.name, zones: status.zones, devices });
+        const configured = await configuredTags().catch(() => undefined);
+        diagram = singleLine(binder, { prefix, title: status.name, zones: status.zones, devices, configured });
         replace(diagramBox, diagram);
         const names = ['elcb', 'mccb'].concat(Array.from({ length: status.zones }, (_, i) => `zone${i + 1}`));
         drawBreakerRows(prefix, names);
+        // Only the readings this panel's analyzer has (a plant may configure a few, or none).
+        const readings = ANALYZER.filter(([, tag]) => !configured || configured.has(`${prefix}.PA.${tag}`));
         replace(paBox, h('h2', { id: `pa-${id}`, text: 'Power analyzer' }),
-          table(['Quantity', 'Value'], ANALYZER.map(([label, tag, units]) =>
-            [label, valueEl(binder, `${prefix}.PA.${tag}`, { units, digits: tag === 'PF' ? 3 : undefined })])));
+          readings.length
+            ? table(['Quantity', 'Value'], readings.map(([label, tag, units]) =>
+              [label, valueEl(binder, `${prefix}.PA.${tag}`, { units, digits: tag === 'PF' ? 3 : undefined })]))
+            : h('p', { class: 'empty', text: 'This panel has no power analyzer readings configured.' }));
         draw();
         timer = setInterval(refresh, POLL_MS);
       })();
