@@ -10,6 +10,7 @@ import { visibleEveryMs, watchExpiry } from './session.js';
 import { toast, attempt, formDialog } from './ui.js';
 import { AlarmFooter } from './components/alarmfooter.js';
 import { beeper } from './components/beeper.js';
+import { drawNavigation, groupOf } from './components/navigation.js';
 import login from './screens/login.js';
 import mainScreen from './screens/main.js';
 import { panelScreen } from './screens/panel.js';
@@ -48,8 +49,10 @@ const BUILTIN = {
   simulation,
 };
 
-/** The screens of this plant the user may open: [id, label, module]. */
+/** The screens of this plant the user may open: [id, label, module, group]. */
 let SCREENS = [];
+/** Shows the current screen in the navigation (set by renderToolbar). */
+let markNavigation = () => {};
 
 function moduleFor(entry) {
   if (entry.kind === 'panel') return panelScreen(entry.panel || entry.id);
@@ -89,7 +92,7 @@ async function loadScreens() {
   if (!state.session.authenticated) return;
   try {
     const { screens } = await get('/api/screens');
-    SCREENS = screens.filter((e) => e.allowed).map((e) => [e.id, e.label, moduleFor(e)]).filter((e) => e[2]);
+    SCREENS = screens.filter((e) => e.allowed).map((e) => [e.id, e.label, moduleFor(e), groupOf(e)]).filter((e) => e[2]);
   } catch (e) {
     toast(`Cannot list the screens: ${e.detail}`, 'error');
   }
@@ -103,8 +106,9 @@ export async function refreshScreens() {
 }
 
 function renderToolbar() {
-  replace($('toolbar'), SCREENS.filter(([id]) => allowed(id)).map(([id, label]) =>
-    h('a', { href: `#/${id}`, class: 'tool', dataset: { screen: id }, text: label })));
+  markNavigation = drawNavigation($('toolbar'), SCREENS.filter(([id]) => allowed(id))
+    .map(([id, label, , group]) => ({ id, label, group })));
+  markNavigation(state.current);
 }
 
 function renderFrame() {
@@ -135,6 +139,7 @@ function renderFrame() {
     live.start();
     footer.hidden = false;
     state.footer = new AlarmFooter(footer, s);
+    state.footer.setScreen(state.current);
     startCommLight();
     watchPanelModes();
     if (s.pair) state.offPair = watchPair($('pair-light'));
@@ -178,10 +183,8 @@ function mount(id) {
   const el = $('screen');
   replace(el);
   el.className = `screen screen-${id}`;
-  for (const a of document.querySelectorAll('#toolbar a')) {
-    if (a.dataset.screen === id) a.setAttribute('aria-current', 'page');
-    else a.removeAttribute('aria-current');
-  }
+  markNavigation(id);
+  if (state.footer) state.footer.setScreen(id);
   const entry = SCREENS.find(([x]) => x === id);
   const screen = id === 'login' ? login : entry && entry[2];
   document.title = `gridscada — ${entry ? entry[1] : id === 'login' ? 'Log in' : 'No screens'}`;

@@ -17,6 +17,9 @@ const VIEW_KEY = 'gridscada.footer.view';
 const MIN_H = 64;
 /** A phone or a small tablet: the footer shows the summary per area. */
 const COMPACT = '(max-width: 700px)';
+/** The footer's height by default: on a phone, the bar and a few areas, so the process comes first. */
+const DEFAULT_H = 150;
+const PHONE_H = 120;
 
 export const PRIORITY_LEVELS = [['', 'Any priority'], ['200', '≥ 200'], ['400', '≥ 400'], ['600', '≥ 600'], ['800', '≥ 800']];
 
@@ -29,6 +32,7 @@ export class AlarmFooter {
     this.minPriority = '';
     this.compact = window.matchMedia(COMPACT);
     this.view = sessionStorage.getItem(VIEW_KEY) || '';
+    this.screen = '';
     this.build();
     this.applyHeight(Number(sessionStorage.getItem(HEIGHT_KEY)) || null);
     this.onMedia = () => { this.applyHeight(this.height); this.draw(live.alarms); };
@@ -95,7 +99,7 @@ export class AlarmFooter {
         this.tbody));
     this.summary = h('div', { class: 'footer-list footer-summary', id: 'footer-summary', tabindex: '0', role: 'group', 'aria-label': 'Alarms by area', hidden: true });
     this.root.replaceChildren(this.grip,
-      h('div', { class: 'footer-bar' },
+      this.bar = h('div', { class: 'footer-bar' },
         h('h2', { class: 'footer-title', text: 'Alarms' }), this.count, this.selSelect, this.prioSelect,
         h('div', { class: 'footer-buttons' }, buttons)),
       this.list, this.summary);
@@ -106,13 +110,26 @@ export class AlarmFooter {
     return this.view === 'summary' || (this.compact.matches && this.view !== 'rows');
   }
 
+  /** On a phone the alarm screen is itself the list: the footer keeps only its bar there. */
+  barOnly() {
+    return this.compact.matches && this.screen === 'alarms';
+  }
+
+  /** Tells the footer which screen is shown. */
+  setScreen(id) {
+    const was = this.barOnly();
+    this.screen = id;
+    if (was !== this.barOnly()) { this.applyHeight(this.height); this.draw(live.alarms); }
+  }
+
   maxHeight() { return Math.max(MIN_H, Math.round(window.innerHeight * 0.8)); }
 
   /** Sets the footer's height (null: the default for the screen's size), kept within the window. */
   applyHeight(px) {
     this.height = px;
-    const def = this.compact.matches ? 200 : 150;
-    const hgt = Math.round(Math.min(this.maxHeight(), Math.max(MIN_H, px || def)));
+    const def = this.compact.matches ? PHONE_H : DEFAULT_H;
+    const wanted = this.barOnly() ? this.bar.getBoundingClientRect().height + 4 : px || def;
+    const hgt = Math.round(Math.min(this.maxHeight(), Math.max(this.barOnly() ? 0 : MIN_H, wanted)));
     document.documentElement.style.setProperty('--footer-h', `${hgt}px`);
     this.grip.setAttribute('aria-valuenow', String(hgt));
     this.grip.setAttribute('aria-valuemin', String(MIN_H));
@@ -178,8 +195,8 @@ export class AlarmFooter {
     drawAlarmRows(this.tbody, shown);
     // The summary counts every standing alarm per area, whatever the filter.
     const summary = this.summaryShown();
-    this.list.hidden = summary;
-    this.summary.hidden = !summary;
+    this.list.hidden = summary || this.barOnly();
+    this.summary.hidden = !summary || this.barOnly();
     this.root.classList.toggle('footer-compact', summary);
     this.viewBtn.setAttribute('aria-pressed', String(summary));
     // Redrawn only when a count or the area chosen changed (a focused area button keeps its focus).

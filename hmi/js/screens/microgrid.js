@@ -94,6 +94,8 @@ export default {
       if (disposed) return;
       // A state of charge column when a unit (a battery) has one.
       const anySoc = units.some((u) => u.has('SoC_pct'));
+      // On a phone the detail columns (voltage, current, maxima) give way to P, SoC, setpoint and state.
+      const DETAIL = new Set(['V', 'V max today', 'I', 'I max today', 'P max today', 'P / max']);
       const head = ['Unit', 'V', 'V max today', 'I', 'I max today', 'P', 'P max today', 'P / max', anySoc ? 'SoC' : null, 'Setpoint', 'State'].filter(Boolean);
       const rows = units.map((u) => {
         const cells = [h('th', { scope: 'row' }, ctx.session.screens.includes('units')
@@ -102,7 +104,7 @@ export default {
           const tag = `${u.prefix}.${q}`;
           const mx = h('span', { class: 'value', dataset: { max: tag, units: units_ } });
           maxEls.set(tag, mx);
-          cells.push(h('td', { class: 'num' }, valueEl(binder, tag, { units: units_ })), h('td', { class: 'num' }, mx));
+          cells.push(h('td', { class: ['num', q !== 'P_kW' && 'col-detail'] }, valueEl(binder, tag, { units: units_ })), h('td', { class: 'num col-detail' }, mx));
           binder.on(tag, (s) => bump(tag, s));
           showMax(tag);
         }
@@ -113,8 +115,14 @@ export default {
         binder.on(`${u.prefix}.P_kW`, (s, connected) => {
           const m = maxima.get(`${u.prefix}.P_kW`);
           const q = qualityOf(s, connected);
-          if (!q.usable || typeof s.value !== 'number' || !m || m <= 0) {
-            pct.textContent = '?'; pct.className = 'value q-bad'; pct.title = q.reason || 'no daily maximum yet';
+          if (!q.usable || typeof s.value !== 'number') {
+            pct.textContent = '?'; pct.className = `value ${q.cls}`; pct.title = q.reason || 'no value';
+            fill.style.width = '0';
+            return;
+          }
+          if (!m || m <= 0) {
+            // A known power, and no output today (a unit that has not run): no ratio to show, and nothing unknown.
+            pct.textContent = '—'; pct.className = 'value q-good'; pct.title = 'no output today, so no ratio to today\'s maximum';
             fill.style.width = '0';
             return;
           }
@@ -122,16 +130,18 @@ export default {
           pct.textContent = `${(r * 100).toFixed(0)} %`; pct.className = 'value q-good'; pct.title = `${fmtNumber(s.value)} / ${fmtNumber(m)} kW`;
           fill.style.width = `${Math.min(100, r * 100)}%`;
         });
-        cells.push(h('td', {}, ratio));
+        cells.push(h('td', { class: 'col-detail' }, ratio));
         if (anySoc) cells.push(h('td', { class: 'num', dataset: { soc: u.id } }, u.has('SoC_pct') ? valueEl(binder, `${u.prefix}.SoC_pct`, { units: '%', digits: 1 }) : '—'));
         cells.push(
           h('td', { class: 'num' }, u.has('Setpoint_kW') ? valueEl(binder, `${u.prefix}.Setpoint_kW`, { units: 'kW' }) : '—'),
           h('td', { class: 'unit-state' }, u.has('State') ? valueEl(binder, `${u.prefix}.State`, { format: stateFormat(u.stateDescription) }) : '—'));
+        // Each cell names its column: on a phone a unit is a card of labelled values.
+        cells.forEach((c, i) => { c.dataset.label = head[i]; });
         return h('tr', { dataset: { unit: u.id } }, cells);
       });
       replace(unitsBox, h('h2', { id: 'mg-units', text: 'Units' }),
         h('div', { class: 'table-wrap', tabindex: '0' }, h('table', { class: 'data', id: 'mg-units-table' },
-          h('thead', {}, h('tr', {}, head.map((t) => h('th', { scope: 'col', text: t })))), h('tbody', {}, rows))));
+          h('thead', {}, h('tr', {}, head.map((t) => h('th', { scope: 'col', class: DETAIL.has(t) && 'col-detail', text: t })))), h('tbody', {}, rows))));
 
       // The demand tag, and the load meter's other readings beside it where they exist.
       const load = [['Active power', mg.demandTag, 'kW'],

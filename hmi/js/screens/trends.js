@@ -234,7 +234,11 @@ export default {
       replace(penList, pens.map((p) => {
         const sw = h('span', { class: 'pen-swatch' });
         sw.style.background = p.color;
-        return h('li', { dataset: { pen: p.tag } }, sw, h('span', { class: 'pen-name', title: p.tag, text: `${p.tag}${p.units ? ` (${p.units})` : ''}` }),
+        // The pen's words and its tag, both whole (wrapped, never cut short).
+        const desc = (meta.get(p.tag) || {}).description || '';
+        const units = p.units ? ` (${p.units})` : '';
+        return h('li', { dataset: { pen: p.tag } }, sw, h('span', { class: 'pen-name', title: `${desc ? `${desc}: ` : ''}${p.tag}${units}` },
+          desc ? [h('span', { class: 'pen-desc', text: `${desc}${units}` }), h('span', { class: 'pen-tag', text: p.tag })] : `${p.tag}${units}`),
           h('button', { type: 'button', class: 'btn btn-small', 'aria-label': `Remove pen ${p.tag}`, text: '×',
             onclick: () => { pens.splice(pens.indexOf(p), 1); drawPens(); load(); } }));
       }));

@@ -21,17 +21,19 @@ use serde::Serialize;
 use crate::auth::Principal;
 
 /// Built-in screens that every plant has, after the plant-specific ones, in
-/// toolbar order, with their labels.
-const TOOLS: &[(&str, &str)] = &[
-    ("tags", "Tags"),
-    ("devices", "Devices"),
-    ("alarms", "Alarms"),
-    ("alarmkpi", "Alarm KPIs"),
-    ("events", "Events"),
-    ("trends", "Trends"),
-    ("reports", "Reports"),
-    ("editor", "Screen editor"),
-    ("users", "Users"),
+/// toolbar order (by group), with their labels. The Simulation screen is
+/// listed only by a server that runs simulators.
+const TOOLS: &[(&str, &str, ScreenGroup)] = &[
+    ("alarms", "Alarms", ScreenGroup::Alarms),
+    ("events", "Events", ScreenGroup::Alarms),
+    ("trends", "Trends", ScreenGroup::Trends),
+    ("tags", "Tags", ScreenGroup::Engineering),
+    ("devices", "Devices", ScreenGroup::Engineering),
+    ("editor", "Screen editor", ScreenGroup::Engineering),
+    (SIMULATION, "Simulation", ScreenGroup::Engineering),
+    ("users", "Users", ScreenGroup::Administration),
+    ("reports", "Reports", ScreenGroup::Administration),
+    ("alarmkpi", "Alarm KPIs", ScreenGroup::Administration),
 ];
 
 /// The switching network's single-line screen (a plant with `[network]`).
@@ -56,6 +58,22 @@ pub enum ScreenKind {
     Custom,
 }
 
+/// Where a screen sits in the HMI's navigation (docs/HMI_STYLE.md,
+/// "Navigation"): the catalog lists the groups in this order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ScreenGroup {
+    /// The plant: main, panels, microgrid, network, drawn screens.
+    Process,
+    /// Alarms and events.
+    Alarms,
+    Trends,
+    /// Tags, devices, the screen editor, the simulation panel.
+    Engineering,
+    /// Users, reports, the alarm KPIs.
+    Administration,
+}
+
 /// One screen of the catalog.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ScreenEntry {
@@ -63,6 +81,7 @@ pub struct ScreenEntry {
     pub id: String,
     pub label: String,
     pub kind: ScreenKind,
+    pub group: ScreenGroup,
     /// The panel's id, for a panel screen.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub panel: Option<String>,
@@ -114,16 +133,17 @@ impl ScreenLibrary {
 
 /// Every screen of this plant, in toolbar order.
 pub fn catalog(plant: &Plant, library: &ScreenLibrary) -> Vec<ScreenEntry> {
-    let builtin = |id: &str, label: &str| ScreenEntry {
+    let builtin = |id: &str, label: &str, group: ScreenGroup| ScreenEntry {
         id: id.into(),
         label: label.into(),
         kind: ScreenKind::Builtin,
+        group,
         panel: None,
         version: None,
     };
     let mut out = vec![];
     if !plant.panels.is_empty() {
-        out.push(builtin("main", "Main"));
+        out.push(builtin("main", "Main", ScreenGroup::Process));
     }
     for p in &plant.panels {
         let id = p.id.get_ref();
@@ -135,30 +155,34 @@ pub fn catalog(plant: &Plant, library: &ScreenLibrary) -> Vec<ScreenEntry> {
                 p.name.clone()
             },
             kind: ScreenKind::Panel,
+            group: ScreenGroup::Process,
             panel: Some(id.clone()),
             version: None,
         });
     }
     if plant.microgrid.is_some() {
-        out.push(builtin("microgrid", "Microgrid"));
-        out.push(builtin("units", "Units"));
+        out.push(builtin("microgrid", "Microgrid", ScreenGroup::Process));
+        out.push(builtin("units", "Units", ScreenGroup::Process));
     }
     if plant.network.is_some() {
-        out.push(builtin(NETWORK, "Network"));
+        out.push(builtin(NETWORK, "Network", ScreenGroup::Process));
     }
     for s in library.all() {
         out.push(ScreenEntry {
             id: s.access_id(),
             label: s.name.clone(),
             kind: ScreenKind::Custom,
+            group: ScreenGroup::Process,
             panel: None,
             version: Some(s.version),
         });
     }
-    out.extend(TOOLS.iter().map(|(id, label)| builtin(id, label)));
-    if library.has_simulation() {
-        out.push(builtin(SIMULATION, "Simulation"));
-    }
+    out.extend(
+        TOOLS
+            .iter()
+            .filter(|(id, ..)| *id != SIMULATION || library.has_simulation())
+            .map(|(id, label, group)| builtin(id, label, *group)),
+    );
     out
 }
 

@@ -124,16 +124,16 @@ fn another_plant_is_usable_whole() {
             "pb",
             "pc",
             "custom:pumps",
-            "tags",
-            "devices",
             "alarms",
-            "alarmkpi",
             "events",
             "trends",
-            "reports",
+            "tags",
+            "devices",
             "editor",
+            "simulation",
             "users",
-            "simulation"
+            "reports",
+            "alarmkpi"
         ]
     );
     let panels = admin.get_ok("/api/panels");

@@ -479,6 +479,17 @@ pub enum ScreenKind {
     Custom,
 }
 
+/// Where a screen sits in the HMI's navigation (`access::ScreenGroup`).
+#[derive(ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum ScreenGroup {
+    Process,
+    Alarms,
+    Trends,
+    Engineering,
+    Administration,
+}
+
 /// A screen of the catalog (`api::screens::CatalogEntry`, its
 /// `access::ScreenEntry` flattened).
 #[derive(ToSchema)]
@@ -488,6 +499,8 @@ pub struct CatalogEntry {
     pub label: String,
     #[schema(inline)]
     pub kind: ScreenKind,
+    #[schema(inline)]
+    pub group: ScreenGroup,
     #[schema(required = false)]
     pub panel: String,
     #[schema(required = false)]

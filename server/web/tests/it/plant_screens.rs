@@ -53,16 +53,16 @@ async fn the_catalog_is_the_plants_own() {
     assert_eq!(
         ids(&cat.json()),
         [
-            "tags",
-            "devices",
             "alarms",
-            "alarmkpi",
             "events",
             "trends",
-            "reports",
+            "tags",
+            "devices",
             "editor",
+            "simulation",
             "users",
-            "simulation"
+            "reports",
+            "alarmkpi"
         ]
     );
     let guest = h.login("guest", PASSWORD).await;

@@ -161,7 +161,7 @@ test('every other element type, resize, delete, rename, copy, export and import;
     const renamed = requireOk(await api.call('GET', `/api/screens/${ID}`), 'renamed screen');
     assert.deepEqual([renamed.id, renamed.name, renamed.version], [ID, RENAMED, 2]);
     assert.deepEqual(renamed.elements, saved.elements);
-    await page.locator(`#toolbar a[data-screen="custom:${ID}"]`, { hasText: RENAMED }).waitFor();
+    await page.locator(`#toolbar a[data-screen="custom:${ID}"]`, { hasText: RENAMED }).waitFor({ state: 'attached' });
 
     // Copy: a new screen (version 1) with the same elements; the original stays at version 2.
     await page.locator('#editor-copy').click();

@@ -5,9 +5,9 @@ import { launch, login, toolbar, credentials, adminApi, BASE } from '../lib.js';
 import { ensureGuest } from '../fixtures.js';
 
 const EXPECTED = {
-  administrator: ['main', 'ss1', 'css1', 'microgrid', 'units', 'network', 'tags', 'devices', 'alarms', 'alarmkpi', 'events', 'trends', 'reports', 'editor', 'users', 'simulation'],
-  supervisor: ['main', 'ss1', 'css1', 'microgrid', 'units', 'network', 'tags', 'devices', 'alarms', 'alarmkpi', 'events', 'trends', 'reports'],
-  operator: ['main', 'ss1', 'css1', 'microgrid', 'units', 'network', 'tags', 'devices', 'alarms', 'events', 'trends'],
+  administrator: ['main', 'ss1', 'css1', 'microgrid', 'units', 'network', 'alarms', 'events', 'trends', 'tags', 'devices', 'editor', 'simulation', 'users', 'reports', 'alarmkpi'],
+  supervisor: ['main', 'ss1', 'css1', 'microgrid', 'units', 'network', 'alarms', 'events', 'trends', 'tags', 'devices', 'reports', 'alarmkpi'],
+  operator: ['main', 'ss1', 'css1', 'microgrid', 'units', 'network', 'alarms', 'events', 'trends', 'tags', 'devices'],
   guest: ['main', 'microgrid', 'network', 'alarms', 'trends'],
 };
 

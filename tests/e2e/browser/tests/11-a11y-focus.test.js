@@ -37,7 +37,7 @@ test('focus after login, skip link on any screen, aria-pressed on view buttons',
       // A fresh load of the screen's address: the keyboard starts at the top of the page.
       await page.goto(`${BASE}/#/${screen}`);
       await page.reload();
-      await page.locator(`#toolbar a[data-screen="${screen}"][aria-current="page"]`).waitFor();
+      await page.locator(`#toolbar a[data-screen="${screen}"][aria-current="page"]`).waitFor({ state: 'attached' });
       await page.keyboard.press('Tab');
       const skip = page.locator('.skip-link');
       assert.equal(await skip.evaluate((e) => e === document.activeElement), true, 'the skip link is the first stop');
