@@ -336,6 +336,12 @@ fn check_tls(cx: &mut Ctx<'_>, tls: &TlsConfig, http: &Spanned<String>) {
     }
 }
 
+/// The form of an ISO 4217 code: three capital letters (whether the code is
+/// assigned is not checked: a new one must not need a new release).
+fn is_currency_code(code: &str) -> bool {
+    code.len() == 3 && code.bytes().all(|b| b.is_ascii_uppercase())
+}
+
 fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
     let http = &main.server.http;
     if http.get_ref().parse::<SocketAddr>().is_err() {
@@ -369,6 +375,18 @@ fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
                 delay.get_ref()
             ),
         );
+    }
+    if let Some(currency) = &main.reports.currency {
+        if !is_currency_code(currency.get_ref()) {
+            cx.err(
+                0,
+                currency.span(),
+                format!(
+                    "[reports] currency: '{}' is not an ISO 4217 currency code: three capital letters, like EUR or USD",
+                    currency.get_ref()
+                ),
+            );
+        }
     }
     let sessions = &main.server.sessions;
     for (role, minutes) in sessions.idle_minutes.get_ref() {

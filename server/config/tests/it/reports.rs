@@ -48,3 +48,17 @@ fn a_bad_delay_or_an_unknown_key_is_located() {
     assert_eq!(d[0].line, 3, "{}", d[0]);
     assert!(d[0].message.contains("weekly"), "{}", d[0]);
 }
+
+#[test]
+fn the_currency_is_optional_and_an_iso_4217_code() {
+    assert_eq!(load("").unwrap().reports.currency(), None);
+    let p = load("[reports]\ncurrency = \"EUR\"\n").unwrap();
+    assert_eq!(p.reports.currency(), Some("EUR"));
+    for bad in ["eur", "EURO", "€", ""] {
+        let d = load(&format!("[reports]\ndaily = true\ncurrency = \"{bad}\"\n")).unwrap_err();
+        assert_eq!(d.len(), 1, "{bad}: {d:?}");
+        assert_eq!(d[0].line, 4, "{}", d[0]);
+        assert!(d[0].message.contains("[reports] currency"), "{}", d[0]);
+        assert!(d[0].message.contains("ISO 4217"), "{}", d[0]);
+    }
+}
