@@ -137,7 +137,10 @@ pub struct Outages {
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct TopAlarm {
     pub alarm_key: String,
+    /// Empty for an alarm of the server's own (a panel sequence's).
     pub tag: String,
+    /// Where it is, by its configured name (see [`alarm_place`]).
+    pub place: String,
     pub priority: i32,
     pub message: String,
     pub count: u64,
@@ -647,8 +650,43 @@ fn energy_not_supplied(
     }
 }
 
-/// Alarm figures from the transitions of the period, oldest first.
-pub fn alarm_figures(transitions: &[AlarmTransition]) -> AlarmFigures {
+/// Where an alarm is, by its configured name: the panel or microgrid unit
+/// whose prefix its tag is under (the longest such prefix), else the one
+/// whose prefix is its selection (a panel sequence's alarms have no tag and
+/// are grouped under their panel's prefix), else the selection itself (the
+/// alarm screen's area).
+pub fn alarm_place(plant: &Plant, tag: &str, selection: &str) -> String {
+    let panels = plant
+        .panels
+        .iter()
+        .map(|p| (p.prefix.get_ref().as_str(), p.name.as_str()));
+    let units = plant
+        .microgrid
+        .iter()
+        .flat_map(|mg| &mg.units)
+        .map(|u| (u.prefix.get_ref().as_str(), u.name.as_str()));
+    let owners: Vec<(&str, &str)> = panels.chain(units).collect();
+    let tag_owner = owners
+        .iter()
+        .filter(|(prefix, _)| {
+            tag.strip_prefix(prefix)
+                .is_some_and(|rest| rest.starts_with('.'))
+        })
+        .max_by_key(|(prefix, _)| prefix.len());
+    let selection_owner = || {
+        owners
+            .iter()
+            .find(|(prefix, _)| prefix.eq_ignore_ascii_case(selection.trim()))
+    };
+    match tag_owner.or_else(selection_owner) {
+        Some((_, name)) => name.to_string(),
+        None => selection.trim().to_string(),
+    }
+}
+
+/// Alarm figures from the transitions of the period, oldest first; the top
+/// alarms are placed in `plant` ([`alarm_place`]).
+pub fn alarm_figures(plant: &Plant, transitions: &[AlarmTransition]) -> AlarmFigures {
     let mut by_priority: BTreeMap<i32, u64> = BTreeMap::new();
     let mut per_alarm: HashMap<&str, TopAlarm> = HashMap::new();
     // Activations waiting for their acknowledgement, per alarm.
@@ -664,6 +702,7 @@ pub fn alarm_figures(transitions: &[AlarmTransition]) -> AlarmFigures {
                 .or_insert_with(|| TopAlarm {
                     alarm_key: t.alarm_key.clone(),
                     tag: t.tag.clone(),
+                    place: alarm_place(plant, &t.tag, &t.selection),
                     priority: t.priority,
                     message: t.message.clone(),
                     count: 0,

@@ -237,13 +237,14 @@ pub async fn generate(
     }
     Ok(Report {
         site: plant.server.site().to_string(),
+        currency: plant.reports.currency().map(str::to_string),
         period,
         id: period.to_string(),
         from,
         to,
         generated_at: now.as_millis(),
         energy,
-        alarms: alarm_figures(&transitions),
+        alarms: alarm_figures(plant, &transitions),
         outages,
     })
 }

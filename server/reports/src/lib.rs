@@ -33,6 +33,9 @@ pub use period::{BadPeriod, Period};
 pub struct Report {
     /// The site it reports on: `[server] site`, else the main file's name.
     pub site: String,
+    /// `[reports] currency`: the ISO 4217 code of every cost; `None`: the
+    /// prices' own unit ("cost units").
+    pub currency: Option<String>,
     pub period: Period,
     /// Its id: `2024-06-21` or `2024-06`.
     pub id: String,

@@ -7,7 +7,7 @@ use std::fmt::Write;
 
 use gridscada_tagdb::Timestamp;
 
-use crate::figures::UnitEnergy;
+use crate::figures::{UnitEnergy, BASELINE_MS, SUSTAINED_S};
 use crate::Report;
 
 /// Escapes text for HTML.
@@ -42,9 +42,41 @@ fn num(v: Option<f64>, digits: usize) -> String {
     }
 }
 
-fn duration_text(s: f64) -> String {
-    let s = s.max(0.0).round() as u64;
-    format!("{}:{:02}:{:02}", s / 3600, s / 60 % 60, s % 60)
+/// A duration as an operator reads it, the HMI's words (`fmtDuration` in
+/// hmi/js/format.js): "4.2 s", "45 s", "2 min 05 s", "8 h 45 min"; every
+/// duration of the report is written with it.
+pub fn duration_words(s: f64) -> String {
+    if !s.is_finite() {
+        return "—".to_string();
+    }
+    let s = s.max(0.0);
+    if s < 59.5 {
+        let digits = if s < 9.95 { 1 } else { 0 };
+        return format!("{s:.digits$} s");
+    }
+    if s < 3570.0 {
+        let whole = s.round() as u64;
+        return format!("{} min {:02} s", whole / 60, whole % 60);
+    }
+    let minutes = (s / 60.0).round() as u64;
+    format!("{} h {:02} min", minutes / 60, minutes % 60)
+}
+
+fn duration(v: Option<f64>) -> String {
+    v.map_or("—".to_string(), duration_words)
+}
+
+/// The unit costs are in: `[reports] currency`, else the prices' own.
+fn cost_unit(r: &Report) -> &str {
+    r.currency.as_deref().unwrap_or("cost units")
+}
+
+/// A cost with its currency, for the page: "12.34 EUR".
+fn cost_text(r: &Report, v: Option<f64>) -> String {
+    match v {
+        Some(v) if v.is_finite() => format!("{:.2} {}", v + 0.0, esc(cost_unit(r))),
+        _ => "—".to_string(),
+    }
 }
 
 fn kind_label(u: &UnitEnergy) -> &'static str {
@@ -66,6 +98,9 @@ th, td { border: 1px solid #bbb; padding: 3px 8px; text-align: left; }
 td.n, th.n { text-align: right; font-variant-numeric: tabular-nums; }
 th { background: #eee; }
 .note { color: #555; font-size: 12px; }
+dl.definitions { font-size: 12px; margin: 4px 0; }
+dl.definitions dt { font-weight: 600; margin-top: 6px; }
+dl.definitions dd { margin: 0 0 0 16px; }
 @media print {
   @page { size: A4; margin: 15mm; }
   body { margin: 0; font-size: 9pt; }
@@ -130,7 +165,7 @@ pub fn html(r: &Report) -> String {
     if !e.units.is_empty() {
         o.push_str(
             "<table><tr><th>Unit</th><th>Kind</th><th class=\"n\">kWh out</th><th class=\"n\">kWh in</th>\
-             <th class=\"n\">Run h</th><th class=\"n\">Starts</th><th class=\"n\">Fuel l</th>\
+             <th class=\"n\">Run time</th><th class=\"n\">Starts</th><th class=\"n\">Fuel l</th>\
              <th class=\"n\">Cycles</th><th class=\"n\">Cost</th></tr>",
         );
         for u in &e.units {
@@ -141,17 +176,17 @@ pub fn html(r: &Report) -> String {
                 o,
                 "<tr><td>{} ({})</td><td>{}</td><td class=\"n\">{:.1}</td><td class=\"n\">{}</td>\
                  <td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td>\
-                 <td class=\"n\">{}</td><td class=\"n\">{:.2}</td></tr>",
+                 <td class=\"n\">{}</td><td class=\"n\">{}</td></tr>",
                 esc(&u.name),
                 esc(&u.id),
                 kind_label(u),
                 u.kwh,
                 if storage { format!("{:.1}", u.charged_kwh) } else { String::new() },
-                if diesel { format!("{:.2}", u.run_h) } else { String::new() },
+                if diesel { duration_words(u.run_h * 3600.0) } else { String::new() },
                 if diesel { u.starts.to_string() } else { String::new() },
                 if diesel { num(u.fuel_l, 1) } else { String::new() },
                 if storage { num(u.cycles, 2) } else { String::new() },
-                u.cost
+                cost_text(r, Some(u.cost))
             );
         }
         let _ = write!(
@@ -164,7 +199,7 @@ pub fn html(r: &Report) -> String {
             e.produced_kwh,
             e.renewable_share
                 .map_or("—".to_string(), |s| format!("{:.1} %", s * 100.0)),
-            num(e.cost, 2)
+            cost_text(r, e.cost)
         );
     }
     let a = &r.alarms;
@@ -180,22 +215,35 @@ pub fn html(r: &Report) -> String {
         o,
         "<tr><th>Acknowledged</th><td class=\"n\">{}</td></tr>\
          <tr><th>Not acknowledged in the period</th><td class=\"n\">{}</td></tr>\
-         <tr><th>Time to acknowledge: mean / median / 90 % / max</th><td class=\"n\">{} / {} / {} / {} s</td></tr></table>",
+         <tr><th>Time to acknowledge: mean</th><td class=\"n\">{}</td></tr>\
+         <tr><th>Time to acknowledge: median</th><td class=\"n\">{}</td></tr>\
+         <tr><th>Time to acknowledge: 90th percentile</th><td class=\"n\">{}</td></tr>\
+         <tr><th>Time to acknowledge: longest</th><td class=\"n\">{}</td></tr></table>",
         a.acknowledged,
         a.unacknowledged,
-        num(a.ack_mean_s, 0),
-        num(a.ack_median_s, 0),
-        num(a.ack_p90_s, 0),
-        num(a.ack_max_s, 0)
+        duration(a.ack_mean_s),
+        duration(a.ack_median_s),
+        duration(a.ack_p90_s),
+        duration(a.ack_max_s)
     );
     if !a.top.is_empty() {
-        o.push_str("<table><tr><th>Top alarms</th><th>Tag</th><th class=\"n\">Priority</th><th class=\"n\">Count</th></tr>");
+        o.push_str(
+            "<table id=\"top-alarms\"><tr><th>Top alarms: where · tag — alarm</th>\
+             <th class=\"n\">Priority</th><th class=\"n\">Count</th></tr>",
+        );
         for t in &a.top {
+            // An alarm without a tag (a panel sequence's) is named by its key.
+            let tag = if t.tag.is_empty() {
+                &t.alarm_key
+            } else {
+                &t.tag
+            };
             let _ = write!(
                 o,
-                "<tr><td>{}</td><td>{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td></tr>",
+                "<tr><td>{} · {} — {}</td><td class=\"n\">{}</td><td class=\"n\">{}</td></tr>",
+                esc(if t.place.is_empty() { "—" } else { &t.place }),
+                esc(tag),
                 esc(&t.message),
-                esc(&t.tag),
                 t.priority,
                 t.count
             );
@@ -243,19 +291,56 @@ pub fn html(r: &Report) -> String {
                 if i.began_before { "before " } else { "" },
                 time_text(i.start),
                 i.end.map_or("still out".to_string(), time_text),
-                duration_text(i.duration_s),
+                duration_words(i.duration_s),
                 if i.sustained { "sustained" } else { "momentary" },
                 num(i.ens_kwh, 2)
             );
         }
         o.push_str("</table>");
     }
-    o.push_str(
-        "<p class=\"note\">Zones stand for customers in SAIFI/SAIDI/MAIFI; interruptions of 5 minutes or \
-         more are sustained. Energy not supplied is the load before the interruption over its \
-         duration. \"Data\" is the share of the period the historian knew the values.</p></body></html>\n",
-    );
+    definitions(&mut o, r);
+    o.push_str("</body></html>\n");
     o
+}
+
+/// The report's notes: what every figure printed is, in the words of its
+/// computation (`figures.rs`), so a reader need not guess.
+fn definitions(o: &mut String, r: &Report) {
+    let cost_unit = match &r.currency {
+        Some(c) => format!("in {} (<code>[reports] currency</code>)", esc(c)),
+        None => "in cost units: the unit of the configured prices \
+                 (set <code>[reports] currency</code> to name the currency)"
+            .to_string(),
+    };
+    let baseline_min = BASELINE_MS / 60_000;
+    let sustained = duration_words(SUSTAINED_S);
+    let items: [(&str, String); 20] = [
+        ("Period", "from its start (00:00 UTC of the day, or of the month's 1st) to its end, or to when the report was made if the period was still running; all times are UTC.".into()),
+        ("Data", "the share of the period the historian knew the values the row is computed from (for outages: every breaker state of the panel). A sample holds for twice its tag's max interval plus 5 minutes; past that, or past the last sample of any tag the report reads (the server stopped), the value is unknown and counts for nothing.".into()),
+        ("Panel kWh", "the panel's meter (its first read-only, historised tag in kW, W or MW under the panel's prefix and outside its zones) integrated over the period; negative readings subtract.".into()),
+        ("Zone kWh", "the zone's own meter (such a tag under PREFIX.ZoneN.) integrated the same way; a zone without one is not measured.".into()),
+        ("kWh out", "a unit's power integrated where positive: produced (PV, wind, diesel), discharged (battery). A generator's negative readings (its auxiliaries) are not production.".into()),
+        ("kWh in", "a battery's power integrated where negative: the energy it charged.".into()),
+        ("Run time", "a diesel's time running (its running tag true; where that tag has no data, its power above zero); Starts: the times it went from stopped to running.".into()),
+        ("Fuel l", "a diesel's litres per kWh × kWh out + no-load litres per hour × run time, from its fuel curve; — without one.".into()),
+        ("Cycles", "a battery's equivalent full cycles: (kWh in + kWh out) / (2 × capacity).".into()),
+        ("Cost", format!("{cost_unit}. PV and wind: cost per kWh × kWh out. Diesel: with a fuel price and fuel curve, fuel price × fuel litres, else cost per kWh × kWh out; plus start cost × starts. Battery: cycle cost per kWh × (kWh in + kWh out). The microgrid's cost is the sum of its units'.")),
+        ("Demand kWh", "the microgrid's demand tag integrated over the period.".into()),
+        ("Produced kWh", "the sum of every unit's kWh out: PV, wind, diesel and battery discharge.".into()),
+        ("PV and wind share", "PV and wind kWh out / produced kWh. Battery discharge is in the denominator and its charging is not subtracted, so energy stored and discharged later counts twice in the denominator (once produced, once discharged) and PV or wind energy once in the numerator: it is a share of production, not of the energy served. A month's share is computed from the month's totals.".into()),
+        ("Activations", "alarm activations annunciated in the period (ISA-18.2): an activation while the alarm is shelved, suppressed or out of service is not counted. Priority N: the same, per priority, highest first.".into()),
+        ("Acknowledged", "activations of the period whose acknowledgement came within the period (one acknowledgement acknowledges every earlier activation of the same alarm); Not acknowledged in the period: the other activations of the period.".into()),
+        ("Time to acknowledge", "from an activation to its acknowledgement, over the acknowledged activations: their mean; the median and the 90th percentile (the sorted times' entry at 0.5 × (count − 1) and 0.9 × (count − 1), rounded); and the longest.".into()),
+        ("Top alarms", "the ten alarms activated most often in the period, each with where it is (the panel or microgrid unit whose prefix its tag is under, by its configured name, else its alarm area) and its tag; an alarm of the server's own, such as a panel sequence's, has no tag and is named by its key.".into()),
+        ("Sustained, Momentary", format!("a zone's interruptions (its breaker, the main MCCB or the ELCB open) lasting {sustained} or more, and shorter ones (IEEE 1366).")),
+        ("SAIFI, SAIDI, MAIFI", "zones stand for customers: sustained interruptions per zone, minutes of sustained interruption per zone, momentary interruptions per zone.".into()),
+        ("ENS kWh", format!("energy not supplied: with a zone meter, the zone's mean load over the {baseline_min} minutes before the interruption × its duration; without one, the panel meter's drop below its mean load over the {baseline_min} minutes before, shared equally among the zones out (exact for one zone out, an estimate for several). Duration: from the interruption's start (or the period's, when it began before) to its end (or the period's).")),
+    ];
+    o.push_str("<h2 id=\"definitions\">Definitions</h2><dl class=\"definitions\">");
+    for (figure, meaning) in items {
+        let _ = write!(o, "<dt>{figure}</dt><dd>{meaning}</dd>");
+    }
+    o.push_str("</dl>");
 }
 
 /// A CSV field with the formula guard of the historian export.
@@ -328,7 +413,7 @@ pub fn csv(r: &Report) -> String {
         row(&mut o, "unit", s, "starts", &u.starts.to_string(), "");
         row(&mut o, "unit", s, "fuel", &val(u.fuel_l), "l");
         row(&mut o, "unit", s, "cycles", &val(u.cycles), "");
-        row(&mut o, "unit", s, "cost", &val(Some(u.cost)), "");
+        row(&mut o, "unit", s, "cost", &val(Some(u.cost)), cost_unit(r));
     }
     if !r.energy.units.is_empty() {
         row(
@@ -355,7 +440,14 @@ pub fn csv(r: &Report) -> String {
             &val(r.energy.renewable_share),
             "share",
         );
-        row(&mut o, "microgrid", "", "cost", &val(r.energy.cost), "");
+        row(
+            &mut o,
+            "microgrid",
+            "",
+            "cost",
+            &val(r.energy.cost),
+            cost_unit(r),
+        );
     }
     let a = &r.alarms;
     row(
@@ -493,4 +585,29 @@ pub fn csv(r: &Report) -> String {
         row(&mut o, "interruption", &s, "ens", &val(i.ens_kwh), "kWh");
     }
     o
+}
+
+#[cfg(test)]
+mod tests {
+    use super::duration_words;
+
+    #[test]
+    fn durations_are_written_in_words() {
+        for (s, words) in [
+            (0.0, "0.0 s"),
+            (4.24, "4.2 s"),
+            (45.0, "45 s"),
+            (59.4, "59 s"),
+            (59.6, "1 min 00 s"),
+            (125.0, "2 min 05 s"),
+            (3569.0, "59 min 29 s"),
+            (3600.0, "1 h 00 min"),
+            (31_527.0, "8 h 45 min"),
+            (90_000.0, "25 h 00 min"),
+            (-3.0, "0.0 s"),
+        ] {
+            assert_eq!(duration_words(s), words, "{s} s");
+        }
+        assert_eq!(duration_words(f64::NAN), "—");
+    }
 }

@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use gridscada_config::Plant;
-use gridscada_reports::figures::{alarm_figures, energy, outages, SampleMap};
+use gridscada_reports::figures::{alarm_figures, alarm_place, energy, outages, SampleMap};
 use gridscada_reports::series::Sample;
 use gridscada_store::AlarmTransition;
 use gridscada_tagdb::Timestamp;
@@ -169,7 +169,7 @@ fn alarm_counts_top_alarms_and_time_to_acknowledge() {
         transition(70_000, "b", 500, false, "ack"),
         transition(80_000, "c", 500, true, "activate"),
     ];
-    let f = alarm_figures(&t);
+    let f = alarm_figures(&plant(), &t);
     assert_eq!(f.activations, 4);
     assert_eq!(f.by_priority, vec![(800, 2), (500, 2)]);
     assert_eq!(f.top[0].alarm_key, "a");
@@ -179,4 +179,112 @@ fn alarm_counts_top_alarms_and_time_to_acknowledge() {
     assert_eq!(f.ack_max_s, Some(60.0));
     assert_eq!(f.ack_median_s, Some(60.0));
     assert!(close(f.ack_mean_s.unwrap(), 50.0));
+}
+
+#[test]
+fn an_alarm_is_placed_by_its_tag_else_its_selection_by_configured_names() {
+    let p = plant();
+    // A tag under a panel's prefix: the panel's name.
+    assert_eq!(
+        alarm_place(&p, "PA.Zone1.Closed", "anything"),
+        "Pump station panel"
+    );
+    // No tag (a panel sequence's alarm, grouped under its panel's prefix).
+    assert_eq!(alarm_place(&p, "", "PB"), "Workshop panel");
+    // A prefix is a whole first part: PAX is not under PA.
+    assert_eq!(alarm_place(&p, "PAX.Volts", "Yard"), "Yard");
+    assert_eq!(alarm_place(&p, "", ""), "");
+}
+
+/// A day of `pa` with two alarms, one of a sequence (no tag), acknowledged
+/// after 8 h 45 min and 125 s, as a report.
+fn report(currency: Option<&str>) -> gridscada_reports::Report {
+    let p = plant();
+    let mut seq = transition(0, "pa:zone2.isolated", 700, true, "activate");
+    seq.tag = String::new();
+    seq.selection = "PA".into();
+    seq.message = "zone 2 is faulty and isolated (left off)".into();
+    let mut seq_ack = seq.clone();
+    seq_ack.ts = Timestamp::from_millis(8 * H + 45 * MIN);
+    seq_ack.activation = false;
+    seq_ack.cause = Some("ack".into());
+    let volts = transition(H, "PA.PA.V_L1", 500, true, "activate");
+    let volts_ack = transition(H + 125_000, "PA.PA.V_L1", 500, false, "ack");
+    let period = gridscada_reports::Period::parse("1970-01-01").unwrap();
+    gridscada_reports::Report {
+        site: "test".into(),
+        currency: currency.map(str::to_string),
+        period,
+        id: period.to_string(),
+        from: 0,
+        to: 4 * H,
+        generated_at: 4 * H,
+        energy: energy(&p, &day(), 0, 4 * H),
+        alarms: alarm_figures(&p, &[seq, volts, volts_ack, seq_ack]),
+        outages: outages(&p, &day(), 0, 4 * H, &Default::default()),
+    }
+}
+
+#[test]
+fn the_page_names_where_each_top_alarm_is_and_writes_durations_in_words() {
+    let html = gridscada_reports::render::html(&report(Some("EUR")));
+    assert!(
+        html.contains(
+            "<td>Pump station panel · pa:zone2.isolated — zone 2 is faulty and isolated (left off)</td>"
+        ),
+        "{html}"
+    );
+    assert!(html.contains("<td>Pump station panel · PA.PA.V_L1 — PA.PA.V_L1 high</td>"));
+    // Time to acknowledge: 125 s and 8 h 45 min; the mean 4 h 24 min.
+    assert!(html.contains("<td class=\"n\">8 h 45 min</td>"), "{html}");
+    assert!(html.contains("<td class=\"n\">2 min 05 s</td>"), "{html}");
+    assert!(html.contains("<td class=\"n\">4 h 24 min</td>"), "{html}");
+    // The interruption of an hour, and the trips of a minute.
+    assert!(html.contains("<td class=\"n\">1 h 00 min</td>"), "{html}");
+    assert!(html.contains("<td class=\"n\">1 min 00 s</td>"), "{html}");
+}
+
+#[test]
+fn every_figure_is_defined_in_the_notes_and_costs_carry_the_currency() {
+    let html = gridscada_reports::render::html(&report(Some("EUR")));
+    let notes = &html[html
+        .find("<h2 id=\"definitions\">")
+        .expect("a Definitions section")..];
+    for figure in [
+        "Data",
+        "Panel kWh",
+        "Zone kWh",
+        "kWh out",
+        "kWh in",
+        "Run time",
+        "Fuel l",
+        "Cycles",
+        "Cost",
+        "Demand kWh",
+        "Produced kWh",
+        "PV and wind share",
+        "Activations",
+        "Acknowledged",
+        "Time to acknowledge",
+        "Top alarms",
+        "SAIFI, SAIDI, MAIFI",
+        "ENS kWh",
+    ] {
+        assert!(
+            notes.contains(&format!("<dt>{figure}</dt>")),
+            "{figure} is not defined"
+        );
+    }
+    assert!(notes.contains("Battery discharge is in the denominator"));
+    assert!(notes.contains("in EUR"));
+    assert!(notes.contains("5 min 00 s or more"));
+    let csv = gridscada_reports::render::csv(&report(Some("EUR")));
+    assert!(
+        !csv.lines()
+            .any(|l| l.contains(",cost,") && !l.ends_with(",EUR")),
+        "{csv}"
+    );
+    // Without a currency, costs are in the prices' own unit, said so.
+    let html = gridscada_reports::render::html(&report(None));
+    assert!(html.contains("in cost units"));
 }
