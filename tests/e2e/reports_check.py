@@ -60,6 +60,16 @@ def main():
     has = all(keys.get(k, 0) >= 1 for k in want)
     print(f"  {'pass' if has else 'FAIL'} the fault's alarms among the top alarms: {keys}")
     ok &= has
+    # Each top alarm says where it is, by the configured name: the
+    # sequence's alarm (no tag) its panel's.
+    names = {p["id"]: p["name"] for p in r["energy"]["panels"]}
+    places = {t["alarm_key"]: t["place"] for t in a["top"]}
+    placed = all(places.values()) and places.get("ss1:zone2.isolated") == names["ss1"]
+    print(f"  {'pass' if placed else 'FAIL'} every top alarm placed, the sequence's on its panel: {places}")
+    ok &= placed
+    currency = r.get("currency")
+    print(f"  {'pass' if currency == 'EUR' else 'FAIL'} costs in the demo's [reports] currency: {currency}")
+    ok &= currency == "EUR"
     # The operator acknowledges everything at 01:25 (5100 s into the day).
     every = a["activations"] >= 2 and a["acknowledged"] == a["activations"]
     print(f"  {'pass' if every else 'FAIL'} every activation acknowledged: {a['acknowledged']} of {a['activations']}")
@@ -76,6 +86,11 @@ def main():
         found = title in text
         print(f"  {'pass' if found else 'FAIL'} the PDF has the title {title!r}")
         ok &= found
+        flat = " ".join(text.split())
+        for words in ["Definitions", "Battery discharge is in the denominator", f"{names['ss1']} · ss1:zone2.isolated", " EUR"]:
+            found = words in flat
+            print(f"  {'pass' if found else 'FAIL'} the PDF has {words!r}")
+            ok &= found
         from PIL import Image, ImageStat
 
         img = Image.open(png).convert("L")
