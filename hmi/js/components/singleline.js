@@ -40,8 +40,10 @@ export function singleLine(binder, { prefix, title, zones = 4, devices = [], onB
   const has = (tag) => !configured || configured.has(tag);
   const W = Math.max(MIN_W, 90 + zones * ZONE_W);
   const svg = s('svg', { viewBox: `0 0 ${W} ${H}`, class: 'single-line', role: 'img', 'aria-label': `Single-line diagram of ${title}`, dataset: { zones: String(zones) } });
-  // Wider than the standard panel: keep the text size and let it scroll.
-  if (W > MIN_W) { svg.classList.add('single-line-wide'); svg.style.width = `${W}px`; svg.style.maxWidth = 'none'; }
+  // Wider than the standard panel: fit the card down to 80 % of the text
+  // size (7 or 8 zones fit a 1366-px screen, no label cut at the card's
+  // edge), and scroll beyond that (a 32-zone panel).
+  if (W > MIN_W) { svg.classList.add('single-line-wide'); svg.style.width = `max(100%, ${Math.round(W * 0.8)}px)`; svg.style.maxWidth = 'none'; }
   svg.append(s('title', {}, `Single-line diagram of ${title}`));
   // What the panel's sequence says (set through box.panelStatus): faulty
   // zones it isolated, and manual mode (automatic isolation off).

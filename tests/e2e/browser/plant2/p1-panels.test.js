@@ -29,6 +29,14 @@ test('every panel of another plant has its screen with its own zones', async () 
       await page.waitForFunction((n) => [...document.querySelectorAll('.panel-left .sl-breaker[data-breaker^="zone"] .sl-state')]
         .filter((t) => /CLOSED|OPEN|TRIPPED/.test(t.textContent)).length === n, p.zones);
       await b.screenshot(`panel-${p.id}`);
+      // No label or state is cut at the diagram card's edge (issue 33, finding 4: "Zone CLOS").
+      const cut = await page.evaluate(() => {
+        const box = document.querySelector('.panel-left .sl-scroll').getBoundingClientRect();
+        return [...document.querySelectorAll('.panel-left svg.single-line text')]
+          .filter((t) => t.textContent.trim() && (t.getBoundingClientRect().right > box.right + 1 || t.getBoundingClientRect().left < box.left - 1))
+          .map((t) => t.textContent);
+      });
+      assert.deepEqual(cut, [], `${p.id}: labels cut at the card's edge at 1366 px`);
     }
     await page.goto(`${BASE}/#/main`);
     await page.locator('.panel-card').nth(panels.length - 1).waitFor();
