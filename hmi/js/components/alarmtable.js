@@ -191,7 +191,7 @@ export function drawAlarmRows(tbody, alarms, { extra, selectable, selected } = {
       dataset: { alarmId: String(a.id) },
     });
     if (selectable) {
-      row.append(h('td', {}, h('input', {
+      row.append(h('td', { class: 'alarm-pick' }, h('input', {
         type: 'checkbox', class: 'alarm-select', value: String(a.id),
         checked: selected && selected.has(a.id), 'aria-label': `Select alarm ${a.message}`,
       })));
@@ -201,9 +201,9 @@ export function drawAlarmRows(tbody, alarms, { extra, selectable, selected } = {
       h('td', { class: 'nowrap alarm-since', text: fmtTime(a.activated_at ?? a.active_since ?? a.last_change) }),
       h('td', { class: 'nowrap alarm-cleared', text: a.active || !a.cleared_at ? '' : fmtTime(a.cleared_at) }),
       h('td', { class: 'alarm-state', text: STATE_LABELS[a.state] || a.state }),
-      h('td', { class: 'num' }, priorityChip(a.priority)),
-      h('td', { text: a.selection }),
-      h('td', { text: KIND_LABELS[a.kind] || a.kind }),
+      h('td', { class: 'num alarm-prio' }, priorityChip(a.priority)),
+      h('td', { class: 'alarm-selection', text: a.selection }),
+      h('td', { class: 'alarm-kind', text: KIND_LABELS[a.kind] || a.kind }),
       h('td', { class: 'alarm-message', text: a.message }),
       valueCell(a));
     if (extra) row.append(h('td', { class: 'actions' }, extra(a)));

@@ -91,10 +91,11 @@ export function panelScreen(id) {
       let disposed = false;
 
       const title = h('h1', { class: 'screen-title', text: `Panel ${id}` });
-      const diagramBox = h('section', { class: 'card', 'aria-label': 'Single-line diagram' });
-      const seqBox = h('section', { class: 'card seq-card', 'aria-labelledby': `seq-${id}` });
-      const breakersBox = h('section', { class: 'card', 'aria-labelledby': `bk-${id}` });
-      const paBox = h('section', { class: 'card', 'aria-labelledby': `pa-${id}` });
+      // On a phone the cards stack as an operator needs them: diagram, sequence, breakers, analyzer.
+      const diagramBox = h('section', { class: 'card pn-diagram', 'aria-label': 'Single-line diagram' });
+      const seqBox = h('section', { class: 'card seq-card pn-sequence', 'aria-labelledby': `seq-${id}` });
+      const breakersBox = h('section', { class: 'card pn-breakers', 'aria-labelledby': `bk-${id}` });
+      const paBox = h('section', { class: 'card pn-analyzer', 'aria-labelledby': `pa-${id}` });
       el.append(title, h('div', { class: 'panel-layout' },
         h('div', { class: 'panel-left' }, diagramBox, paBox),
         h('div', { class: 'panel-right' }, seqBox, breakersBox)));

@@ -13,7 +13,7 @@ export async function setTheme(page, dark) {
 }
 
 /** A screen has drawn and its first requests are answered. */
-async function ready(page, id) {
+export async function ready(page, id) {
   await settled(page).catch(() => {});
   await page.waitForLoadState('networkidle', { timeout: 5000 }).catch(() => {});
   if (id === 'trends') await page.locator('#trend-status', { hasText: /samples|No data|Cannot/ }).waitFor({ timeout: 15_000 }).catch(() => {});
