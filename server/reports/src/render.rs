@@ -282,11 +282,18 @@ pub fn html(r: &Report) -> String {
              <th class=\"n\">Duration</th><th>Kind</th><th class=\"n\">ENS kWh</th></tr>",
         );
         for i in &r.outages.interruptions {
+            // The panel by its configured name, as in the table above.
+            let panel = r
+                .outages
+                .panels
+                .iter()
+                .find(|p| p.id == i.panel)
+                .map_or_else(|| i.panel.clone(), |p| format!("{} ({})", p.name, p.id));
             let _ = write!(
                 o,
                 "<tr><td>{}</td><td class=\"n\">{}</td><td>{}{}</td><td>{}</td><td class=\"n\">{}</td>\
                  <td>{}</td><td class=\"n\">{}</td></tr>",
-                esc(&i.panel),
+                esc(&panel),
                 i.zone,
                 if i.began_before { "before " } else { "" },
                 time_text(i.start),

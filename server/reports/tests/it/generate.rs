@@ -149,6 +149,9 @@ async fn a_month(store: Store, dir: &Path) {
     );
     let html = std::fs::read_to_string(archive.path(march, "html")).unwrap();
     assert!(html.contains("<title>Monthly report 2024-03"));
+    // The interruption names its panel as the reliability table does: by name, then id.
+    let named = format!("<tr><td>{} (pa)</td><td class=\"n\">2</td>", rel.name);
+    assert!(html.contains(&named), "{named} not in the page");
 
     // A day with nothing recorded is empty, and the schedule makes nothing of it.
     let later = Period::parse("2024-03-20").unwrap();
