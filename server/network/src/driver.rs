@@ -14,6 +14,13 @@ use crate::plant::{in_service, position, Network};
 use crate::safety::SafetyTags;
 use crate::topology::{compute, Inputs, Pos, SectionState, Topology, Unknown};
 
+/// The name of a section's derived tag: `<prefix>.Sec.<section>.<signal>`,
+/// `signal` one of `State`, `Energised`, `Sources`. The one place that
+/// shapes it (the API and the drawn layout look names up through it).
+pub fn section_tag(prefix: &str, section: &str, signal: &str) -> String {
+    format!("{prefix}.Sec.{section}.{signal}")
+}
+
 /// The network's derived tags, under its prefix.
 pub fn network_tags(net: &Network) -> Vec<TagMeta> {
     let p = &net.prefix;
@@ -21,17 +28,17 @@ pub fn network_tags(net: &Network) -> Vec<TagMeta> {
     for s in &net.model.sections {
         let id = &s.id;
         tags.push(
-            TagMeta::new(format!("{p}.Sec.{id}.State"), ValueKind::Str).describe(format!(
+            TagMeta::new(section_tag(p, id, "State"), ValueKind::Str).describe(format!(
                 "Section {id}: ENERGISED, DEAD, EARTHED, UNKNOWN or ENERGISED+EARTHED"
             )),
         );
         tags.push(
-            TagMeta::new(format!("{p}.Sec.{id}.Energised"), ValueKind::Bool).describe(format!(
+            TagMeta::new(section_tag(p, id, "Energised"), ValueKind::Bool).describe(format!(
                 "Section {id}: energised (Uncertain quality when unknown)"
             )),
         );
         tags.push(
-            TagMeta::new(format!("{p}.Sec.{id}.Sources"), ValueKind::Str)
+            TagMeta::new(section_tag(p, id, "Sources"), ValueKind::Str)
                 .describe(format!("Section {id}: the sources feeding it")),
         );
     }
@@ -123,9 +130,9 @@ impl TopologyDriver {
             .map(|s| {
                 let id = &s.id;
                 [
-                    db.id(&format!("{p}.Sec.{id}.State")),
-                    db.id(&format!("{p}.Sec.{id}.Energised")),
-                    db.id(&format!("{p}.Sec.{id}.Sources")),
+                    db.id(&section_tag(p, id, "State")),
+                    db.id(&section_tag(p, id, "Energised")),
+                    db.id(&section_tag(p, id, "Sources")),
                 ]
             })
             .collect();

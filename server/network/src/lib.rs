@@ -32,7 +32,7 @@ pub mod selection;
 pub mod topology;
 
 pub use alarms::NetworkAlarm;
-pub use driver::{network_tags, Live, TopologyDriver};
+pub use driver::{network_tags, section_tag, Live, TopologyDriver};
 pub use guard::SwitchingGuard;
 pub use model::{
     BranchKind, BranchSpec, BuildError, LoadSpec, Model, NodeSpec, ParallelRule, SecIdx,

@@ -13,11 +13,28 @@ export async function setTheme(page, dark) {
 }
 
 /** A screen has drawn and its first requests are answered. */
-export async function ready(page, id) {
+async function ready(page, id) {
   await settled(page).catch(() => {});
   await page.waitForLoadState('networkidle', { timeout: 5000 }).catch(() => {});
   if (id === 'trends') await page.locator('#trend-status', { hasText: /samples|No data|Cannot/ }).waitFor({ timeout: 15_000 }).catch(() => {});
   if (id.startsWith('custom:')) await page.locator('#custom-screen .el').first().waitFor({ timeout: 15_000 }).catch(() => {});
+}
+
+/**
+ * Opens every screen in `screens` in the light and then the dark theme, and
+ * calls `visit(id, theme)` once each has drawn.
+ */
+export async function visitScreens(page, screens, visit) {
+  for (const theme of ['light', 'dark']) {
+    await setTheme(page, theme === 'dark');
+    for (const id of screens) {
+      await page.goto(`${BASE}/#/${id}`);
+      // The screen's link is marked (inside its group's closed list, so attached, not visible).
+      await page.locator(`#toolbar a[data-screen="${id}"][aria-current="page"]`).waitFor({ state: 'attached' });
+      await ready(page, id);
+      await visit(id, theme);
+    }
+  }
 }
 
 /**
@@ -42,31 +59,24 @@ export async function axeEveryScreen(page, name, shot) {
   await page.waitForFunction(() => { const l = document.querySelector('#alarm-footer .footer-list:not([hidden])'); return l && l.scrollHeight > l.clientHeight; });
   record('footer-scrolling', 'light', await runAxe(page));
   for (let i = 0; i < 4; i++) await page.keyboard.press('ArrowUp');
-  for (const theme of ['light', 'dark']) {
-    await setTheme(page, theme === 'dark');
-    for (const id of screens) {
-      await page.goto(`${BASE}/#/${id}`);
-      // The screen's link is marked (inside its group's closed list, so attached, not visible).
-      await page.locator(`#toolbar a[data-screen="${id}"][aria-current="page"]`).waitFor({ state: 'attached' });
-      await ready(page, id);
-      record(id, theme, await runAxe(page));
-      if (id === 'alarms') {
-        await page.locator('#alarms-tab-history').click();
-        await page.locator('#alarms-history, #screen .error').first().waitFor({ timeout: 15_000 });
-        record('alarms/history', theme, await runAxe(page));
-      }
-      if (id === screens[0]) {
-        // The footer's summary per area, then back to rows.
-        await page.locator('#footer-view').click();
-        await page.locator('#footer-summary-table').waitFor();
-        record(`${id}+footer-summary`, theme, await runAxe(page));
-        if (shot) await shot(`${theme}-footer-summary`);
-        await page.locator('#footer-view').click();
-        await page.locator('#footer-alarms').waitFor();
-      }
-      if (shot && (['main', 'trends', 'alarms'].includes(id) || id.startsWith('custom:p4b-elements'))) await shot(`${theme}-${id.replace(':', '-')}`);
+  await visitScreens(page, screens, async (id, theme) => {
+    record(id, theme, await runAxe(page));
+    if (id === 'alarms') {
+      await page.locator('#alarms-tab-history').click();
+      await page.locator('#alarms-history, #screen .error').first().waitFor({ timeout: 15_000 });
+      record('alarms/history', theme, await runAxe(page));
     }
-  }
+    if (id === screens[0]) {
+      // The footer's summary per area, then back to rows.
+      await page.locator('#footer-view').click();
+      await page.locator('#footer-summary-table').waitFor();
+      record(`${id}+footer-summary`, theme, await runAxe(page));
+      if (shot) await shot(`${theme}-footer-summary`);
+      await page.locator('#footer-view').click();
+      await page.locator('#footer-alarms').waitFor();
+    }
+    if (shot && (['main', 'trends', 'alarms'].includes(id) || id.startsWith('custom:p4b-elements'))) await shot(`${theme}-${id.replace(':', '-')}`);
+  });
   await setTheme(page, false);
   const report = { screens, counts, findings };
   fs.mkdirSync(ARTIFACTS, { recursive: true });

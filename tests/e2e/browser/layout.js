@@ -4,8 +4,8 @@
 // row (two short rows on a phone), and the page itself never scrolls
 // sideways (a wide table or diagram scrolls inside its own card).
 
-import { setTheme, ready } from './a11y.js';
-import { BASE, toolbar } from './lib.js';
+import { setTheme, visitScreens } from './a11y.js';
+import { toolbar } from './lib.js';
 
 export const SIZES = [[1366, 768], [1920, 1080], [390, 844]];
 
@@ -18,22 +18,16 @@ export async function layoutEveryScreen(page, shot) {
   const problems = [];
   for (const [w, hgt] of SIZES) {
     await page.setViewportSize({ width: w, height: hgt });
-    for (const theme of ['light', 'dark']) {
-      await setTheme(page, theme === 'dark');
-      for (const id of screens) {
-        await page.goto(`${BASE}/#/${id}`);
-        await page.locator(`#toolbar a[data-screen="${id}"][aria-current="page"]`).waitFor({ state: 'attached' });
-        await ready(page, id);
-        const m = await page.evaluate(() => ({
-          header: Math.round(document.getElementById('header').getBoundingClientRect().height),
-          sideways: document.documentElement.scrollWidth - window.innerWidth,
-        }));
-        const phone = w < 700;
-        if (m.header > (phone ? 80 : 52)) problems.push(`${id} at ${w}x${hgt} (${theme}): the header is ${m.header} px high`);
-        if (m.sideways > 1) problems.push(`${id} at ${w}x${hgt} (${theme}): the page scrolls sideways by ${m.sideways} px`);
-        await shot(`${w}-${theme}-${id.replace(':', '-')}`);
-      }
-    }
+    await visitScreens(page, screens, async (id, theme) => {
+      const m = await page.evaluate(() => ({
+        header: Math.round(document.getElementById('header').getBoundingClientRect().height),
+        sideways: document.documentElement.scrollWidth - window.innerWidth,
+      }));
+      const phone = w < 700;
+      if (m.header > (phone ? 80 : 52)) problems.push(`${id} at ${w}x${hgt} (${theme}): the header is ${m.header} px high`);
+      if (m.sideways > 1) problems.push(`${id} at ${w}x${hgt} (${theme}): the page scrolls sideways by ${m.sideways} px`);
+      await shot(`${w}-${theme}-${id.replace(':', '-')}`);
+    });
   }
   await page.setViewportSize({ width: 1366, height: 768 });
   await setTheme(page, false);

@@ -133,8 +133,20 @@ pub struct PlacedSection {
 }
 
 /// The sections the drawn layout screen places, by their state tags.
-fn drawn_layout(s: &WebState, prefix: &str) -> Option<NetworkLayout> {
+fn drawn_layout(s: &WebState, net: &gridscada_network::Network) -> Option<NetworkLayout> {
     let screen = s.screens.get(LAYOUT_SCREEN)?;
+    // A line places the section whose state tag it is bound to.
+    let by_state_tag: BTreeMap<String, &str> = net
+        .model
+        .sections
+        .iter()
+        .map(|x| {
+            (
+                gridscada_network::section_tag(&net.prefix, &x.id, "State"),
+                x.id.as_str(),
+            )
+        })
+        .collect();
     let mut sections = BTreeMap::new();
     for e in &screen.elements {
         if let gridscada_config::screen::ElementKind::Line {
@@ -142,11 +154,7 @@ fn drawn_layout(s: &WebState, prefix: &str) -> Option<NetworkLayout> {
             ..
         } = &e.kind
         {
-            let id = tag
-                .strip_prefix(prefix)
-                .and_then(|t| t.strip_prefix(".Sec."))
-                .and_then(|t| t.strip_suffix(".State"));
-            if let Some(id) = id {
+            if let Some(id) = by_state_tag.get(tag.as_str()) {
                 sections.entry(id.to_string()).or_insert(PlacedSection {
                     x: e.x,
                     y: e.y,
@@ -184,7 +192,7 @@ pub async fn model(State(s): State<WebState>) -> ApiResult<Json<NetworkModel>> {
                 busbar: x.busbar,
                 customers: x.customers,
                 nodes: x.nodes.iter().map(|&n| m.nodes[n].id.clone()).collect(),
-                state_tag: format!("{}.Sec.{}.State", net.prefix, x.id),
+                state_tag: gridscada_network::section_tag(&net.prefix, &x.id, "State"),
             })
             .collect(),
         switches: m
@@ -250,7 +258,7 @@ pub async fn model(State(s): State<WebState>) -> ApiResult<Json<NetworkModel>> {
                 customers: l.customers,
             })
             .collect(),
-        layout: drawn_layout(&s, &net.prefix),
+        layout: drawn_layout(&s, net),
     }))
 }
 
