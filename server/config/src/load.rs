@@ -56,6 +56,8 @@ pub struct Plant {
     pub reports: ReportsConfig,
     /// `[network]`: the switching network, if configured.
     pub network: Option<NetworkConfig>,
+    /// `[hmi]`: decimals and date format on the HMI.
+    pub hmi: HmiConfig,
     /// Positions of the tags and devices by name, made at the first lookup.
     index: NameIndex,
 }
@@ -297,6 +299,7 @@ pub fn load_with(
         suppression: main_cfg.suppression,
         reports: main_cfg.reports,
         network: main_cfg.network,
+        hmi: main_cfg.hmi,
         index: NameIndex::default(),
     })
 }
@@ -402,6 +405,7 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
     let mut suppression = vec![];
     let mut reports = ReportsConfig::default();
     let mut network = None;
+    let mut hmi = HmiConfig::default();
     let before = diags.len();
     for (key, value) in root.iter() {
         match key.get_ref().as_ref() {
@@ -418,10 +422,11 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
             "suppression" => suppression = de_each(file, value, "suppression", diags),
             "reports" => reports = de(file, value, "[reports]", diags).unwrap_or_default(),
             "network" => network = de(file, value, "[network]", diags),
+            "hmi" => hmi = de(file, value, "[hmi]", diags).unwrap_or_default(),
             other => diags.push(file.error_at(
                 key.span(),
                 format!(
-                    "unknown key '{other}' in the main file; expected one of tag_files, server, storage, panel, microgrid, mqtt, opcua, iec104_server, redundancy, notify, suppression, reports, network"
+                    "unknown key '{other}' in the main file; expected one of tag_files, server, storage, panel, microgrid, mqtt, opcua, iec104_server, redundancy, notify, suppression, reports, network, hmi"
                 ),
             )),
         }
@@ -453,6 +458,7 @@ fn parse_main(file: &SourceFile, diags: &mut Vec<Diagnostic>) -> Option<MainFile
         suppression,
         reports,
         network,
+        hmi,
     })
 }
 

@@ -10,7 +10,8 @@
 //! `devices.rs`, IEC 104 links and points `iec104.rs`, DNP3 sessions and points `dnp3.rs`, tags `tags.rs`, a tag's alarms and history `alarms.rs`,
 //! panels `panels.rs`, the microgrid `microgrid.rs`, the MQTT Sparkplug B
 //! northbound `mqtt.rs`, the OPC UA server `opcua.rs`, the redundant pair
-//! `redundancy.rs`, alarm notification routes `notify.rs`.
+//! `redundancy.rs`, alarm notification routes `notify.rs`, how the HMI shows
+//! numbers and dates `hmi.rs`.
 
 use serde::Deserialize;
 use serde_spanned::Spanned;
@@ -18,6 +19,7 @@ use serde_spanned::Spanned;
 mod alarms;
 mod devices;
 mod dnp3;
+mod hmi;
 mod iec104;
 mod iec61850;
 mod microgrid;
@@ -35,6 +37,7 @@ mod tags;
 pub use alarms::*;
 pub use devices::*;
 pub use dnp3::*;
+pub use hmi::*;
 pub use iec104::*;
 pub use iec61850::*;
 pub use microgrid::*;
@@ -78,6 +81,9 @@ pub struct MainFile {
     pub reports: ReportsConfig,
     /// `[network]`: the switching network, if configured.
     pub network: Option<NetworkConfig>,
+    /// `[hmi]`: decimals and date format on the HMI.
+    #[serde(default)]
+    pub hmi: HmiConfig,
 }
 
 /// A tag file: devices and the tags read from them.

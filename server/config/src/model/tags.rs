@@ -137,6 +137,10 @@ pub struct TagConfig {
     pub offset: f64,
     #[serde(default)]
     pub units: String,
+    /// Decimals the HMI shows the value with (0 to 6), overriding `[hmi]
+    /// decimals`; numeric tags only.
+    #[serde(default)]
+    pub decimals: Option<Spanned<u8>>,
     #[serde(default = "no")]
     pub writable: Spanned<bool>,
     /// The least role that may write the tag; required when writable.
@@ -208,7 +212,11 @@ impl TagConfig {
             _ => ValueKind::Int,
         }
     }
-    /// The effective scan period.
+    /// The tag's own `decimals`, if set.
+    pub fn decimals(&self) -> Option<u8> {
+        self.decimals.as_ref().map(|d| *d.get_ref())
+    }
+
     /// The word configured for `value` in `states`, if any.
     pub fn state_label(&self, value: &gridscada_tagdb::Value) -> Option<&str> {
         let states = self.states.as_ref()?.get_ref();
@@ -227,6 +235,7 @@ impl TagConfig {
         (name != RECEIVE_TIME && name != self.name.get_ref()).then_some(name)
     }
 
+    /// The effective scan period.
     pub fn scan_ms(&self, device: &DeviceConfig) -> u64 {
         self.scan_ms
             .as_ref()

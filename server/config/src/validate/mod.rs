@@ -435,6 +435,17 @@ fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
         );
     }
     check_connections(cx, &main.server.connections);
+    let decimals = &main.hmi.decimals;
+    if *decimals.get_ref() > MAX_DECIMALS {
+        cx.err(
+            0,
+            decimals.span(),
+            format!(
+                "[hmi] decimals: {} must be 0 to {MAX_DECIMALS}",
+                decimals.get_ref()
+            ),
+        );
+    }
     let merge = &main.server.live_merge_ms;
     if *merge.get_ref() > 1_000 {
         cx.err(

@@ -495,6 +495,24 @@ fn check_tag_common(cx: &mut Ctx<'_>, f: usize, t: &TagConfig) {
             );
         }
     }
+    if let Some(d) = &t.decimals {
+        if !matches!(t.value_kind(), ValueKind::Int | ValueKind::Float) {
+            cx.err(
+                f,
+                d.span(),
+                format!("tag '{name}': decimals apply to numeric tags only"),
+            );
+        } else if *d.get_ref() > MAX_DECIMALS {
+            cx.err(
+                f,
+                d.span(),
+                format!(
+                    "tag '{name}': decimals {} must be 0 to {MAX_DECIMALS}",
+                    d.get_ref()
+                ),
+            );
+        }
+    }
     // Writes.
     let writable = *t.writable.get_ref();
     if let Some(states) = &t.states {

@@ -75,7 +75,7 @@ fn unknown_key_in_main_file() {
     assert_problems(
         main,
         DEVICE,
-        &["DIR/gridscada.toml:2:1: error: unknown key 'http' in the main file; expected one of tag_files, server, storage, panel, microgrid, mqtt, opcua, iec104_server, redundancy, notify, suppression, reports, network"],
+        &["DIR/gridscada.toml:2:1: error: unknown key 'http' in the main file; expected one of tag_files, server, storage, panel, microgrid, mqtt, opcua, iec104_server, redundancy, notify, suppression, reports, network, hmi"],
     );
 }
 
@@ -245,6 +245,61 @@ fn write_limits_are_checked() {
     let plant = load_path(dir.path()).unwrap();
     assert_eq!(plant.write_limits("A.Set"), (Some(-5.0), Some(50.0)));
     assert_eq!(plant.write_limits("Other"), (None, None));
+}
+
+#[test]
+fn decimals_are_checked() {
+    let tags = format!(
+        "{DEVICE}\n[[tag]]\nname = \"A.Volts\"\ndevice = \"D1\"\nkind = \"input_register\"\naddress = 0\ntype = \"f32\"\ndecimals = 7\n\n[[tag]]\nname = \"A.Cmd\"\ndevice = \"D1\"\nkind = \"coil\"\naddress = 0\ndecimals = 1\n"
+    );
+    assert_problems(
+        &format!("{MAIN}\n[hmi]\ndecimals = 9\n"),
+        &tags,
+        &[
+            "DIR/gridscada.toml:4:12: error: [hmi] decimals: 9 must be 0 to 6",
+            "DIR/tags.toml:12:12: error: tag 'A.Volts': decimals 7 must be 0 to 6",
+            "DIR/tags.toml:19:12: error: tag 'A.Cmd': decimals apply to numeric tags only",
+        ],
+    );
+    // A date format outside the set is named where it is.
+    let got = problems(&format!("{MAIN}[hmi]\ndate_format = \"D.M.YY\"\n"), &tags);
+    assert!(
+        got.iter()
+            .any(|e| e.starts_with("DIR/gridscada.toml:3:15: error: [hmi]")
+                && e.contains("unknown variant `D.M.YY`")
+                && e.contains("`DD.MM.YYYY`")),
+        "{got:#?}"
+    );
+}
+
+#[test]
+fn decimals_resolve_to_the_tag_s_own_else_the_plant_s() {
+    let dir = tempfile::tempdir().unwrap();
+    fs::write(
+        dir.path().join("gridscada.toml"),
+        format!("{MAIN}[hmi]\ndecimals = 2\ndate_format = \"DD.MM.YYYY\"\n"),
+    )
+    .unwrap();
+    fs::write(
+        dir.path().join("tags.toml"),
+        format!("{DEVICE}\n[[tag]]\nname = \"A.Hz\"\ndevice = \"D1\"\nkind = \"input_register\"\naddress = 0\ntype = \"f32\"\ndecimals = 3\n\n[[tag]]\nname = \"A.Volts\"\ndevice = \"D1\"\nkind = \"input_register\"\naddress = 2\ntype = \"f32\"\n\n[[tag]]\nname = \"A.Count\"\ndevice = \"D1\"\nkind = \"input_register\"\naddress = 4\n\n[[tag]]\nname = \"A.Closed\"\ndevice = \"D1\"\nkind = \"coil\"\naddress = 0\n"),
+    )
+    .unwrap();
+    let plant = load_path(dir.path()).unwrap();
+    let shown = |name: &str| {
+        let t = plant.tag(name).unwrap();
+        plant.hmi.decimals_for(t.value_kind(), t.decimals())
+    };
+    assert_eq!(shown("A.Hz"), Some(3), "the tag's own");
+    assert_eq!(shown("A.Volts"), Some(2), "[hmi] decimals");
+    assert_eq!(shown("A.Count"), Some(0), "an integer has none");
+    assert_eq!(shown("A.Closed"), None, "a bool is not a number");
+    assert_eq!(plant.hmi.date_format.get_ref().pattern(), "DD.MM.YYYY");
+    // Without [hmi]: one decimal, ISO dates.
+    let plant =
+        load_path(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tags")).unwrap();
+    assert_eq!(*plant.hmi.decimals.get_ref(), 1);
+    assert_eq!(plant.hmi.date_format.get_ref().pattern(), "YYYY-MM-DD");
 }
 
 #[test]
