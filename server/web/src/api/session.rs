@@ -139,6 +139,20 @@ pub struct SessionView {
     /// Whether this server is one of a redundant pair: only then does
     /// `/api/pair` describe it (a server alone answers that 404).
     pub pair: bool,
+    /// How the HMI shows numbers and dates (`[hmi]`).
+    pub hmi: HmiSettings,
+}
+
+/// The plant's display settings, read by the HMI before it shows a screen.
+#[derive(Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct HmiSettings {
+    /// Decimals of an analog value whose tag sets none
+    #[schema(minimum = 0, maximum = 6)]
+    pub decimals: u8,
+    /// The order of a date's parts; times are 24-hour
+    #[schema(value_type = shapes::DateFormat, inline)]
+    pub date_format: &'static str,
 }
 
 fn session_body(s: &WebState, p: &Principal) -> SessionView {
@@ -155,6 +169,10 @@ fn session_body(s: &WebState, p: &Principal) -> SessionView {
             .flatten(),
         warn_s: policy.warn.as_secs(),
         pair: s.components.pair.is_some(),
+        hmi: HmiSettings {
+            decimals: *s.plant.hmi.decimals.get_ref(),
+            date_format: s.plant.hmi.date_format.get_ref().pattern(),
+        },
     }
 }
 

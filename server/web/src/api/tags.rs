@@ -34,6 +34,10 @@ pub struct TagView {
     /// The engineering limits a write must respect, for a writable tag
     /// with any (`Plant::write_limits`); the write dialog shows them.
     pub limits: Option<WriteLimits>,
+    /// Decimals the HMI shows the value with: the tag's `decimals`, else
+    /// `[hmi] decimals` for an analog value, 0 for an integer; `None` for
+    /// a bool or text.
+    pub decimals: Option<u8>,
     #[serde(flatten)]
     pub sample: Sample,
 }
@@ -193,6 +197,10 @@ impl WebState {
                 .then(|| self.plant.write_limits(&meta.name))
                 .filter(|(min, max)| min.is_some() || max.is_some())
                 .map(|(min, max)| WriteLimits { min, max }),
+            decimals: self
+                .plant
+                .hmi
+                .decimals_for(meta.kind, config.and_then(|t| t.decimals())),
             sample,
         })
     }

@@ -153,6 +153,19 @@ pub enum RegisterKind {
     HoldingRegister,
 }
 
+/// `gridscada_config::DateFormat`, by its pattern.
+#[derive(ToSchema)]
+pub enum DateFormat {
+    #[serde(rename = "YYYY-MM-DD")]
+    Iso,
+    #[serde(rename = "DD.MM.YYYY")]
+    DayDotted,
+    #[serde(rename = "DD/MM/YYYY")]
+    DaySlashed,
+    #[serde(rename = "MM/DD/YYYY")]
+    MonthSlashed,
+}
+
 /// `gridscada_config::Endian`.
 #[derive(ToSchema)]
 #[serde(rename_all = "lowercase")]
@@ -186,6 +199,9 @@ pub struct Tag {
     /// The engineering limits a write must respect (either bound may be null); null for a tag that is not writable or has none
     #[schema(required = true)]
     pub limits: Option<crate::api::tags::WriteLimits>,
+    /// Decimals the HMI shows the value with (the tag's `decimals`, else the plant's `[hmi] decimals` for an analog value, 0 for an integer); null for a bool or text
+    #[schema(required = true, minimum = 0, maximum = 6)]
+    pub decimals: Option<u8>,
 }
 
 /// `gridscada_store::UserSummary`.

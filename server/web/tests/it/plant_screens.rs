@@ -479,3 +479,58 @@ async fn narrowed_screens_apply_to_an_open_socket_at_its_next_subscribe() {
     let pushed = pushed_until_last(&h, &mut ws, &[TAG_RO, TAG_OP], 3.0).await;
     assert!(pushed.iter().all(|n| n == TAG_OP), "{pushed:?}");
 }
+
+/// The HMI's display settings: each tag's decimals resolved in the tag
+/// list, the plant's `[hmi]` with the session.
+#[tokio::test]
+async fn tags_carry_their_decimals_and_the_session_the_plant_s_display_settings() {
+    let h = Harness::new(Options::default()).await;
+    let op = h.login("operator", PASSWORD).await;
+    let decimals = |app: axum::Router, tag: &'static str| {
+        let op = op.clone();
+        async move {
+            let path = format!("/api/tags/{}", seg(tag));
+            let r = send_to(
+                &app,
+                request(Method::GET, &path, Some(&op), None),
+                "127.0.0.1:40000".parse().unwrap(),
+            )
+            .await;
+            assert_eq!(r.status, StatusCode::OK, "{}", r.text());
+            r.json()["decimals"].clone()
+        }
+    };
+    // Without [hmi]: one decimal for an analog value; a bool is no number.
+    assert_eq!(decimals(h.app.clone(), TAG_RO).await, json!(1));
+    assert_eq!(decimals(h.app.clone(), TAG_OP).await, Value::Null);
+    let session = h.call(Method::GET, "/api/session", Some(&op), None).await;
+    assert_eq!(
+        session.json()["hmi"],
+        json!({"decimals": 1, "date_format": "YYYY-MM-DD"})
+    );
+    // The plant's default, and a tag's own, as configured.
+    let app = h.app_with_plant(|p| {
+        p.hmi.decimals = serde_spanned::Spanned::new(0..0, 3);
+        p.hmi.date_format =
+            serde_spanned::Spanned::new(0..0, gridscada_config::DateFormat::DayDotted);
+        let sup = p
+            .tags
+            .iter_mut()
+            .find(|t| t.name.get_ref() == TAG_SUP)
+            .unwrap();
+        sup.decimals = Some(serde_spanned::Spanned::new(0..0, 0));
+    });
+    assert_eq!(decimals(app.clone(), TAG_RO).await, json!(3));
+    assert_eq!(decimals(app.clone(), TAG_SUP).await, json!(0));
+    let session = send_to(
+        &app,
+        request(Method::GET, "/api/session", Some(&op), None),
+        "127.0.0.1:40000".parse().unwrap(),
+    )
+    .await;
+    assert_eq!(
+        session.json()["hmi"],
+        json!({"decimals": 3, "date_format": "DD.MM.YYYY"})
+    );
+    h.cleanup().await;
+}
