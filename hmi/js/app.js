@@ -3,7 +3,7 @@
 
 import { api, get, del, post, setUnauthorizedHandler, enc, qs } from './api.js';
 import { h, replace } from './dom.js';
-import { fmtTime } from './format.js';
+import { fmtTime, setDisplay } from './format.js';
 import { live } from './live.js';
 import { claimHandover, watchPair } from './pair.js';
 import { visibleEveryMs, watchExpiry } from './session.js';
@@ -78,6 +78,7 @@ function allowed(name) { return state.session.authenticated && state.session.scr
 async function loadSession() {
   try {
     state.session = await get('/api/session');
+    setDisplay(state.session.hmi);
   } catch (e) {
     state.session = { authenticated: false, user: null, role: 'guest', screens: [] };
     toast(`Cannot read the session: ${e.detail}`, 'error');

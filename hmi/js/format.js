@@ -6,22 +6,80 @@ export const roleAtLeast = (role, min) => ROLES.indexOf(role) >= ROLES.indexOf(m
 
 export function pad(n, w = 2) { return String(n).padStart(w, '0'); }
 
-/** Local date and time, "2026-11-21 06:55:03". */
+/**
+ * The plant's display settings (`[hmi]`, sent with GET /api/session): the
+ * decimals of an analog value whose tag sets none, and the date order.
+ */
+const display = { decimals: 1, dateFormat: 'YYYY-MM-DD' };
+
+/** Takes the session's `hmi` settings; missing ones keep their defaults. */
+export function setDisplay(hmi) {
+  if (!hmi) return;
+  if (Number.isInteger(hmi.decimals)) display.decimals = hmi.decimals;
+  if (typeof hmi.date_format === 'string') display.dateFormat = hmi.date_format;
+}
+
+/** The configured date pattern, e.g. "DD.MM.YYYY". */
+export const dateFormat = () => display.dateFormat;
+
+/** A local date in the plant's order, "2026-11-21" or "21.11.2026"; without the year: "21.11". */
+export function fmtDate(d, { year = true } = {}) {
+  const pattern = year ? display.dateFormat : display.dateFormat.replace(/[^A-Z]?YYYY[^A-Z]?/, '');
+  return pattern.replace('YYYY', String(d.getFullYear())).replace('MM', pad(d.getMonth() + 1)).replace('DD', pad(d.getDate()));
+}
+
+/** A date typed in the plant's order, as "YYYY-MM-DD"; null when it is not one. */
+export function parseDate(text) {
+  const order = display.dateFormat.match(/YYYY|MM|DD/g);
+  const parts = String(text).trim().match(/^(\d{1,4})\D(\d{1,2})\D(\d{1,4})$/);
+  if (!parts) return null;
+  const by = Object.fromEntries(order.map((k, i) => [k, Number(parts[i + 1])]));
+  const d = new Date(by.YYYY, by.MM - 1, by.DD);
+  if (by.YYYY < 1000 || d.getMonth() !== by.MM - 1 || d.getDate() !== by.DD) return null;
+  return `${by.YYYY}-${pad(by.MM)}-${pad(by.DD)}`;
+}
+
+/** Local date and 24-hour time, "2026-11-21 06:55:03" (the date in the plant's order). */
 export function fmtTime(ms, withMs = false) {
   if (ms === null || ms === undefined || !Number.isFinite(Number(ms))) return '—';
   const d = new Date(Number(ms));
-  const t = `${d.getFullYear()}-${pad(d.getMonth() + 1)}-${pad(d.getDate())} ${pad(d.getHours())}:${pad(d.getMinutes())}:${pad(d.getSeconds())}`;
+  const t = `${fmtDate(d)} ${pad(d.getHours())}:${pad(d.getMinutes())}:${pad(d.getSeconds())}`;
   return withMs ? `${t}.${pad(d.getMilliseconds(), 3)}` : t;
 }
 
-/** A number with a sensible number of decimals for its size. */
+/**
+ * Decimals of the tags whose metadata the HMI has read (`decimals` of
+ * GET /api/tags: the tag's own, else the plant's; null for a bool or text).
+ * Values of one tag are then shown alike on every screen.
+ */
+const tagDecimals = new Map();
+const decimalsListeners = new Set();
+
+/** Records the decimals of tags as the API lists them; tells the listeners when any is new. */
+export function noteTags(tags) {
+  let changed = false;
+  for (const t of tags || []) {
+    if (!t || typeof t.name !== 'string' || !('decimals' in t) || tagDecimals.get(t.name) === t.decimals) continue;
+    tagDecimals.set(t.name, t.decimals);
+    changed = true;
+  }
+  if (changed) for (const f of decimalsListeners) f();
+  return tags;
+}
+
+/** The decimals a tag's values are shown with, if known. */
+export function decimalsOf(tag) {
+  const d = tagDecimals.get(tag);
+  return Number.isInteger(d) ? d : undefined;
+}
+
+/** Calls f when decimals of more tags become known; returns a function that stops it. */
+export function onDecimals(f) { decimalsListeners.add(f); return () => decimalsListeners.delete(f); }
+
+/** A number with the given decimals, else the plant's (`[hmi] decimals`), so a screen's numbers line up. */
 export function fmtNumber(v, digits) {
   if (typeof v !== 'number' || !Number.isFinite(v)) return String(v);
-  if (digits === undefined) {
-    const a = Math.abs(v);
-    digits = a >= 1000 ? 0 : a >= 100 ? 1 : a >= 1 ? 2 : 3;
-  }
-  return v.toFixed(digits);
+  return v.toFixed(digits ?? display.decimals);
 }
 
 export function fmtValue(v, digits) {
@@ -68,10 +126,10 @@ export function qualityOf(sample, live = true) {
  * Shows a sample in an element: the value and units, or "?" greyed with the
  * reason in its title when the value may not be trusted.
  */
-export function showSample(el, sample, { units = '', digits, live = true, format, kind } = {}) {
+export function showSample(el, sample, { units = '', digits, live = true, format, kind, tag } = {}) {
   const q = qualityOf(sample, live);
-  // An integer tag (a counter) is shown without decimals.
-  if (digits === undefined && kind === 'int') digits = 0;
+  // The tag's configured decimals; an integer tag (a counter) has none.
+  if (digits === undefined) digits = decimalsOf(tag) ?? (kind === 'int' ? 0 : undefined);
   el.classList.remove('q-good', 'q-uncertain', 'q-bad');
   el.classList.add('value', q.cls);
   const shown = sample && sample.value !== undefined && sample.value !== null

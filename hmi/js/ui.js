@@ -2,7 +2,7 @@
 // that keeps elements in step with live tags.
 
 import { h } from './dom.js';
-import { showSample } from './format.js';
+import { onDecimals, showSample } from './format.js';
 import { live } from './live.js';
 
 /** Shows a message; errors stay until dismissed, others fade after a while. */
@@ -74,6 +74,8 @@ export class Binder {
     this.handlers = new Map(); // tag -> [f]
     this.offTags = live.onTags((names, snapshot) => this.update(snapshot ? null : names));
     this.offStatus = live.onStatus(() => this.update(null));
+    // Values drawn before their tags' decimals were read are drawn again with them.
+    this.offDecimals = onDecimals(() => this.update(null));
     // The tags bound here are subscribed as one interest, re-sent once per batch of bindings.
     this.interest = { tags: [] };
     this.offWant = live.want(this.interest);
@@ -97,7 +99,7 @@ export class Binder {
   sample(tag) { return live.get(tag); }
 
   show(el, tag, opts = {}) {
-    return this.on(tag, (sample, connected) => showSample(el, sample, { ...opts, live: connected }));
+    return this.on(tag, (sample, connected) => showSample(el, sample, { tag, ...opts, live: connected }));
   }
 
   update(names) {
@@ -111,6 +113,7 @@ export class Binder {
   dispose() {
     this.offTags();
     this.offStatus();
+    this.offDecimals();
     this.offWant();
     this.handlers.clear();
   }

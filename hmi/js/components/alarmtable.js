@@ -1,7 +1,7 @@
 // The alarm list as a table: used by the footer and the alarm screen's online view.
 
 import { h, replace } from '../dom.js';
-import { fmtTime, fmtValue } from '../format.js';
+import { decimalsOf, fmtTime, fmtValue } from '../format.js';
 
 export const STATE_LABELS = {
   normal: 'Normal',
@@ -149,8 +149,10 @@ function messageNumber(v) {
 function valueText(a) {
   if (a.value === null || a.value === undefined) return '';
   // The tag's own word for the value (TRIPPED), else the number.
-  const v = a.value_text || fmtValue(a.value);
-  const l = a.limit !== null && a.limit !== undefined && typeof a.limit !== 'boolean' ? ` (limit ${fmtValue(a.limit)})` : '';
+  // In the tag's decimals where the HMI has read them, else the plant's.
+  const digits = decimalsOf(a.tag);
+  const v = a.value_text || fmtValue(a.value, digits);
+  const l = a.limit !== null && a.limit !== undefined && typeof a.limit !== 'boolean' ? ` (limit ${fmtValue(a.limit, digits)})` : '';
   return `${v}${a.units ? ` ${a.units}` : ''}${l}`;
 }
 

@@ -7,7 +7,7 @@
 // the chart only proposes the new window through `onView`: the screen
 // decides (and never lets it reach into the future).
 
-import { fmtNumber, fmtTime, pad } from '../format.js';
+import { fmtDate, fmtNumber, fmtTime, pad } from '../format.js';
 
 // Pens: blues, greens, greys and browns, readable on the light and the dark
 // plot; none red, orange, yellow or purple, the alarm colours (ISA-101).
@@ -406,7 +406,8 @@ function timeLabel(t, step, span) {
   const hm = `${pad(d.getHours())}:${pad(d.getMinutes())}`;
   if (step < 60_000) return `${hm}:${pad(d.getSeconds())}`;
   if (span <= 36 * 3_600_000) return hm;
-  return `${pad(d.getDate())}/${pad(d.getMonth() + 1)} ${hm}`;
+  // Days apart: the day and month in the plant's order (`[hmi] date_format`).
+  return `${fmtDate(d, { year: false })} ${hm}`;
 }
 
 export { fmtTime };

@@ -7,7 +7,7 @@
 // Unknown quality shows "?".
 
 import { s } from '../dom.js';
-import { fmtNumber, qualityOf } from '../format.js';
+import { decimalsOf, fmtNumber, qualityOf } from '../format.js';
 import { live } from '../live.js';
 
 const MIN_W = 640;
@@ -159,11 +159,12 @@ export function singleLine(binder, { prefix, title, zones = 4, devices = [], onB
     const t = s('text', { x, y, class: 'sl-value' }, '');
     const tip = s('title', {}, '');
     t.append(tip);
-    binder.on(`${prefix}.PA.${tag}`, (smp, connected) => {
+    const name = `${prefix}.PA.${tag}`;
+    binder.on(name, (smp, connected) => {
       const q = qualityOf(smp, connected);
       t.setAttribute('class', `sl-value ${q.cls}`);
       t.firstChild && t.firstChild.nodeType === 3 && t.firstChild.remove();
-      const text = q.usable && typeof smp.value === 'number' ? `${label} ${fmtNumber(smp.value, 1)} ${units}` : `${label} ?`;
+      const text = q.usable && typeof smp.value === 'number' ? `${label} ${fmtNumber(smp.value, decimalsOf(name))} ${units}` : `${label} ?`;
       t.insertBefore(document.createTextNode(text), tip);
       tip.textContent = q.reason || `${label} ${text}`;
     });

@@ -8,7 +8,7 @@
 
 import { get, post, del, qs, apiUrl } from '../api.js';
 import { h, replace, select, field } from '../dom.js';
-import { fmtTime, fmtValue, roleAtLeast } from '../format.js';
+import { decimalsOf, fmtTime, fmtValue, roleAtLeast } from '../format.js';
 import { live } from '../live.js';
 import { siteChoice } from '../sites.js';
 import { attempt, formDialog, toast } from '../ui.js';
@@ -208,8 +208,8 @@ export default {
                 // Rows recorded before causes were kept: the change, or that it is not known.
                 h('td', { class: ['hist-cause', t.cause ? null : 'hint'], text: causeLabel(t) || (t.from_state === t.to_state ? 'Not recorded' : '') }),
                 h('td', { class: 'hist-state', text: stateChange(t) }),
-                h('td', { class: 'num', title: 'The value at this transition', text: fmtValue(t.value) }),
-                h('td', { class: 'num', text: fmtValue(t.limit) }),
+                h('td', { class: 'num', title: 'The value at this transition', text: fmtValue(t.value, decimalsOf(t.tag)) }),
+                h('td', { class: 'num', text: fmtValue(t.limit, decimalsOf(t.tag)) }),
                 h('td', { class: 'num' }, t.priority === null || t.priority === undefined ? '' : priorityChip(t.priority)),
                 h('td', { text: t.selection ?? '' }),
                 h('td', { text: t.user ?? '' }),

@@ -1,13 +1,14 @@
 // Look-ups shared by several screens.
 
 import { get } from '../api.js';
+import { noteTags } from '../format.js';
 
 let tagListCache = null;
 
 /** All tag metadata (name, units, kind, description...), fetched once per page load. */
 export async function tagList() {
   if (!tagListCache) {
-    tagListCache = get('/api/tags').then((r) => r.tags).catch((e) => { tagListCache = null; throw e; });
+    tagListCache = get('/api/tags').then((r) => noteTags(r.tags)).catch((e) => { tagListCache = null; throw e; });
   }
   return tagListCache;
 }

@@ -4,7 +4,7 @@
 
 import { get, qs, enc } from '../api.js';
 import { h, replace, s } from '../dom.js';
-import { fmtTime, fmtValue, qualityOf, roleAtLeast, showSample } from '../format.js';
+import { fmtTime, fmtValue, noteTags, qualityOf, roleAtLeast, showSample } from '../format.js';
 import { Binder } from '../ui.js';
 import { TrendChart, PEN_COLORS } from '../components/chart.js';
 import { singleLine } from '../components/singleline.js';
@@ -125,7 +125,7 @@ export function drawElement(e, i, live) {
       box.append(label(e.label), track, text);
       const meta = live.tags.get(e.tag);
       binder.on(e.tag, (smp, connected) => {
-        showSample(text, smp, { units: meta ? meta.units : '', kind: meta ? meta.kind : undefined, live: connected });
+        showSample(text, smp, { units: meta ? meta.units : '', kind: meta ? meta.kind : undefined, tag: e.tag, live: connected });
         const q = qualityOf(smp, connected);
         const ok = q.usable && typeof smp.value === 'number';
         const frac = ok ? Math.min(1, Math.max(0, (smp.value - e.min) / (e.max - e.min))) : 0;
@@ -161,7 +161,7 @@ export function drawElement(e, i, live) {
       btn.addEventListener('click', async () => {
         if (live.editing || !may) return;
         const r = await confirmedWrite(meta, e.value);
-        if (r) out.textContent = `✓ ${fmtValue(r.value)}${meta.units ? ` ${meta.units}` : ''}`;
+        if (r) out.textContent = `✓ ${fmtValue(r.value, meta.decimals ?? undefined)}${meta.units ? ` ${meta.units}` : ''}`;
       });
       box.append(btn, out);
       break;
@@ -230,6 +230,7 @@ export async function tagsOf(screen, cache = new Map()) {
   await Promise.all([...names].filter((n) => !cache.has(n)).map(async (n) => {
     try { cache.set(n, await get(`/api/tags/${enc(n)}`)); } catch { /* not readable: drawn as unknown */ }
   }));
+  noteTags([...cache.values()]);
   return cache;
 }
 

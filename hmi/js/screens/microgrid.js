@@ -5,7 +5,7 @@
 
 import { get, qs, apiUrl } from '../api.js';
 import { h, replace } from '../dom.js';
-import { fmtNumber, fmtTime, qualityOf } from '../format.js';
+import { decimalsOf, fmtNumber, fmtTime, qualityOf } from '../format.js';
 import { Binder, valueEl } from '../ui.js';
 import { tagList } from './common.js';
 
@@ -74,7 +74,7 @@ export default {
       if (!el2) return;
       const m = maxima.get(tag);
       const u = el2.dataset.units;
-      el2.textContent = m === undefined ? '—' : `${fmtNumber(m)}${u ? ` ${u}` : ''}`;
+      el2.textContent = m === undefined ? '—' : `${fmtNumber(m, decimalsOf(tag))}${u ? ` ${u}` : ''}`;
       el2.title = m === undefined ? 'no value recorded today' : `highest value since ${fmtTime(startOfToday())}`;
     }
 
@@ -131,7 +131,7 @@ export default {
           fill.style.width = `${Math.min(100, r * 100)}%`;
         });
         cells.push(h('td', { class: 'col-detail' }, ratio));
-        if (anySoc) cells.push(h('td', { class: 'num', dataset: { soc: u.id } }, u.has('SoC_pct') ? valueEl(binder, `${u.prefix}.SoC_pct`, { units: '%', digits: 1 }) : '—'));
+        if (anySoc) cells.push(h('td', { class: 'num', dataset: { soc: u.id } }, u.has('SoC_pct') ? valueEl(binder, `${u.prefix}.SoC_pct`, { units: '%' }) : '—'));
         cells.push(
           h('td', { class: 'num' }, u.has('Setpoint_kW') ? valueEl(binder, `${u.prefix}.Setpoint_kW`, { units: 'kW' }) : '—'),
           h('td', { class: 'unit-state' }, u.has('State') ? valueEl(binder, `${u.prefix}.State`, { format: stateFormat(u.stateDescription) }) : '—'));
@@ -149,7 +149,7 @@ export default {
         .filter(([, tag], i) => tag && (i === 0 || mg.has(tag)));
       replace(demandBox, h('h2', { id: 'mg-demand', text: 'Demand' }),
         h('dl', { class: 'kv' }, load.map(([label, tag, u]) => [h('dt', { text: label }),
-          h('dd', {}, valueEl(binder, tag, { units: u, digits: u === 'Hz' ? 2 : undefined }))])));
+          h('dd', {}, valueEl(binder, tag, { units: u }))])));
 
       // Today's maxima from the recorded history (at most 16 pens per request).
       const tags = [...maxEls.keys()];

@@ -276,7 +276,7 @@ export function panelScreen(id) {
         replace(paBox, h('h2', { id: `pa-${id}`, text: 'Power analyzer' }),
           readings.length
             ? table(['Quantity', 'Value'], readings.map(([label, tag, units]) =>
-              [label, valueEl(binder, `${prefix}.PA.${tag}`, { units, digits: tag === 'PF' ? 3 : undefined })]))
+              [label, valueEl(binder, `${prefix}.PA.${tag}`, { units })]))
             : h('p', { class: 'empty', text: 'This panel has no power analyzer readings configured.' }));
         draw();
         timer = setInterval(refresh, POLL_MS);

@@ -7,7 +7,7 @@
 
 import { get, post, qs, enc } from '../api.js';
 import { h, replace, field, select } from '../dom.js';
-import { fmtStated, fmtTime, qualityOf, roleAtLeast, showSample } from '../format.js';
+import { fmtStated, fmtTime, fmtValue, noteTags, qualityOf, roleAtLeast, showSample, stateWord } from '../format.js';
 import { live } from '../live.js';
 import { Binder, attempt, formDialog, confirmDialog, toast } from '../ui.js';
 
@@ -21,7 +21,12 @@ const PAGE = 200;
 
 /** A tag with `states` shows its values in those words (OPEN, CLOSED), not TRUE/FALSE. */
 function wordsOf(t) {
-  return t.states ? (v) => fmtStated(t.states, v) : undefined;
+  return t.states ? (v) => fmtStated(t.states, v, t.decimals ?? undefined) : undefined;
+}
+
+/** A value the operator typed: in the tag's words where it has them, else as typed (not rounded to its decimals). */
+function typedText(tag, v) {
+  return stateWord(tag.states, v) ?? (typeof v === 'number' ? String(v) : fmtValue(v));
 }
 
 /** A tag's engineering limits in the server's words ("0 to 100", "at least 0"), or ''. */
@@ -89,11 +94,11 @@ export async function askValue(tag, current) {
  */
 export async function confirmedWrite(tag, value) {
   const ok = await confirmDialog(`Write ${tag.name}`,
-    `Write ${fmtStated(tag.states, value)}${tag.units ? ` ${tag.units}` : ''} to ${tag.name}? The device is commanded at once.`,
+    `Write ${typedText(tag, value)}${tag.units ? ` ${tag.units}` : ''} to ${tag.name}? The device is commanded at once.`,
     { submitLabel: 'Write', danger: true });
   if (!ok) return undefined;
   const r = await attempt(`Write ${tag.name}`, () => post(`/api/tags/${enc(tag.name)}/write`, { value }));
-  if (r) toast(`${tag.name}: the device confirmed ${fmtStated(tag.states, r.value)}${r.units ? ` ${r.units}` : ''}.`, 'ok');
+  if (r) toast(`${tag.name}: the device confirmed ${fmtStated(tag.states, r.value, tag.decimals ?? undefined)}${r.units ? ` ${r.units}` : ''}.`, 'ok');
   return r;
 }
 
@@ -183,7 +188,7 @@ export default {
       const promise = get(`/api/tags${qs({ prefix: filter.prefix, search: filter.search, offset: i * PAGE, limit: PAGE })}`)
         .then((r) => {
           if (gen !== generation || disposed) return null;
-          pages.set(i, r.tags);
+          pages.set(i, noteTags(r.tags));
           total = r.total;
           where.textContent = `${total} tag${total === 1 ? '' : 's'}${filter.prefix ? ` under ${filter.prefix}` : ''}${filter.search ? ` matching "${filter.search}"` : ''}`;
           render();
@@ -214,7 +219,7 @@ export default {
       replace(rows, shown.map(([i, t]) => {
         const value = h('span', { class: 'value' });
         const s = live.get(t.name) || t;
-        showSample(value, s, { units: t.units, kind: t.kind, live: live.connected, format: wordsOf(t) });
+        showSample(value, s, { units: t.units, kind: t.kind, tag: t.name, live: live.connected, format: wordsOf(t) });
         const row = h('div', {
           class: ['vlist-row', selected === t.name && 'selected'], role: 'option', 'aria-selected': String(selected === t.name),
           dataset: { tag: t.name }, tabindex: '-1',
@@ -250,7 +255,7 @@ export default {
       const quality = h('dd', { id: 'tag-quality' });
       const stamp = h('dd', { id: 'tag-timestamp' });
       detailBinder.on(t.name, (smp, connected) => {
-        showSample(value, smp, { units: t.units, kind: t.kind, live: connected, format: wordsOf(t) });
+        showSample(value, smp, { units: t.units, kind: t.kind, tag: t.name, live: connected, format: wordsOf(t) });
         const q = qualityOf(smp, connected);
         quality.textContent = q.cls === 'q-good' ? 'Good' : `${q.cls === 'q-uncertain' ? 'Uncertain' : 'Bad'}: ${q.reason}`;
         quality.className = q.cls === 'q-good' ? '' : q.cls === 'q-uncertain' ? 'badge badge-warn' : 'badge badge-bad';
@@ -265,7 +270,7 @@ export default {
           const v = await askValue(t, cur ? cur.value : undefined);
           if (v === undefined || (typeof v === 'number' && !Number.isFinite(v))) return;
           const r = await confirmedWrite(t, v);
-          if (r) readback.textContent = `Confirmed by the device: ${fmtStated(t.states, r.value)}${t.units ? ` ${t.units}` : ''} at ${fmtTime(r.timestamp, true)}`;
+          if (r) readback.textContent = `Confirmed by the device: ${fmtStated(t.states, r.value, t.decimals ?? undefined)}${t.units ? ` ${t.units}` : ''} at ${fmtTime(r.timestamp, true)}`;
         });
       }
       const readback = h('p', { class: 'hint', id: 'tag-readback', role: 'status' });

@@ -6,7 +6,7 @@
 
 import { apiUrl, get, qs } from '../api.js';
 import { h, replace, select, field } from '../dom.js';
-import { fmtNumber, fmtTime, pad } from '../format.js';
+import { dateFormat, decimalsOf, fmtDate, fmtNumber, fmtTime, pad, parseDate } from '../format.js';
 import { live } from '../live.js';
 import { toast } from '../ui.js';
 import { siteChoice } from '../sites.js';
@@ -24,7 +24,8 @@ const MAX_SPAN_S = 31 * 86400;
 const MAX_PENS = 8;
 const PENS_KEY = 'gridscada.trend.pens';
 
-const dateValue = (d) => `${d.getFullYear()}-${pad(d.getMonth() + 1)}-${pad(d.getDate())}`;
+/** A Y bound for its field: four significant digits, whatever the pens' decimals (0.95 stays 0.95). */
+const yBound = (v) => String(Number(v.toPrecision(4)));
 const timeValue = (d) => `${pad(d.getHours())}:${pad(d.getMinutes())}:${pad(d.getSeconds())}`;
 /** A point's width in time, as an operator says it: "2 s", "40 s", "3 min", "1 h". */
 function fmtEvery(ms) {
@@ -72,7 +73,11 @@ export default {
     let loadSeq = 0;
 
     const now = new Date(Date.now() - 15 * 60_000);
-    const startDate = h('input', { type: 'date', id: 'trend-start-date', value: dateValue(now) });
+    // Typed in the plant's date order (`[hmi] date_format`): a date input follows the browser's locale.
+    const startDate = h('input', {
+      type: 'text', id: 'trend-start-date', value: fmtDate(now), size: 10, inputmode: 'numeric', placeholder: dateFormat(),
+      pattern: dateFormat().replace(/[.]/g, '\\.').replace('YYYY', '[0-9]{4}').replace(/MM|DD/g, '[0-9]{1,2}'), title: `Date, ${dateFormat()}`,
+    });
     // Typed as 24-hour text: a time input follows the browser's locale (09:22:38 AM).
     const startTime = h('input', {
       type: 'text', id: 'trend-start-time', value: timeValue(now), size: 8, inputmode: 'numeric', placeholder: 'HH:MM:SS',
@@ -138,7 +143,7 @@ export default {
       yMin.disabled = yMax.disabled = yAuto.checked;
       if (!yAuto.checked && data) {
         const r = chart.yRange(yAxis.value);
-        yMin.value = fmtNumber(r.min); yMax.value = fmtNumber(r.max);
+        yMin.value = yBound(r.min); yMax.value = yBound(r.max);
       }
       applyY();
     });
@@ -148,8 +153,8 @@ export default {
       const fixed = chart.yFixed.get(yAxis.value);
       yAuto.checked = !fixed;
       yMin.disabled = yMax.disabled = !fixed;
-      yMin.value = fixed ? fmtNumber(fixed.min) : '';
-      yMax.value = fixed ? fmtNumber(fixed.max) : '';
+      yMin.value = fixed ? yBound(fixed.min) : '';
+      yMax.value = fixed ? yBound(fixed.max) : '';
     });
     liveBox.addEventListener('change', () => { setLive(liveBox.checked); load(); });
     // Editing the start leaves Live and keeps what was typed (the window starts there).
@@ -180,7 +185,7 @@ export default {
     function drawAxes() {
       const axes = chart.axesInfo();
       replace(axesList, axes.map((a) => h('li', { dataset: { unit: a.unit, side: a.side, min: String(a.min), max: String(a.max), pens: a.pens.join(',') } },
-        h('strong', { text: a.unit || '(no unit)' }), ` axis, ${a.side}: ${fmtNumber(a.min)} to ${fmtNumber(a.max)}${chart.yFixed.has(a.unit) ? ' (set)' : ''}; ${a.pens.join(', ')}`)));
+        h('strong', { text: a.unit || '(no unit)' }), ` axis, ${a.side}: ${yBound(a.min)} to ${yBound(a.max)}${chart.yFixed.has(a.unit) ? ' (set)' : ''}; ${a.pens.join(', ')}`)));
       // The Y axis choice follows the units of the pens.
       const units = axesOf(pens).map((a) => a.unit);
       const cur = yAxis.value;
@@ -204,7 +209,7 @@ export default {
       if (!stayLive) {
         if (liveBox.checked) { liveBox.checked = false; setLive(false, false); }
         const d = new Date(start);
-        startDate.value = dateValue(d);
+        startDate.value = fmtDate(d);
         startTime.value = timeValue(d);
       }
       load();
@@ -254,13 +259,15 @@ export default {
       }
       const time = (startTime.value || '00:00:00').trim();
       if (!/^([01][0-9]|2[0-3]):[0-5][0-9](:[0-5][0-9])?$/.test(time)) return { from: NaN, to: NaN };
-      const from = new Date(`${startDate.value}T${time.length === 5 ? `${time}:00` : time}`).getTime();
+      const date = parseDate(startDate.value);
+      if (!date) return { from: NaN, to: NaN };
+      const from = new Date(`${date}T${time.length === 5 ? `${time}:00` : time}`).getTime();
       return { from, to: from + dur };
     }
 
     async function load() {
       const { from, to } = range();
-      if (!Number.isFinite(from)) { status.textContent = 'Set a valid start date and a 24-hour start time (HH:MM:SS).'; return; }
+      if (!Number.isFinite(from)) { status.textContent = `Set a valid start date (${dateFormat()}) and a 24-hour start time (HH:MM:SS).`; return; }
       csvLink.href = pens.length ? apiUrl(`/api/trends.csv${qs({ tags: pens.map((p) => p.tag).join(','), from, to, site: site.value() })}`) : '#';
       if (!pens.length) { data = { from, to, series: [] }; chart.setData([], from, to); drawAxes(); drawTable(); return; }
       const points = Math.max(50, Math.min(2000, Math.round(canvas.clientWidth || 800)));
@@ -325,7 +332,7 @@ export default {
         const dur = Number(duration.value) * 1000;
         const latest = Math.floor((Date.now() - dur) / 1000) * 1000;
         const d = new Date(Math.min(data ? data.from : latest, latest));
-        startDate.value = dateValue(d);
+        startDate.value = fmtDate(d);
         startTime.value = timeValue(d);
       }
     }
@@ -338,9 +345,10 @@ export default {
           const b = v.bucket;
           // Inside a bucket its average; after it, the value held since its last sample.
           const val = b ? (t >= b.end && typeof b.last === 'number' ? b.last : b.avg) : null;
-          const text = b ? `${fmtNumber(val)}${v.units ? ` ${v.units}` : ''}` : '? no data';
+          const digits = decimalsOf(v.tag);
+          const text = b ? `${fmtNumber(val, digits)}${v.units ? ` ${v.units}` : ''}` : '? no data';
           return [h('dt', {}, sw, v.tag), h('dd', { class: ['value', b ? 'q-good' : 'q-bad'], dataset: { pen: v.tag },
-            title: b ? `min ${fmtNumber(b.min)}, max ${fmtNumber(b.max)}, ${b.count} samples, ${fmtTime(b.start)} to ${fmtTime(b.end)}` : 'no samples at this time',
+            title: b ? `min ${fmtNumber(b.min, digits)}, max ${fmtNumber(b.max, digits)}, ${b.count} samples, ${fmtTime(b.start)} to ${fmtTime(b.end)}` : 'no samples at this time',
             text })];
         }));
     }
@@ -352,7 +360,8 @@ export default {
       const rows = times.map((t, i) => h('tr', {}, h('td', { class: 'nowrap', text: fmtTime(t) }),
         series.map((s) => {
           const b = s.buckets[i];
-          return h('td', { class: 'num', title: b && b.count ? `min ${fmtNumber(b.min)}, max ${fmtNumber(b.max)}, ${b.count} samples` : '', text: b && b.count ? fmtNumber(b.avg) : '—' });
+          const digits = decimalsOf(s.tag);
+          return h('td', { class: 'num', title: b && b.count ? `min ${fmtNumber(b.min, digits)}, max ${fmtNumber(b.max, digits)}, ${b.count} samples` : '', text: b && b.count ? fmtNumber(b.avg, digits) : '—' });
         })));
       const withData = rows.filter((_, i) => series.some((s) => s.buckets[i] && s.buckets[i].count));
       replace(tableBox, h('table', { class: 'data', id: 'trend-data-table' },
