@@ -9,9 +9,10 @@ use serde_spanned::Spanned;
 #[serde(deny_unknown_fields)]
 pub struct HmiConfig {
     /// Decimals of an analog value whose tag sets none, so one screen's
-    /// numbers line up (0 to [`MAX_DECIMALS`]).
+    /// numbers line up (0 to [`MAX_DECIMALS`]; read as any integer so that
+    /// one out of range is reported by name).
     #[serde(default = "default_decimals")]
-    pub decimals: Spanned<u8>,
+    pub decimals: Spanned<i64>,
     /// The order of a date's parts; times are always 24-hour.
     #[serde(default = "default_date_format")]
     pub date_format: Spanned<DateFormat>,
@@ -32,8 +33,8 @@ pub const MAX_DECIMALS: u8 = 6;
 /// The plant-wide decimals when `[hmi]` sets none.
 pub const DEFAULT_DECIMALS: u8 = 1;
 
-fn default_decimals() -> Spanned<u8> {
-    Spanned::new(0..0, DEFAULT_DECIMALS)
+fn default_decimals() -> Spanned<i64> {
+    Spanned::new(0..0, DEFAULT_DECIMALS.into())
 }
 fn default_date_format() -> Spanned<DateFormat> {
     Spanned::new(0..0, DateFormat::default())
@@ -70,13 +71,18 @@ impl DateFormat {
 }
 
 impl HmiConfig {
+    /// The plant's decimals (`check` refuses one out of range).
+    pub fn decimals(&self) -> u8 {
+        u8::try_from(*self.decimals.get_ref()).unwrap_or(DEFAULT_DECIMALS)
+    }
+
     /// The decimals a value of `kind` is shown with: the tag's `own`, else
     /// none for an integer and the plant's for an analog value; `None` for
     /// what is not a number (a bool, a text), which is shown in words.
     pub fn decimals_for(&self, kind: ValueKind, own: Option<u8>) -> Option<u8> {
         match kind {
             ValueKind::Int => Some(own.unwrap_or(0)),
-            ValueKind::Float => Some(own.unwrap_or(*self.decimals.get_ref())),
+            ValueKind::Float => Some(own.unwrap_or(self.decimals())),
             _ => None,
         }
     }

@@ -138,9 +138,10 @@ pub struct TagConfig {
     #[serde(default)]
     pub units: String,
     /// Decimals the HMI shows the value with (0 to 6), overriding `[hmi]
-    /// decimals`; numeric tags only.
+    /// decimals`; numeric tags only. Read as any integer so that a value
+    /// out of range is reported by name (`validate`), not as a type error.
     #[serde(default)]
-    pub decimals: Option<Spanned<u8>>,
+    pub decimals: Option<Spanned<i64>>,
     #[serde(default = "no")]
     pub writable: Spanned<bool>,
     /// The least role that may write the tag; required when writable.
@@ -212,9 +213,12 @@ impl TagConfig {
             _ => ValueKind::Int,
         }
     }
-    /// The tag's own `decimals`, if set.
+    /// The tag's own `decimals`, if set (and in range: `check` refuses
+    /// others).
     pub fn decimals(&self) -> Option<u8> {
-        self.decimals.as_ref().map(|d| *d.get_ref())
+        self.decimals
+            .as_ref()
+            .and_then(|d| u8::try_from(*d.get_ref()).ok())
     }
 
     /// The word configured for `value` in `states`, if any.

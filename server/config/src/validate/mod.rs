@@ -436,7 +436,7 @@ fn check_main(cx: &mut Ctx<'_>, main: &MainFile) {
     }
     check_connections(cx, &main.server.connections);
     let decimals = &main.hmi.decimals;
-    if *decimals.get_ref() > MAX_DECIMALS {
+    if !(0..=i64::from(MAX_DECIMALS)).contains(decimals.get_ref()) {
         cx.err(
             0,
             decimals.span(),

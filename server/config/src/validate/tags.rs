@@ -502,7 +502,7 @@ fn check_tag_common(cx: &mut Ctx<'_>, f: usize, t: &TagConfig) {
                 d.span(),
                 format!("tag '{name}': decimals apply to numeric tags only"),
             );
-        } else if *d.get_ref() > MAX_DECIMALS {
+        } else if !(0..=i64::from(MAX_DECIMALS)).contains(d.get_ref()) {
             cx.err(
                 f,
                 d.span(),

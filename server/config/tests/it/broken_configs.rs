@@ -250,14 +250,14 @@ fn write_limits_are_checked() {
 #[test]
 fn decimals_are_checked() {
     let tags = format!(
-        "{DEVICE}\n[[tag]]\nname = \"A.Volts\"\ndevice = \"D1\"\nkind = \"input_register\"\naddress = 0\ntype = \"f32\"\ndecimals = 7\n\n[[tag]]\nname = \"A.Cmd\"\ndevice = \"D1\"\nkind = \"coil\"\naddress = 0\ndecimals = 1\n"
+        "{DEVICE}\n[[tag]]\nname = \"A.Volts\"\ndevice = \"D1\"\nkind = \"input_register\"\naddress = 0\ntype = \"f32\"\ndecimals = -1\n\n[[tag]]\nname = \"A.Cmd\"\ndevice = \"D1\"\nkind = \"coil\"\naddress = 0\ndecimals = 1\n"
     );
     assert_problems(
         &format!("{MAIN}\n[hmi]\ndecimals = 9\n"),
         &tags,
         &[
             "DIR/gridscada.toml:4:12: error: [hmi] decimals: 9 must be 0 to 6",
-            "DIR/tags.toml:12:12: error: tag 'A.Volts': decimals 7 must be 0 to 6",
+            "DIR/tags.toml:12:12: error: tag 'A.Volts': decimals -1 must be 0 to 6",
             "DIR/tags.toml:19:12: error: tag 'A.Cmd': decimals apply to numeric tags only",
         ],
     );
@@ -298,7 +298,7 @@ fn decimals_resolve_to_the_tag_s_own_else_the_plant_s() {
     // Without [hmi]: one decimal, ISO dates.
     let plant =
         load_path(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tags")).unwrap();
-    assert_eq!(*plant.hmi.decimals.get_ref(), 1);
+    assert_eq!(plant.hmi.decimals(), 1);
     assert_eq!(plant.hmi.date_format.get_ref().pattern(), "YYYY-MM-DD");
 }
 

@@ -170,7 +170,7 @@ fn session_body(s: &WebState, p: &Principal) -> SessionView {
         warn_s: policy.warn.as_secs(),
         pair: s.components.pair.is_some(),
         hmi: HmiSettings {
-            decimals: *s.plant.hmi.decimals.get_ref(),
+            decimals: s.plant.hmi.decimals(),
             date_format: s.plant.hmi.date_format.get_ref().pattern(),
         },
     }

@@ -518,7 +518,7 @@ async fn tags_carry_their_decimals_and_the_session_the_plant_s_display_settings(
             .iter_mut()
             .find(|t| t.name.get_ref() == TAG_SUP)
             .unwrap();
-        sup.decimals = Some(serde_spanned::Spanned::new(0..0, 0));
+        sup.decimals = Some(serde_spanned::Spanned::new(0..0, 0i64));
     });
     assert_eq!(decimals(app.clone(), TAG_RO).await, json!(3));
     assert_eq!(decimals(app.clone(), TAG_SUP).await, json!(0));
