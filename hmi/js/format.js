@@ -39,6 +39,20 @@ export function parseDate(text) {
   return `${by.YYYY}-${pad(by.MM)}-${pad(by.DD)}`;
 }
 
+/** The `pattern` of a field a date is typed in, in the plant's order. */
+export function datePattern() {
+  return display.dateFormat.replace(/[.]/g, '\\.').replace('YYYY', '[0-9]{4}').replace(/MM|DD/g, '[0-9]{1,2}');
+}
+
+/** A local time typed as a date in the plant's order and a 24-hour time ("21.11.2026 14:05[:03]"; the date alone: midnight), in ms; null when it is not one. */
+export function parseDateTime(text) {
+  const [date, time = '00:00', ...rest] = String(text).trim().split(/\s+/);
+  const iso = parseDate(date);
+  const t = time.match(/^([01]?\d|2[0-3]):([0-5]\d)(?::([0-5]\d))?$/);
+  if (!iso || !t || rest.length) return null;
+  return new Date(`${iso}T${pad(Number(t[1]))}:${t[2]}:${t[3] || '00'}`).getTime();
+}
+
 /** Local date and 24-hour time, "2026-11-21 06:55:03" (the date in the plant's order). */
 export function fmtTime(ms, withMs = false) {
   if (ms === null || ms === undefined || !Number.isFinite(Number(ms))) return '—';

@@ -2,7 +2,7 @@
 // that keeps elements in step with live tags.
 
 import { h } from './dom.js';
-import { onDecimals, showSample } from './format.js';
+import { dateFormat, datePattern, fmtDate, onDecimals, showSample } from './format.js';
 import { live } from './live.js';
 
 /** Shows a message; errors stay until dismissed, others fade after a while. */
@@ -124,4 +124,12 @@ export function valueEl(binder, tag, opts = {}) {
   const el = h('span', { class: 'value' });
   binder.show(el, tag, opts);
   return el;
+}
+
+/** A date field typed in the plant's order (`[hmi] date_format`): a date input would follow the browser's locale. */
+export function dateInput(attrs, date) {
+  return h('input', {
+    type: 'text', size: 10, inputmode: 'numeric', placeholder: dateFormat(), pattern: datePattern(), title: `Date, ${dateFormat()}`,
+    value: date ? fmtDate(date) : '', ...attrs,
+  });
 }

@@ -8,7 +8,7 @@
 
 import { get, post, del, qs, apiUrl } from '../api.js';
 import { h, replace, select, field } from '../dom.js';
-import { decimalsOf, fmtTime, fmtValue, roleAtLeast } from '../format.js';
+import { dateFormat, decimalsOf, fmtTime, fmtValue, parseDateTime, roleAtLeast } from '../format.js';
 import { live } from '../live.js';
 import { siteChoice } from '../sites.js';
 import { attempt, formDialog, toast } from '../ui.js';
@@ -16,11 +16,6 @@ import { ALARM_HEADERS, KIND_LABELS, STATE_LABELS, causeLabel, drawAlarmRows, st
 import { PRIORITY_LEVELS } from '../components/alarmfooter.js';
 
 const STATES = [['', 'Any state'], ...Object.entries(STATE_LABELS).filter(([k]) => k !== 'normal')];
-
-function localInput(ms) {
-  const d = new Date(ms - new Date(ms).getTimezoneOffset() * 60_000);
-  return d.toISOString().slice(0, 16);
-}
 
 export default {
   mount(el, ctx) {
@@ -176,8 +171,10 @@ export default {
 
     function historyView() {
       const now = Date.now();
-      const from = h('input', { type: 'datetime-local', id: 'hist-from', value: localInput(now - 86_400_000) });
-      const to = h('input', { type: 'datetime-local', id: 'hist-to', value: localInput(now + 60_000) });
+      // Typed as the plant writes them (`[hmi] date_format`, 24-hour): a datetime-local input follows the browser's locale.
+      const when = (id, ms) => h('input', { type: 'text', id, size: 19, value: fmtTime(ms), title: `${dateFormat()} HH:MM[:SS], 24-hour` });
+      const from = when('hist-from', now - 86_400_000);
+      const to = when('hist-to', now + 60_000);
       const selection = h('input', { id: 'hist-selection', size: 10 });
       const prio = select({ id: 'hist-priority' }, PRIORITY_LEVELS, '');
       const text = h('input', { type: 'search', id: 'hist-text', size: 16 });
@@ -192,8 +189,10 @@ export default {
       const load = async () => {
         replace(out, h('p', { class: 'loading', text: 'Loading…' }));
         try {
+          const [start, end] = [from.value.trim(), to.value.trim()].map((v) => (v ? parseDateTime(v) : ''));
+          if (start === null || end === null) { replace(out, h('p', { class: 'error', role: 'status', text: `Type the times as ${dateFormat()} HH:MM, 24-hour.` })); return; }
           const filter = {
-            from: from.value ? new Date(from.value).getTime() : '', to: to.value ? new Date(to.value).getTime() : '',
+            from: start, to: end,
             selection: selection.value.trim(), min_priority: prio.value, text: text.value.trim(), site: site.value() };
           csvLink.href = apiUrl(`/api/alarms/history.csv${qs(filter)}`);
           const r = await get(`/api/alarms/history${qs({ ...filter, limit: limit.value })}`);

@@ -3,19 +3,19 @@
 
 import { get, qs, apiUrl } from '../api.js';
 import { h, replace, field } from '../dom.js';
-import { fmtTime, pad } from '../format.js';
+import { dateFormat, fmtDate, fmtTime, parseDateTime } from '../format.js';
+import { dateInput } from '../ui.js';
 import { siteChoice } from '../sites.js';
 
 const KNOWN_TYPES = ['login', 'logout', 'login_failed', 'command', 'command_refused', 'mode', 'reset', 'write', 'write_refused', 'write_failed',
   'ack', 'shelve', 'unshelve', 'sequence', 'dispatch', 'simulation', 'training', 'user', 'system'];
 
-const dateValue = (d) => `${d.getFullYear()}-${pad(d.getMonth() + 1)}-${pad(d.getDate())}`;
-
 export default {
   mount(el) {
     const today = new Date();
-    const from = h('input', { type: 'date', id: 'events-from', value: dateValue(today) });
-    const to = h('input', { type: 'date', id: 'events-to', value: dateValue(today) });
+    // Typed in the plant's date order (`[hmi] date_format`).
+    const from = dateInput({ id: 'events-from' }, today);
+    const to = dateInput({ id: 'events-to' }, today);
     const type = h('input', { id: 'events-type', list: 'events-types', size: 14 });
     const types = h('datalist', { id: 'events-types' }, KNOWN_TYPES.map((t) => h('option', { value: t })));
     const user = h('input', { id: 'events-user', size: 12 });
@@ -29,7 +29,7 @@ export default {
       field('From date', from), field('To date', to), field('Type', type), types, field('User', user), field('Text', text), site.el,
       h('div', { class: 'btn-row' },
         h('button', { type: 'submit', class: 'btn btn-primary', id: 'events-search', text: 'Search' }),
-        h('button', { type: 'button', class: 'btn', id: 'events-today', text: 'Today', onclick: () => { todayMode = true; const d = dateValue(new Date()); from.value = d; to.value = d; load(); } }),
+        h('button', { type: 'button', class: 'btn', id: 'events-today', text: 'Today', onclick: () => { todayMode = true; const d = fmtDate(new Date()); from.value = d; to.value = d; load(); } }),
         csvLink));
     el.append(h('h1', { class: 'screen-title', text: 'Events' }), h('div', { class: 'card' }, form, out));
     form.addEventListener('submit', (e) => { e.preventDefault(); todayMode = false; load(); });
@@ -40,8 +40,10 @@ export default {
         params.today = true;
         params.tz_offset_min = -new Date().getTimezoneOffset();
       } else {
-        if (from.value) params.from = new Date(`${from.value}T00:00:00`).getTime();
-        if (to.value) params.to = new Date(`${to.value}T00:00:00`).getTime() + 86_400_000 - 1;
+        const [start, end] = [from.value.trim(), to.value.trim()].map((v) => (v ? parseDateTime(v) : undefined));
+        if (start === null || end === null) { replace(out, h('p', { class: 'error', role: 'status', text: `Type the dates as ${dateFormat()}.` })); return; }
+        if (start !== undefined) params.from = start;
+        if (end !== undefined) params.to = end + 86_400_000 - 1;
       }
       csvLink.href = apiUrl(`/api/events.csv${qs(params)}`);
       params.limit = 1000;

@@ -6,9 +6,9 @@
 
 import { apiUrl, get, qs } from '../api.js';
 import { h, replace, select, field } from '../dom.js';
-import { dateFormat, decimalsOf, fmtDate, fmtNumber, fmtTime, pad, parseDate } from '../format.js';
+import { dateFormat, decimalsOf, fmtDate, fmtNumber, fmtTime, pad, parseDateTime } from '../format.js';
 import { live } from '../live.js';
-import { toast } from '../ui.js';
+import { dateInput, toast } from '../ui.js';
 import { siteChoice } from '../sites.js';
 import { TrendChart, PEN_COLORS, axesOf } from '../components/chart.js';
 import { tagList } from './common.js';
@@ -73,11 +73,7 @@ export default {
     let loadSeq = 0;
 
     const now = new Date(Date.now() - 15 * 60_000);
-    // Typed in the plant's date order (`[hmi] date_format`): a date input follows the browser's locale.
-    const startDate = h('input', {
-      type: 'text', id: 'trend-start-date', value: fmtDate(now), size: 10, inputmode: 'numeric', placeholder: dateFormat(),
-      pattern: dateFormat().replace(/[.]/g, '\\.').replace('YYYY', '[0-9]{4}').replace(/MM|DD/g, '[0-9]{1,2}'), title: `Date, ${dateFormat()}`,
-    });
+    const startDate = dateInput({ id: 'trend-start-date' }, now);
     // Typed as 24-hour text: a time input follows the browser's locale (09:22:38 AM).
     const startTime = h('input', {
       type: 'text', id: 'trend-start-time', value: timeValue(now), size: 8, inputmode: 'numeric', placeholder: 'HH:MM:SS',
@@ -259,9 +255,7 @@ export default {
       }
       const time = (startTime.value || '00:00:00').trim();
       if (!/^([01][0-9]|2[0-3]):[0-5][0-9](:[0-5][0-9])?$/.test(time)) return { from: NaN, to: NaN };
-      const date = parseDate(startDate.value);
-      if (!date) return { from: NaN, to: NaN };
-      const from = new Date(`${date}T${time.length === 5 ? `${time}:00` : time}`).getTime();
+      const from = parseDateTime(`${startDate.value} ${time}`) ?? NaN;
       return { from, to: from + dur };
     }
 

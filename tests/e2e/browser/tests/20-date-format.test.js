@@ -1,7 +1,8 @@
 // The plant's date order (`[hmi] date_format`; issue 33, finding 8): the
-// clock, the trend's start date field, its status line and its cursor
-// follow it, and a date typed in that order is taken. The demo keeps the
-// default (YYYY-MM-DD): here the session's setting is replaced on its way
+// clock, the trend's start date field, its status line and its cursor, the
+// event log's date fields and the alarm history's time fields follow it,
+// and a date typed in that order is taken. The demo keeps the default
+// (YYYY-MM-DD): here the session's setting is replaced on its way
 // to the browser by the one a DD.MM.YYYY plant sends; the server's side
 // (the key, its check, GET /api/session) has its Rust tests.
 import test from 'node:test';
@@ -57,6 +58,26 @@ test('dates in the plant\'s order: DD.MM.YYYY, times 24-hour', async () => {
     });
     assert.deepEqual(labels, { time: '21.11.2026 14:05:03', short: '21.11' });
     await b.screenshot('trend-dates');
+
+    // The event log's dates and the alarm history's times: typed in the plant's order too.
+    await page.goto(`${BASE}/#/events`);
+    const from = page.locator('#events-from');
+    await from.waitFor();
+    assert.equal(await from.inputValue(), typed, 'today, in the plant\'s order');
+    await page.locator('#events-search').click();
+    await page.locator('#events-count').waitFor({ timeout: 10_000 });
+    assert.match(await page.locator('#events-table tbody td').first().textContent(), DATE, 'the event times');
+    // A date in another order does not pass the field's pattern: the form is not sent.
+    await from.fill(`${today.getFullYear()}-${pad(today.getMonth() + 1)}-${pad(today.getDate())}`);
+    assert.equal(await from.evaluate((i) => i.validity.patternMismatch), true, 'YYYY-MM-DD is refused');
+    assert.equal(await from.getAttribute('placeholder'), 'DD.MM.YYYY');
+    await page.goto(`${BASE}/#/alarms`);
+    await page.locator('#alarms-tab-history').click();
+    const histFrom = page.locator('#hist-from');
+    await histFrom.waitFor();
+    assert.match(await histFrom.inputValue(), DATE, 'the history\'s start, in the plant\'s order');
+    await page.locator('#hist-search').click();
+    await page.locator('#alarms-history').waitFor({ timeout: 10_000 });
     assert.deepEqual(b.problems, []);
   } finally {
     await b.close();
