@@ -58,6 +58,7 @@ fn main() {
                 units: "V".into(),
                 device: None,
                 states: None,
+                decimals: None,
                 condition: cond,
                 on_delay: Duration::from_secs(2),
                 off_delay: Duration::ZERO,

@@ -76,6 +76,9 @@ pub struct AlarmDef {
     /// The tag's words for its values (`states` in the configuration):
     /// `{value}` and the alarm list show `TRIPPED`, not `false`.
     pub states: Option<std::sync::Arc<std::collections::BTreeMap<String, String>>>,
+    /// The decimals `{value}` and `{limit}` are written with: the tag's, as
+    /// the HMI shows it (`HmiConfig::decimals_for`); `None` for at most two.
+    pub decimals: Option<u8>,
     pub condition: Condition,
     pub on_delay: Duration,
     pub off_delay: Duration,
@@ -632,17 +635,22 @@ pub fn discrete_equals(value: &Value, when: &Value) -> Option<bool> {
     }
 }
 
-/// Formats a value for a message: floats to at most two decimals, without
-/// trailing zeros.
-pub fn format_value(v: &Value) -> String {
+/// Formats a value for a message: a float with `decimals` (the tag's, as
+/// the HMI shows it), or without them to at most two decimals, without
+/// trailing zeros. Never "-0".
+pub fn format_value(v: &Value, decimals: Option<u8>) -> String {
     match v {
         Value::Float(f) if f.is_finite() => {
-            let s = format!("{f:.2}");
-            let s = s.trim_end_matches('0').trim_end_matches('.');
-            if s == "-0" {
-                "0".into()
-            } else {
-                s.to_owned()
+            let s = match decimals {
+                Some(d) => format!("{f:.*}", usize::from(d)),
+                None => {
+                    let s = format!("{f:.2}");
+                    s.trim_end_matches('0').trim_end_matches('.').to_owned()
+                }
+            };
+            match s.strip_prefix('-') {
+                Some(rest) if rest.chars().all(|c| c == '0' || c == '.') => rest.to_owned(),
+                _ => s,
             }
         }
         other => other.to_string(),
@@ -673,13 +681,13 @@ pub fn render(def: &AlarmDef, value: Option<&Value>, detail: Option<&str>) -> St
             "tag" => Some(def.tag.clone().unwrap_or_else(|| def.key.clone())),
             "value" => Some(
                 value
-                    .map(|v| value_text(def, v).unwrap_or_else(|| format_value(v)))
+                    .map(|v| value_text(def, v).unwrap_or_else(|| format_value(v, def.decimals)))
                     .unwrap_or_else(|| "?".into()),
             ),
             "limit" => Some(
                 def.condition
                     .limit()
-                    .map(|l| format_value(&l))
+                    .map(|l| format_value(&l, def.decimals))
                     .unwrap_or_default(),
             ),
             "units" => Some(def.units.clone()),
@@ -695,4 +703,23 @@ pub fn render(def: &AlarmDef, value: Option<&Value>, detail: Option<&str>) -> St
     }
     out.push_str(rest);
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_value_is_written_with_its_tags_decimals_or_at_most_two() {
+        let f = |v: f64, d| format_value(&Value::Float(v), d);
+        assert_eq!(f(253.456, Some(1)), "253.5");
+        assert_eq!(f(253.0, Some(1)), "253.0");
+        assert_eq!(f(0.95, Some(2)), "0.95");
+        assert_eq!(f(1234.5, Some(0)), "1234");
+        assert_eq!(f(-0.04, Some(1)), "0.0", "never -0.0");
+        assert_eq!(f(203.456, None), "203.46");
+        assert_eq!(f(207.0, None), "207");
+        assert_eq!(f(-0.001, None), "0");
+        assert_eq!(format_value(&Value::Int(3), Some(1)), "3");
+    }
 }

@@ -54,6 +54,7 @@ pub(super) fn system_def(key: &str, priority: u32, selection: &str, message: &st
         units: String::new(),
         device: None,
         states: None,
+        decimals: None,
         condition: Condition::External,
         on_delay: Duration::ZERO,
         off_delay: Duration::ZERO,
@@ -71,7 +72,8 @@ pub fn plant_defs(plant: &Plant) -> Result<Vec<AlarmDef>, AlarmError> {
     let mut defs = Vec::new();
     for tag in &plant.tags {
         if let Some(a) = &tag.alarm {
-            tag_defs(tag, a, &mut defs)?;
+            let decimals = plant.hmi.decimals_for(tag.value_kind(), tag.decimals());
+            tag_defs(tag, a, decimals, &mut defs)?;
         }
     }
     let comm_states = Arc::new(std::collections::BTreeMap::from([
@@ -91,6 +93,7 @@ pub fn plant_defs(plant: &Plant) -> Result<Vec<AlarmDef>, AlarmError> {
             device: Some(device.clone()),
             // The status in words, as every other state is shown.
             states: Some(Arc::clone(&comm_states)),
+            decimals: None,
             condition: Condition::CommLost,
             on_delay: Duration::from_secs_f64(*d.comm_alarm.on_delay_s.get_ref()),
             off_delay: Duration::from_secs_f64(*d.comm_alarm.off_delay_s.get_ref()),
@@ -99,13 +102,19 @@ pub fn plant_defs(plant: &Plant) -> Result<Vec<AlarmDef>, AlarmError> {
     Ok(defs)
 }
 
-fn tag_defs(tag: &TagConfig, a: &AlarmConfig, defs: &mut Vec<AlarmDef>) -> Result<(), AlarmError> {
+fn tag_defs(
+    tag: &TagConfig,
+    a: &AlarmConfig,
+    decimals: Option<u8>,
+    defs: &mut Vec<AlarmDef>,
+) -> Result<(), AlarmError> {
     let source = AlarmSource {
         name: tag.name.get_ref(),
         units: &tag.units,
         description: &tag.description,
         device: Some(tag.device.get_ref()),
         states: tag.states.as_ref().map(|s| Arc::new(s.get_ref().clone())),
+        decimals,
     };
     defs.extend(tag_alarm_defs(&source, a)?);
     Ok(())
@@ -120,6 +129,8 @@ pub struct AlarmSource<'a> {
     /// The device the tag is read from (a local tag), if any.
     pub device: Option<&'a str>,
     pub states: Option<Arc<std::collections::BTreeMap<String, String>>>,
+    /// The decimals its values are shown with (see `AlarmDef::decimals`).
+    pub decimals: Option<u8>,
 }
 
 /// The limit and discrete alarms of one tag's `[tag.alarm]`: for a plant's
@@ -171,6 +182,7 @@ pub fn tag_alarm_defs(tag: &AlarmSource, a: &AlarmConfig) -> Result<Vec<AlarmDef
             units: tag.units.to_owned(),
             device: tag.device.map(str::to_owned),
             states: tag.states.clone(),
+            decimals: tag.decimals,
             condition,
         });
     }
@@ -216,6 +228,7 @@ pub fn tag_alarm_defs(tag: &AlarmSource, a: &AlarmConfig) -> Result<Vec<AlarmDef
             units: tag.units.to_owned(),
             device: tag.device.map(str::to_owned),
             states: tag.states.clone(),
+            decimals: tag.decimals,
             condition: Condition::Equals(when),
         });
     }
@@ -238,5 +251,5 @@ fn default_limit_message(kind: AlarmKind, units: &str) -> String {
 
 /// Formats a value as messages do (exposed for the web layer's tables).
 pub fn display_value(v: &Value) -> String {
-    format_value(v)
+    format_value(v, None)
 }

@@ -195,6 +195,9 @@ async fn engine_evaluates_suppresses_and_reports() {
         (t.cause, t.to, t.annunciated),
         (TransitionCause::Activate, AlarmState::Suppressed, false)
     );
+    // The value and the limit with the tag's decimals, as the HMI shows them
+    // (the demo's `[hmi] decimals = 1`).
+    assert_eq!(t.message, "SS1.PA.V_L1 very low: 0.0 V (limit 195.0 V)");
     let list = r.engine.summary(&AlarmFilter::default());
     assert!(list.iter().all(|v| !v.key.starts_with("SS1.PA.V_L1")));
     assert!(list.iter().any(|v| v.key == "SS1.ELCB.Closed:discrete"));
@@ -326,6 +329,7 @@ async fn alarms_defined_at_run_time_watch_their_new_tags() {
         description: "",
         device: None,
         states: None,
+        decimals: None,
     };
     let defs = || gridscada_alarms::tag_alarm_defs(&source, &config).unwrap();
     assert!(

@@ -121,6 +121,8 @@ fn define_remote_alarms(engine: &AlarmEngine, r: &RemoteAlarms) {
         description: &r.description,
         device: None,
         states: None,
+        // The edge's display settings do not travel with its births.
+        decimals: None,
     };
     let at_edge = gridscada_alarms::set::first_segment(&r.metric).to_owned();
     let mut config = r.config.clone();
