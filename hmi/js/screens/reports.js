@@ -5,7 +5,8 @@
 
 import { get, post, apiUrl, enc } from '../api.js';
 import { h, replace, field, select, table } from '../dom.js';
-import { fmtTime, pad } from '../format.js';
+import { dateFormat, fmtTime, pad, parseDate } from '../format.js';
+import { dateInput } from '../ui.js';
 
 const utcDay = (d) => `${d.getUTCFullYear()}-${pad(d.getUTCMonth() + 1)}-${pad(d.getUTCDate())}`;
 
@@ -13,7 +14,9 @@ export default {
   mount(el) {
     const yesterday = new Date(Date.now() - 86_400_000);
     const kind = select({ id: 'reports-kind' }, [['day', 'Day'], ['month', 'Month']], 'day');
-    const day = h('input', { type: 'date', id: 'reports-day', value: utcDay(yesterday), required: true });
+    // The UTC day typed in the plant's date order (a date input follows the browser's locale).
+    const day = dateInput({ id: 'reports-day', required: true },
+      new Date(yesterday.getUTCFullYear(), yesterday.getUTCMonth(), yesterday.getUTCDate()));
     const month = h('input', { type: 'month', id: 'reports-month', value: utcDay(yesterday).slice(0, 7), hidden: true });
     const status = h('p', { class: 'hint', role: 'status', id: 'reports-status' });
     const make = h('button', { type: 'submit', class: 'btn btn-primary', id: 'reports-make', text: 'Make report' });
@@ -36,8 +39,11 @@ export default {
 
     form.addEventListener('submit', async (e) => {
       e.preventDefault();
-      const period = kind.value === 'month' ? month.value : day.value;
-      if (!period) return;
+      const period = kind.value === 'month' ? month.value : parseDate(day.value);
+      if (!period) {
+        if (kind.value === 'day') replace(status, h('span', { class: 'error', text: `Type the day as ${dateFormat()}.` }));
+        return;
+      }
       make.disabled = true;
       replace(status, `Making the report of ${period}…`);
       try {

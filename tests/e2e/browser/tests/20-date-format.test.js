@@ -11,19 +11,23 @@ import { launch, login, credentials, until, BASE } from '../lib.js';
 
 const DATE = /^\d{2}\.\d{2}\.\d{4} ([01]\d|2[0-3]):[0-5]\d:[0-5]\d$/;
 
+/** Answers the page's GET /api/session as a plant with `[hmi] date_format = "DD.MM.YYYY"` does. */
+async function asDayFirstPlant(page) {
+  await page.route('**/api/session', async (route) => {
+    if (route.request().method() !== 'GET') { await route.continue(); return; }
+    const resp = await route.fetch();
+    const body = await resp.json();
+    body.hmi = { ...body.hmi, date_format: 'DD.MM.YYYY' };
+    await route.fulfill({ response: resp, json: body });
+  });
+}
+
 test('dates in the plant\'s order: DD.MM.YYYY, times 24-hour', async () => {
   const c = credentials().operator;
   const b = await launch('20-date-format', { locale: 'en-US' });
   const page = b.page;
   try {
-    // What a plant with `[hmi] date_format = "DD.MM.YYYY"` answers.
-    await page.route('**/api/session', async (route) => {
-      if (route.request().method() !== 'GET') { await route.continue(); return; }
-      const resp = await route.fetch();
-      const body = await resp.json();
-      body.hmi = { ...body.hmi, date_format: 'DD.MM.YYYY' };
-      await route.fulfill({ response: resp, json: body });
-    });
+    await asDayFirstPlant(page);
     await login(page, c.user, c.password);
     await until('the clock in the plant\'s order', async () => DATE.test((await page.locator('#clock').textContent()).trim()), 5_000);
 
@@ -78,6 +82,30 @@ test('dates in the plant\'s order: DD.MM.YYYY, times 24-hour', async () => {
     assert.match(await histFrom.inputValue(), DATE, 'the history\'s start, in the plant\'s order');
     await page.locator('#hist-search').click();
     await page.locator('#alarms-history').waitFor({ timeout: 10_000 });
+    assert.deepEqual(b.problems, []);
+  } finally {
+    await b.close();
+  }
+});
+
+test('the reports screen takes its day in the plant\'s order', async () => {
+  const c = credentials().supervisor;
+  const b = await launch('20-date-format-reports', { locale: 'en-US' });
+  const page = b.page;
+  try {
+    await asDayFirstPlant(page);
+    await login(page, c.user, c.password);
+    await page.goto(`${BASE}/#/reports`);
+    const day = page.locator('#reports-day');
+    await day.waitFor();
+    // Yesterday's UTC day, written DD.MM.YYYY.
+    const y = new Date(Date.now() - 86_400_000);
+    const p2 = (n) => String(n).padStart(2, '0');
+    assert.equal(await day.inputValue(), `${p2(y.getUTCDate())}.${p2(y.getUTCMonth() + 1)}.${y.getUTCFullYear()}`);
+    assert.equal(await day.getAttribute('placeholder'), 'DD.MM.YYYY');
+    // The ISO order is not this plant's: refused, nothing is made.
+    await day.fill(`${y.getUTCFullYear()}-${p2(y.getUTCMonth() + 1)}-${p2(y.getUTCDate())}`);
+    assert.equal(await day.evaluate((i) => i.validity.patternMismatch), true, 'YYYY-MM-DD does not match the field');
     assert.deepEqual(b.problems, []);
   } finally {
     await b.close();
