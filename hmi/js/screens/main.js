@@ -53,7 +53,8 @@ export default {
           const diagram = singleLine(binder, { prefix, title: p.name, zones: p.zones, devices, configured });
           shown.set(p.id, { badge, diagram });
           showPanelStatus(badge, diagram, p);
-          cards.push(h('section', { class: 'card panel-card', 'aria-label': p.name, dataset: { panel: p.id } },
+          // A panel of many zones takes the whole row, so its labels keep their size.
+          cards.push(h('section', { class: ['card', 'panel-card', p.zones > 6 && 'panel-card-wide'], 'aria-label': p.name, dataset: { panel: p.id } },
             h('div', { class: 'card-head' }, h('h2', {}, p.name, badge), open),
             diagram));
         }

@@ -41,6 +41,13 @@ test('every panel of another plant has its screen with its own zones', async () 
     await page.goto(`${BASE}/#/main`);
     await page.locator('.panel-card').nth(panels.length - 1).waitFor();
     assert.equal(await page.locator('.panel-card').count(), panels.length);
+    // Nor on the main screen's cards (a panel of many zones takes a whole row).
+    const cutOnMain = await page.evaluate(() => [...document.querySelectorAll('.panel-card .sl-scroll')].flatMap((box) => {
+      const r = box.getBoundingClientRect();
+      return [...box.querySelectorAll('text')].filter((t) => t.textContent.trim()
+        && (t.getBoundingClientRect().right > r.right + 1 || t.getBoundingClientRect().left < r.left - 1)).map((t) => t.textContent);
+    }));
+    assert.deepEqual(cutOnMain, [], 'labels cut on the main screen at 1366 px');
     await b.screenshot('main');
     assert.deepEqual(b.problems, []);
   } finally {
