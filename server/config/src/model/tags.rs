@@ -108,15 +108,18 @@ pub struct TagConfig {
     /// Zero-based address in that table (Modbus devices).
     #[serde(default)]
     pub address: Option<Spanned<u32>>,
-    /// The IEC 104 point (IEC 104 devices).
+    /// The IEC 104 point (IEC 104 devices). Boxed, as the other optional
+    /// sections: a plant of a million tags keeps every tag's configuration,
+    /// and inline each tag would pay for every protocol's and the alarms'
+    /// room (docs/research/million-tags.md).
     #[serde(default)]
-    pub iec104: Option<Iec104TagConfig>,
+    pub iec104: Option<Box<Iec104TagConfig>>,
     /// The DNP3 point (DNP3 devices).
     #[serde(default)]
-    pub dnp3: Option<Dnp3TagConfig>,
+    pub dnp3: Option<Box<Dnp3TagConfig>>,
     /// The IEC 61850 data attribute (IEC 61850 devices).
     #[serde(default)]
-    pub iec61850: Option<Iec61850TagConfig>,
+    pub iec61850: Option<Box<Iec61850TagConfig>>,
     /// Bit within a register (0 = least significant), for bool tags on registers.
     pub bit: Option<Spanned<u8>>,
     /// Wire type; `bool` by default for coils and discrete inputs, `u16` for registers.
@@ -164,7 +167,7 @@ pub struct TagConfig {
     /// `states = { 0 = "Stopped", 1 = "Manual", 2 = "Automatic" }`.
     #[serde(default)]
     pub states: Option<Spanned<std::collections::BTreeMap<String, String>>>,
-    pub alarm: Option<AlarmConfig>,
+    pub alarm: Option<Box<AlarmConfig>>,
     #[serde(default)]
     pub history: HistoryConfig,
 }
@@ -271,3 +274,21 @@ pub fn state_label<'a>(
 
 /// The `time_tag` value that keeps a tag's receive time.
 pub const RECEIVE_TIME: &str = "receive";
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A plant keeps every tag's configuration for the server's life: a
+    /// tag pays inline only for what every tag has, and a million tags stay
+    /// within a few hundred MiB here (docs/research/million-tags.md).
+    #[test]
+    fn a_tag_configuration_is_compact() {
+        let size = std::mem::size_of::<TagConfig>();
+        println!("TagConfig: {size} B inline");
+        assert!(
+            size <= 700,
+            "TagConfig is {size} B inline (1,768 B with its optional sections inline)"
+        );
+    }
+}

@@ -224,7 +224,7 @@ fn trigger_exists<'t>(
         return Err(format!("no tag '{owner}' for '{key}'; {forms}"));
     };
     let none = AlarmConfig::default();
-    let a = tag.alarm.as_ref().unwrap_or(&none);
+    let a = tag.alarm.as_deref().unwrap_or(&none);
     let present = match suffix {
         "hihi" => a.hihi.is_some(),
         "hi" => a.hi.is_some(),
