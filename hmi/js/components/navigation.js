@@ -130,12 +130,13 @@ export function drawNavigation(nav, screens) {
     for (const b of nav.querySelectorAll('.tool-menu-button')) {
       const here = !!inGroup && b.dataset.group === current.group;
       b.classList.toggle('tool-here', here);
-      b.querySelector('.tool-where').textContent = here ? current.label : '';
-      b.setAttribute('aria-label', here ? `${groupLabel(b.dataset.group)}, now ${current.label}` : groupLabel(b.dataset.group));
+      // The name is the words on the button (WCAG 2.5.3), the current screen's even where it is not shown.
+      b.querySelector('.tool-where').textContent = here ? `· ${current.label}` : '';
+      b.setAttribute('aria-label', here ? `${groupLabel(b.dataset.group)} · ${current.label}` : groupLabel(b.dataset.group));
     }
-    phoneButton.querySelector('.tool-where').textContent = inGroup ? current.label : '';
+    phoneButton.querySelector('.tool-where').textContent = inGroup ? `· ${current.label}` : '';
     phoneButton.classList.toggle('tool-here', !!inGroup);
-    phoneButton.setAttribute('aria-label', inGroup ? `Screens, now ${current.label}` : 'Screens');
+    phoneButton.setAttribute('aria-label', inGroup ? `Screens · ${current.label}` : 'Screens');
   };
 }
 

@@ -6,7 +6,7 @@
 // screen, and the alarm screen shows its summary per area once.
 import test from 'node:test';
 import assert from 'node:assert/strict';
-import { launch, login, credentials, adminApi, requireOk, until, BASE } from '../lib.js';
+import { launch, login, credentials, adminApi, requireOk, until, runAxe, seriousFindings, BASE } from '../lib.js';
 
 const DRAWN = Array.from({ length: 10 }, (_, i) => `e2e-nav-${i + 1}`);
 
@@ -70,6 +70,12 @@ test('the header is one row for every role at 1366x768 and 1920x1080, with ten d
           assert.ok(rows.height <= 52 && rows.spread <= 6,
             `${role} at ${w}x${hgt}: the header is ${rows.height} px high, its ${rows.count} items spread over ${rows.spread} px`);
         }
+        // At 1920 px the group button also names the screen on view: its name is still its words (axe).
+        await page.goto(`${BASE}/#/${DRAWN.length ? `custom:${DRAWN[0]}` : 'main'}`);
+        await page.locator('#toolbar .tool-menu-button.tool-here').waitFor();
+        assert.match(await page.locator('#toolbar .tool-menu-button.tool-here').textContent(), /Process.*Feeder overview 1/);
+        assert.deepEqual(seriousFindings(await runAxe(page)).map((v) => `${v.id}: ${v.nodes.join(', ')}`), [],
+          `${role}: axe at 1920 px with the group naming the screen`);
         await page.setViewportSize({ width: 1366, height: 768 });
         // Every screen the session allows is in the navigation, and opens from it.
         const session = requireOk(await page.evaluate(async () => {
