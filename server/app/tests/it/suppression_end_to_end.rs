@@ -126,9 +126,20 @@ fn a_configured_rule_suppresses_what_it_names_while_its_trigger_stands_and_relea
 
     // Automatic: the sequence isolates zone 2 and recloses the ELCB. The
     // trip clears; after the 2 s hold, zone 2's dead-supply alarm (still
-    // true: the zone is isolated) is released to the operator.
+    // true: the zone is isolated) is released to the operator. While the
+    // sequence runs, the ELCB recloses and re-trips as it tries each zone,
+    // so the rule may release and engage again: judge it once the sequence
+    // has ended.
     let (s, b) = sup.post("/api/panels/pa/mode", json!({"mode": "auto"}));
     assert_eq!(s, 200, "{b}");
+    wait_for(
+        "panel pa's sequence ended with zone 2 isolated",
+        Duration::from_secs(60),
+        || {
+            let p = op.get_ok("/api/panels/pa");
+            (p["step"] == "isolated").then_some(())
+        },
+    );
     let z2 = wait_for(
         "zone 2's alarm released into the list",
         Duration::from_secs(60),
