@@ -12,6 +12,14 @@ the first minute.
 
     target/test-venv/bin/python scripts/bench-memory.py --seconds 600
     (GRIDSCADA_BIN: the binary, target/release/gridscada by default)
+
+The devices are served by the Rust `register_walker` example of the modbus
+crate (`cargo build --release -p gridscada-modbus --example register_walker`,
+WALKER_BIN to point elsewhere) when it is built: one lean process whose CPU
+is a few percent of a core even at a million tags. `--peer python` uses
+pymodbus servers in a child process instead (the walk is the same; at more
+than about 100,000 tags they cannot keep up on 2 cores). The peer's CPU is
+printed beside the server's.
 """
 import argparse
 import asyncio
@@ -146,6 +154,8 @@ def main():
     ap.add_argument("--clients", type=int, default=20)
     ap.add_argument("--seconds", type=int, default=600)
     ap.add_argument("--every", type=int, default=10)
+    ap.add_argument("--peer", choices=["rust", "python"], default=None,
+                    help="who serves the devices (default: rust when the walker is built)")
     ap.add_argument("--serve-devices", help=argparse.SUPPRESS)
     args = ap.parse_args()
     per_device = args.tags // args.devices
@@ -154,15 +164,31 @@ def main():
         return
     binary = os.environ.get("GRIDSCADA_BIN", os.path.join(ROOT, "target", "release", "gridscada"))
     tmp = tempfile.mkdtemp(prefix="bench-memory-")
-    ports = [free_port() for _ in range(args.devices)]
-    hport = free_port()
+    # Distinct ports: the kernel may hand the same free port out twice
+    # among hundreds of picks.
+    picked = set()
+    while len(picked) < args.devices + 1:
+        picked.add(free_port())
+    ports = sorted(picked)
+    hport = ports.pop()
     base = f"http://127.0.0.1:{hport}"
     write_plant(tmp, ports, per_device, f"127.0.0.1:{hport}")
     procs = []
     try:
-        procs.append(subprocess.Popen([sys.executable, __file__, "--tags", str(args.tags),
-                                       "--devices", str(args.devices),
-                                       "--serve-devices", ",".join(map(str, ports))]))
+        walker = os.environ.get("WALKER_BIN", os.path.join(ROOT, "target", "release", "examples",
+                                                            "register_walker"))
+        peer_kind = args.peer or ("rust" if os.path.exists(walker) else "python")
+        if peer_kind == "rust":
+            peer = subprocess.Popen([walker, str(per_device), ",".join(map(str, ports))],
+                                    stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+            if peer.stdout.readline().strip() != "ready":
+                sys.exit("the register walker did not start")
+        else:
+            peer = subprocess.Popen([sys.executable, __file__, "--tags", str(args.tags),
+                                     "--devices", str(args.devices),
+                                     "--serve-devices", ",".join(map(str, ports))])
+        print(f"devices served by the {peer_kind} peer (pid {peer.pid})", flush=True)
+        procs.append(peer)
         password = "bench-memory-" + str(random.randrange(10**9))
         subprocess.run([binary, "user", "add", "bench", "--role", "display", "--config", tmp],
                        input=password + "\n", text=True, check=True, capture_output=True)
@@ -203,11 +229,12 @@ def main():
         t.start()
         started = time.monotonic()
         last_cpu, last_t = proc_sample(server.pid)[0], started
+        last_peer_cpu = proc_sample(peer.pid)[0]
         series = []
         print(f"load average at the start: {open('/proc/loadavg').read().strip()}", flush=True)
         print("| t (s) | RSS (MiB) | CPU (% of one core) | tags | historian samples written | "
-              "live messages | load 1 min |")
-        print("|---:|---:|---:|---:|---:|---:|---:|", flush=True)
+              "historian dropped | late scans | live messages | peer CPU (%) | load 1 min |")
+        print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|", flush=True)
         while time.monotonic() - started < args.seconds:
             time.sleep(args.every)
             now = time.monotonic()
@@ -215,12 +242,17 @@ def main():
             m = metrics(base)
             tags = m.get("gridscada_tags", float("nan"))
             written = m.get("gridscada_historian_samples_written_total", float("nan"))
+            dropped = m.get("gridscada_historian_dropped_total", 0.0)
+            late = sum(v for k, v in m.items() if k.startswith("gridscada_poll_late_scans_total"))
+            peer_cpu = proc_sample(peer.pid)[0]
             pct = 100 * (cpu - last_cpu) / (now - last_t)
-            last_cpu, last_t = cpu, now
-            row = (now - started, rss, pct, tags, written, sum(counts),
+            peer_pct = 100 * (peer_cpu - last_peer_cpu) / (now - last_t)
+            last_cpu, last_t, last_peer_cpu = cpu, now, peer_cpu
+            row = (now - started, rss, pct, tags, written, dropped, late, sum(counts), peer_pct,
                    float(open("/proc/loadavg").read().split()[0]))
             series.append(row)
-            print("| %.0f | %.1f | %.1f | %.0f | %.0f | %d | %.2f |" % row, flush=True)
+            print("| %.0f | %.1f | %.1f | %.0f | %.0f | %.0f | %.0f | %d | %.1f | %.2f |" % row,
+                  flush=True)
         after = [r for r in series if r[0] >= 60]
         if after:
             first, peak, end = after[0][1], max(r[1] for r in after), after[-1][1]

@@ -1114,7 +1114,6 @@ pub async fn web_state(stack: &Stack) -> gridscada_web::WebState {
             iec104_server: stack.iec104_server_counters.clone(),
         })),
         screens: Default::default(),
-        tag_index: Arc::new(gridscada_web::access::TagIndex::new(&stack.plant)),
         devices: Some(Arc::new(StackDevices {
             plant: stack.plant.clone(),
             db: stack.db.clone(),

@@ -456,11 +456,14 @@ pub async fn dispatch_notices(
 /// The historian's logging policy, per configured tag.
 pub fn recorder(plant: &Plant, db: &TagDb) -> Recorder {
     let mut r = Recorder::new();
+    r.reserve(db.len());
     for t in &plant.tags {
         if let Some(id) = db.id(t.name.get_ref()) {
+            // The tag database's name, shared, not a copy per tag.
+            let name = db.meta(id).map(|m| m.name.clone());
             r.set_policy(
                 id,
-                t.name.get_ref().as_str(),
+                name.unwrap_or_else(|| t.name.get_ref().as_str().into()),
                 RecordPolicy::from_config(&t.history),
             );
         }

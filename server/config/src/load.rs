@@ -4,7 +4,6 @@
 //! entry, is deserialized on its own, so one bad entry does not hide the
 //! problems of the others: `gridscada check` reports them all.
 
-use std::collections::HashMap;
 use std::io;
 use std::path::{Path, PathBuf};
 
@@ -65,36 +64,70 @@ pub struct Plant {
 /// Where each tag and device name sits in [`Plant::tags`] and
 /// [`Plant::devices`], so a lookup by name is not a scan of a million tags
 /// (start-up looks up every tag once: a scan each would be quadratic).
-/// Built at the first lookup; a hit is checked against the list, and a
-/// miss scans it, so a plant whose lists were changed after loading (tests
-/// do) still answers right, only slower.
+/// Built at the first lookup. It holds positions only, hashed by the name
+/// they point at, not a copy of every name. A hit is checked against the
+/// list; a miss scans the list only if its length changed since the index
+/// was made, so a plant whose lists were changed after loading (tests do)
+/// still answers right, and a name that is not configured (a device's
+/// status tag, a remote tag) costs one probe, not a scan.
 #[derive(Debug, Clone, Default)]
 struct NameIndex {
-    tags: std::sync::OnceLock<HashMap<String, usize>>,
-    devices: std::sync::OnceLock<HashMap<String, usize>>,
+    tags: std::sync::OnceLock<Positions>,
+    devices: std::sync::OnceLock<Positions>,
+}
+
+#[derive(Debug, Clone)]
+struct Positions {
+    hasher: std::hash::RandomState,
+    table: hashbrown::HashTable<u32>,
+    /// The list's length when the index was made.
+    len: usize,
 }
 
 /// Each name's position (the first, should a name repeat).
-fn positions<'a>(names: impl Iterator<Item = &'a str>) -> HashMap<String, usize> {
-    let mut index = HashMap::new();
-    for (i, name) in names.enumerate() {
-        index.entry(name.to_string()).or_insert(i);
+fn positions<T>(items: &[T], name_of: impl Fn(&T) -> &String) -> Positions {
+    use std::hash::BuildHasher;
+    let hasher = std::hash::RandomState::new();
+    let mut table = hashbrown::HashTable::with_capacity(items.len());
+    let hash = |i: &u32| hasher.hash_one(name_of(&items[*i as usize]).as_str());
+    for (i, item) in items.iter().enumerate() {
+        let name = name_of(item);
+        let h = hasher.hash_one(name.as_str());
+        let Ok(i) = u32::try_from(i) else { break };
+        if table
+            .find(h, |j: &u32| name_of(&items[*j as usize]) == name)
+            .is_none()
+        {
+            table.insert_unique(h, i, hash);
+        }
     }
-    index
+    Positions {
+        hasher,
+        table,
+        len: items.len(),
+    }
 }
 
-/// The item named `name`: by the index when it still holds there, else by
-/// a scan.
+/// The item named `name`: by the index when it still holds there, else
+/// (when the list changed since) by a scan.
 fn lookup<'a, T>(
-    index: &HashMap<String, usize>,
+    index: &Positions,
     items: &'a [T],
     name: &str,
     name_of: impl Fn(&T) -> &String,
 ) -> Option<&'a T> {
-    if let Some(item) = index.get(name).and_then(|&i| items.get(i)) {
-        if name_of(item) == name {
-            return Some(item);
-        }
+    use std::hash::BuildHasher;
+    let h = index.hasher.hash_one(name);
+    let hit = index.table.find(h, |j: &u32| {
+        items
+            .get(*j as usize)
+            .is_some_and(|item| name_of(item) == name)
+    });
+    if let Some(&i) = hit {
+        return items.get(i as usize);
+    }
+    if items.len() == index.len {
+        return None;
     }
     items.iter().find(|item| name_of(item) == name)
 }
@@ -117,14 +150,14 @@ impl Plant {
         let index = self
             .index
             .devices
-            .get_or_init(|| positions(self.devices.iter().map(|d| d.name.get_ref().as_str())));
+            .get_or_init(|| positions(&self.devices, |d| d.name.get_ref()));
         lookup(index, &self.devices, name, |d| d.name.get_ref())
     }
     pub fn tag(&self, name: &str) -> Option<&TagConfig> {
         let index = self
             .index
             .tags
-            .get_or_init(|| positions(self.tags.iter().map(|t| t.name.get_ref().as_str())));
+            .get_or_init(|| positions(&self.tags, |t| t.name.get_ref()));
         lookup(index, &self.tags, name, |t| t.name.get_ref())
     }
 

@@ -20,7 +20,6 @@ mod notice;
 mod round_trip;
 mod serial;
 
-use std::collections::HashMap;
 use std::sync::Arc;
 
 use gridscada_config::Plant;
@@ -326,21 +325,44 @@ pub fn check_limits(
 /// protocol its device speaks. Control loops, the HMI and northbound hold
 /// this, never a protocol's own.
 pub struct Router {
-    routes: HashMap<Arc<str>, Arc<dyn TagWriter>>,
+    db: Arc<TagDb>,
+    writers: Vec<Arc<dyn TagWriter>>,
+    /// By tag id: the index in `writers` of the tag's protocol, `NO_ROUTE`
+    /// for a tag no protocol serves. One byte a tag, not a map of names.
+    route: Vec<u8>,
 }
 
+const NO_ROUTE: u8 = u8::MAX;
+
 impl Router {
-    /// `writers`: each protocol's writer with the tags it serves.
+    /// `writers`: each protocol's writer with the tags it serves, by the
+    /// names `db` knows them by (a name it does not know has no route).
     pub fn new<'a>(
+        db: Arc<TagDb>,
         writers: impl IntoIterator<Item = (Arc<dyn TagWriter>, Vec<&'a str>)>,
     ) -> Router {
-        let mut routes = HashMap::new();
+        let mut route = vec![NO_ROUTE; db.len()];
+        let mut all = Vec::new();
         for (writer, tags) in writers {
+            let index = u8::try_from(all.len())
+                .ok()
+                .filter(|i| *i != NO_ROUTE)
+                .expect("fewer than 255 protocol writers");
+            all.push(writer);
             for t in tags {
-                routes.insert(Arc::<str>::from(t), Arc::clone(&writer));
+                if let Some(id) = db.id(t) {
+                    if route.len() <= id.index() {
+                        route.resize(id.index() + 1, NO_ROUTE);
+                    }
+                    route[id.index()] = index;
+                }
             }
         }
-        Router { routes }
+        Router {
+            db,
+            writers: all,
+            route,
+        }
     }
 
     /// The tags of `plant` whose device's protocol satisfies `speaks`.
@@ -363,7 +385,12 @@ impl Router {
 
 impl TagWriter for Router {
     fn write<'a>(&'a self, name: &'a str, value: Value) -> WriteFuture<'a> {
-        match self.routes.get(name) {
+        let writer = self
+            .db
+            .id(name)
+            .and_then(|id| self.route.get(id.index()))
+            .and_then(|&i| self.writers.get(usize::from(i)));
+        match writer {
             Some(w) => w.write(name, value),
             None => Box::pin(async move { Err(WriteError::UnknownTag(name.to_string())) }),
         }

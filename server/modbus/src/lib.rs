@@ -33,8 +33,10 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use gridscada_config::{DeviceConfig, Plant, Protocol};
-use gridscada_field::{check_limits, DeviceStats, LinkStats, PollStats, StatsSource};
-use gridscada_tagdb::{Clock, Leadership, TagDb, TagWriter, Value, WriteError, WriteFuture};
+use gridscada_field::{
+    check_limits, no_write_target, DeviceStats, LinkStats, PollStats, StatsSource,
+};
+use gridscada_tagdb::{Clock, Leadership, TagDb, TagId, TagWriter, Value, WriteError, WriteFuture};
 use parking_lot::Mutex;
 use tokio::sync::{mpsc, oneshot, watch};
 use tokio::task::JoinHandle;
@@ -59,7 +61,6 @@ struct WriteTarget {
     link: usize,
     tag: usize,
     codec: decode::Codec,
-    writable: bool,
     /// Engineering limits (`Plant::write_limits`), checked before anything
     /// is sent, for every writer: HMI, control loops, northbound.
     limits: (Option<f64>, Option<f64>),
@@ -67,7 +68,10 @@ struct WriteTarget {
 
 struct Shared {
     links: Vec<mpsc::Sender<WriteCmd>>,
-    targets: HashMap<Arc<str>, WriteTarget>,
+    /// The writable tags only: a read-only one is told apart from an
+    /// unknown one by the tag database (most of a large plant is read-only).
+    targets: HashMap<TagId, WriteTarget>,
+    db: Arc<TagDb>,
     /// The fencing gate (asked again by the link as the frame goes out).
     leadership: Leadership,
 }
@@ -190,19 +194,23 @@ impl FieldIo {
                 width: codec.width,
                 scan_ms: t.scan_ms(device).max(10),
             });
-            let arc: Arc<str> = Arc::from(name.as_str());
-            targets.insert(
-                arc.clone(),
-                WriteTarget {
-                    link: li,
-                    tag: index,
-                    codec: codec.clone(),
-                    writable: *t.writable.get_ref() && codec.table.is_writable(),
-                    limits: plant.write_limits(t.name.get_ref()),
-                },
-            );
+            if *t.writable.get_ref() && codec.table.is_writable() {
+                targets.insert(
+                    id,
+                    WriteTarget {
+                        link: li,
+                        tag: index,
+                        codec: codec.clone(),
+                        limits: plant.write_limits(t.name.get_ref()),
+                    },
+                );
+            }
+            // The tag database's name, shared rather than copied.
+            let name = db
+                .meta(id)
+                .map_or_else(|| Arc::from(name.as_str()), |m| m.name.clone());
             link_tags[li].push(LinkTag {
-                name: arc,
+                name,
                 id,
                 device: di,
                 address,
@@ -367,6 +375,7 @@ impl FieldIo {
             shared: Arc::new(Shared {
                 links: senders,
                 targets,
+                db: db.clone(),
                 leadership,
             }),
             counters: ModbusStats {
@@ -473,14 +482,12 @@ struct FieldWriter {
 impl TagWriter for FieldWriter {
     fn write<'a>(&'a self, name: &'a str, value: Value) -> WriteFuture<'a> {
         Box::pin(async move {
-            let target = self
-                .shared
-                .targets
-                .get(name)
-                .ok_or_else(|| WriteError::UnknownTag(name.to_string()))?;
-            if !target.writable {
-                return Err(WriteError::ReadOnly(name.to_string()));
-            }
+            let shared = &self.shared;
+            let target = shared
+                .db
+                .id(name)
+                .and_then(|id| shared.targets.get(&id))
+                .ok_or_else(|| no_write_target(&shared.db, name))?;
             // Refused early on a standby, with the active server's name; the
             // link asks again at the last moment.
             self.shared

@@ -50,10 +50,7 @@ impl TagSpace {
         let mut nodes = Vec::with_capacity(db.len());
         let mut by_node = HashMap::with_capacity(db.len());
         for (id, meta) in db.all_meta() {
-            let register = web
-                .tag_index
-                .get(&web.plant, &meta.name)
-                .map(|t| t.data_type());
+            let register = web.plant.tag(&meta.name).map(|t| t.data_type());
             let node = NodeId::new(ns, meta.name.to_string());
             by_node.insert(node.clone(), id);
             nodes.push((node, data_type_of(meta.kind, register)));

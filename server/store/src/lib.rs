@@ -39,6 +39,19 @@ macro_rules! on_backend {
             }
         }
     };
+    // SQLite's writer or reader pool by a condition (PostgreSQL has one).
+    ($store:expr, if $c:expr => $yes:ident else $no:ident, |$p:ident| $body:expr) => {
+        match &$store.inner.backend {
+            $crate::store::Backend::Sqlite(s) => {
+                let $p = if $c { s.$yes() } else { s.$no() };
+                $body
+            }
+            $crate::store::Backend::Postgres(pool) => {
+                let $p = pool;
+                $body
+            }
+        }
+    };
 }
 
 mod alarms;

@@ -18,7 +18,6 @@
 //!
 //! String tags have no numeric value and are not logged.
 
-use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -99,9 +98,12 @@ impl IntoIterator for Rows {
 }
 
 /// Per-tag logging policy and the memory it needs (last logged, last seen).
+/// Indexed by tag id, which is dense: a million tags cost their states and
+/// nothing more (a hash map would be half empty at that size).
 #[derive(Debug, Default)]
 pub struct Recorder {
-    tags: HashMap<TagId, TagState>,
+    tags: Vec<Option<TagState>>,
+    registered: usize,
 }
 
 /// Whether `a` and `b` differ by more than `deadband`; NaN/None count as a
@@ -128,29 +130,41 @@ impl Recorder {
     /// Registers a tag (or replaces its policy, keeping what was logged).
     pub fn set_policy(&mut self, id: TagId, name: impl Into<Arc<str>>, policy: RecordPolicy) {
         let name = name.into();
-        self.tags
-            .entry(id)
-            .and_modify(|t| {
-                t.policy = policy.clone();
-                t.name = name.clone();
-            })
-            .or_insert(TagState {
-                name,
-                policy,
-                last_logged: None,
-                last_seen: None,
-                last_late: None,
-                return_from: None,
-            });
+        if self.tags.len() <= id.index() {
+            self.tags.resize_with(id.index() + 1, || None);
+        }
+        match &mut self.tags[id.index()] {
+            Some(t) => {
+                t.policy = policy;
+                t.name = name;
+            }
+            slot @ None => {
+                *slot = Some(TagState {
+                    name,
+                    policy,
+                    last_logged: None,
+                    last_seen: None,
+                    last_late: None,
+                    return_from: None,
+                });
+                self.registered += 1;
+            }
+        }
+    }
+
+    /// Makes room for tags up to `count` ids at once (start-up registers
+    /// every configured tag).
+    pub fn reserve(&mut self, count: usize) {
+        self.tags.reserve(count.saturating_sub(self.tags.len()));
     }
 
     /// Tags registered.
     pub fn len(&self) -> usize {
-        self.tags.len()
+        self.registered
     }
 
     pub fn is_empty(&self) -> bool {
-        self.tags.is_empty()
+        self.registered == 0
     }
 
     /// Offers a new sample of a tag; returns its own row to log, if any
@@ -162,7 +176,7 @@ impl Recorder {
     /// Offers a new sample of a tag; returns the rows to log. Unknown tags,
     /// disabled tags, string values and never-read samples are not logged.
     pub fn offer_rows(&mut self, id: TagId, sample: &Sample) -> Rows {
-        let Some(t) = self.tags.get_mut(&id) else {
+        let Some(Some(t)) = self.tags.get_mut(id.index()) else {
             return Rows::default();
         };
         Rows(t.offer(sample))
@@ -250,7 +264,7 @@ impl Recorder {
     /// at least its max interval old, the last seen value stamped `now`.
     pub fn tick(&mut self, now: Timestamp) -> Vec<HistorySample> {
         let mut out = Vec::new();
-        for t in self.tags.values_mut() {
+        for t in self.tags.iter_mut().flatten() {
             let (Some(interval), true) = (t.policy.max_interval, t.policy.enabled) else {
                 continue;
             };

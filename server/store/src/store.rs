@@ -18,6 +18,7 @@ use sqlx::postgres::{PgConnectOptions, PgPool, PgPoolOptions};
 use sqlx::sqlite::{
     SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous,
 };
+use sqlx::QueryBuilder;
 
 use crate::error::db;
 use crate::{Result, StoreError};
@@ -674,11 +675,7 @@ impl Store {
         if self.view {
             // Another site's ids: looked up each time, not mixed into the
             // cache of this site's.
-            for &n in names {
-                if !missing.contains(&n) {
-                    missing.push(n)
-                }
-            }
+            missing.extend(names.iter().copied());
         } else {
             let cache = self.inner.tag_ids.lock();
             for &n in names {
@@ -686,66 +683,52 @@ impl Store {
                     Some((k, &id)) => {
                         found.insert(k.clone(), id);
                     }
-                    None => {
-                        if !missing.contains(&n) {
-                            missing.push(n)
-                        }
-                    }
+                    None => missing.push(n),
                 }
             }
         }
         if missing.is_empty() {
             return Ok(found);
         }
+        missing.sort_unstable();
+        missing.dedup();
         for n in &missing {
             validate_tag_name(n)?;
         }
-        let resolved: Vec<(String, i64)> = if create {
-            on_backend!(self, writer, |p| {
-                let mut tx = p.begin().await.map_err(db("registering historian tags"))?;
-                let mut out = Vec::with_capacity(missing.len());
-                for n in &missing {
-                    sqlx::query(
-                        "INSERT INTO tags (site, name) VALUES ($1, $2) \
-                         ON CONFLICT (site, name) DO NOTHING",
-                    )
-                    .bind(&*self.site)
-                    .bind(*n)
-                    .execute(&mut *tx)
-                    .await
-                    .map_err(db("registering historian tags"))?;
-                    let id: i64 =
-                        sqlx::query_scalar("SELECT id FROM tags WHERE site = $1 AND name = $2")
-                            .bind(&*self.site)
-                            .bind(*n)
-                            .fetch_one(&mut *tx)
-                            .await
-                            .map_err(db("registering historian tags"))?;
-                    out.push((n.to_string(), id));
+        // In chunks, a statement each (not two per name): the first scan of a
+        // large plant brings every tag's first row within seconds.
+        let resolved: Vec<(String, i64)> = on_backend!(self, if create => writer else reader, |p| {
+            let mut out = Vec::with_capacity(missing.len());
+            let mut tx = p.begin().await.map_err(db("registering historian tags"))?;
+            for chunk in missing.chunks(TAG_NAMES_PER_STATEMENT) {
+                if create {
+                    let mut qb = QueryBuilder::new("INSERT INTO tags (site, name) ");
+                    qb.push_values(chunk, |mut b, n| {
+                        b.push_bind(&*self.site).push_bind(*n);
+                    });
+                    qb.push(" ON CONFLICT (site, name) DO NOTHING");
+                    qb.build()
+                        .execute(&mut *tx)
+                        .await
+                        .map_err(db("registering historian tags"))?;
                 }
-                tx.commit()
-                    .await
-                    .map_err(db("registering historian tags"))?;
-                out
-            })
-        } else {
-            on_backend!(self, reader, |p| {
-                let mut out = Vec::new();
-                for n in &missing {
-                    let id: Option<i64> =
-                        sqlx::query_scalar("SELECT id FROM tags WHERE site = $1 AND name = $2")
-                            .bind(&*self.site)
-                            .bind(*n)
-                            .fetch_optional(p)
-                            .await
-                            .map_err(db("looking up historian tags"))?;
-                    if let Some(id) = id {
-                        out.push((n.to_string(), id));
-                    }
+                let mut qb = QueryBuilder::new("SELECT name, id FROM tags WHERE site = ");
+                qb.push_bind(&*self.site).push(" AND name IN (");
+                let mut names = qb.separated(", ");
+                for n in chunk {
+                    names.push_bind(*n);
                 }
-                out
-            })
-        };
+                qb.push(")");
+                let rows: Vec<(String, i64)> = qb
+                    .build_query_as()
+                    .fetch_all(&mut *tx)
+                    .await
+                    .map_err(db("looking up historian tags"))?;
+                out.extend(rows);
+            }
+            tx.commit().await.map_err(db("registering historian tags"))?;
+            out
+        });
         if self.view {
             for (n, id) in resolved {
                 found.insert(n.into(), id);
@@ -761,6 +744,10 @@ impl Store {
         Ok(found)
     }
 }
+
+/// Names registered or looked up per statement (well under SQLite's
+/// 32,766 bound parameters).
+const TAG_NAMES_PER_STATEMENT: usize = 1000;
 
 /// A site id as the configuration allows it: 1..64 letters, digits, `-`, `_`.
 pub(crate) fn check_site(site: &str) -> Result<()> {

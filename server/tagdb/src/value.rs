@@ -264,12 +264,19 @@ pub struct Sample {
 /// The reason of a tag that has never been read.
 pub const NEVER_READ: &str = "no value yet";
 
+/// One shared copy of [`NEVER_READ`]: every tag starts with it, and a
+/// million tags should not hold a million copies.
+fn never_read_reason() -> Arc<str> {
+    static REASON: std::sync::OnceLock<Arc<str>> = std::sync::OnceLock::new();
+    REASON.get_or_init(|| Arc::from(NEVER_READ)).clone()
+}
+
 impl Sample {
     /// What a tag holds before its first reading: Bad, at time 0.
     pub fn never_read(value: Value) -> Self {
         Sample {
             value,
-            quality: Quality::bad(NEVER_READ),
+            quality: Quality::bad(never_read_reason()),
             timestamp: Timestamp::from_millis(0),
         }
     }

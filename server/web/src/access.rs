@@ -319,28 +319,3 @@ impl Readable {
                 .any(|p| tag.starts_with(p.as_str()))
     }
 }
-
-/// The configured tags by name, so per-tag look-ups stay O(1) for plants of
-/// 100,000 tags (`Plant::tag` scans).
-#[derive(Debug, Default)]
-pub struct TagIndex(std::collections::HashMap<String, usize>);
-
-impl TagIndex {
-    pub fn new(plant: &Plant) -> Self {
-        TagIndex(
-            plant
-                .tags
-                .iter()
-                .enumerate()
-                .map(|(i, t)| (t.name.get_ref().clone(), i))
-                .collect(),
-        )
-    }
-
-    pub fn get<'p>(&self, plant: &'p Plant, name: &str) -> Option<&'p gridscada_config::TagConfig> {
-        self.0
-            .get(name)
-            .and_then(|&i| plant.tags.get(i))
-            .filter(|t| t.name.get_ref() == name)
-    }
-}

@@ -59,8 +59,6 @@ pub struct WebState {
     pub metrics: Option<Arc<dyn metrics::MetricsSource>>,
     /// The screens users drew, as last saved.
     pub screens: Arc<access::ScreenLibrary>,
-    /// The plant's tags by name (build with [`access::TagIndex::new`]).
-    pub tag_index: Arc<access::TagIndex>,
     /// Communication figures of the field devices, where field I/O runs.
     pub devices: Option<Arc<dyn api::devices::DeviceSource>>,
     /// This server itself speaks HTTPS (`[server.tls]`): responses carry

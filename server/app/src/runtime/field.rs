@@ -44,9 +44,13 @@ impl Field {
         let mut dnp3 =
             gridscada_dnp3::Dnp3Io::start(plant, db.clone(), clock.clone(), leadership.clone())
                 .context("starting the DNP3 master")?;
-        let mut iec61850 =
-            gridscada_iec61850::client::Iec61850Io::start(plant, db, clock.clone(), leadership)
-                .context("starting the IEC 61850 client")?;
+        let mut iec61850 = gridscada_iec61850::client::Iec61850Io::start(
+            plant,
+            db.clone(),
+            clock.clone(),
+            leadership,
+        )
+        .context("starting the IEC 61850 client")?;
         for notices in [
             iec104.take_notices(),
             dnp3.take_notices(),
@@ -57,21 +61,24 @@ impl Field {
         {
             tokio::spawn(record_notices(notices, events.clone(), clock.clone()));
         }
-        let writer: Arc<dyn TagWriter> = Arc::new(Router::new([
-            (modbus.writer(), Router::tags_of(plant, |p| p.is_modbus())),
-            (
-                iec104.writer(),
-                Router::tags_of(plant, |p| p == Protocol::Iec104),
-            ),
-            (
-                dnp3.writer(),
-                Router::tags_of(plant, |p| p == Protocol::Dnp3),
-            ),
-            (
-                iec61850.writer(),
-                Router::tags_of(plant, |p| p == Protocol::Iec61850),
-            ),
-        ]));
+        let writer: Arc<dyn TagWriter> = Arc::new(Router::new(
+            db,
+            [
+                (modbus.writer(), Router::tags_of(plant, |p| p.is_modbus())),
+                (
+                    iec104.writer(),
+                    Router::tags_of(plant, |p| p == Protocol::Iec104),
+                ),
+                (
+                    dnp3.writer(),
+                    Router::tags_of(plant, |p| p == Protocol::Dnp3),
+                ),
+                (
+                    iec61850.writer(),
+                    Router::tags_of(plant, |p| p == Protocol::Iec61850),
+                ),
+            ],
+        ));
         let stats = StatsHandle::new(vec![
             modbus.stats_source(),
             iec104.stats_source(),

@@ -72,7 +72,6 @@ pub async fn web_state(db: Arc<TagDb>, dir: &Path) -> (WebState, String) {
         http_metrics: Default::default(),
         metrics: None,
         screens: Default::default(),
-        tag_index: Arc::new(gridscada_web::access::TagIndex::new(&plant_ref)),
         devices: None,
         tls: false,
         live: Default::default(),

@@ -121,7 +121,7 @@ pub struct Dnp3Source {
 
 impl WebState {
     pub fn write_role(&self, name: &str) -> Option<Role> {
-        match self.tag_index.get(&self.plant, name) {
+        match self.plant.tag(name) {
             Some(t) => t
                 .writable
                 .get_ref()
@@ -142,7 +142,7 @@ impl WebState {
 
     pub fn tag_view(&self, id: TagId, meta: &TagMeta) -> Option<TagView> {
         let sample = self.db.get(id)?;
-        let config = self.tag_index.get(&self.plant, &meta.name);
+        let config = self.plant.tag(&meta.name);
         Some(TagView {
             name: meta.name.to_string(),
             description: meta.description.clone(),

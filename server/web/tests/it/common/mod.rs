@@ -336,7 +336,6 @@ impl Harness {
         .expect("alarm engine");
         let writer = Arc::new(FakeWriter::for_plant(&plant));
         let sim = Arc::new(FakeSim::default());
-        let tag_index = Arc::new(gridscada_web::access::TagIndex::new(&plant));
         let state = WebState {
             db,
             plant: Arc::new(plant),
@@ -354,7 +353,6 @@ impl Harness {
             http_metrics: Default::default(),
             metrics: None,
             screens: Default::default(),
-            tag_index,
             devices: None,
             tls: false,
             live: Default::default(),
