@@ -32,6 +32,7 @@ import sys
 import tempfile
 import time
 import urllib.error
+import urllib.parse
 import urllib.request
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -44,7 +45,7 @@ def free_port():
         return s.getsockname()[1]
 
 
-def write_plant(folder, ports, per_device, http):
+def write_plant(folder, ports, per_device, http, storage="sqlite://gridscada.db"):
     files = []
     for d, port in enumerate(ports):
         name = f"d{d:02d}.toml"
@@ -61,7 +62,7 @@ def write_plant(folder, ports, per_device, http):
             f.write("\n".join(lines))
     with open(os.path.join(folder, "gridscada.toml"), "w") as f:
         f.write(f'tag_files = {json.dumps(files)}\n\n[server]\nhttp = "{http}"\n'
-                f'data_dir = "data"\n\n[storage]\nurl = "sqlite://gridscada.db"\n')
+                f'data_dir = "data"\n\n[storage]\nurl = "{storage}"\n')
 
 
 def serve_devices(ports, per_device):
@@ -156,6 +157,8 @@ def main():
     ap.add_argument("--every", type=int, default=10)
     ap.add_argument("--peer", choices=["rust", "python"], default=None,
                     help="who serves the devices (default: rust when the walker is built)")
+    ap.add_argument("--storage", default="sqlite://gridscada.db",
+                    help="the plant's [storage] url (a PostgreSQL database is emptied first)")
     ap.add_argument("--serve-devices", help=argparse.SUPPRESS)
     args = ap.parse_args()
     per_device = args.tags // args.devices
@@ -172,7 +175,13 @@ def main():
     ports = sorted(picked)
     hport = ports.pop()
     base = f"http://127.0.0.1:{hport}"
-    write_plant(tmp, ports, per_device, f"127.0.0.1:{hport}")
+    if args.storage.startswith("postgres"):
+        # A fresh database of the bench's own on that server.
+        u = urllib.parse.urlparse(args.storage)
+        admin = u._replace(path="/postgres").geturl()
+        for sql in ("DROP DATABASE IF EXISTS " + u.path[1:], "CREATE DATABASE " + u.path[1:]):
+            subprocess.run(["psql", admin, "-q", "-c", sql], check=True)
+    write_plant(tmp, ports, per_device, f"127.0.0.1:{hport}", args.storage)
     procs = []
     try:
         walker = os.environ.get("WALKER_BIN", os.path.join(ROOT, "target", "release", "examples",

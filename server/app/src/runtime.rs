@@ -508,7 +508,16 @@ impl Stack {
         };
 
         // The historian.
-        let historian = gridscada_store::Historian::spawn(store.clone(), Default::default());
+        // Room for every tag's first row and half as many more: a large
+        // plant's first scan brings them all within a second or two.
+        let defaults = gridscada_store::HistorianConfig::default();
+        let historian = gridscada_store::Historian::spawn(
+            store.clone(),
+            gridscada_store::HistorianConfig {
+                capacity: defaults.capacity.max(db.len() + db.len() / 2),
+                ..defaults
+            },
+        );
         let (feed_stop, feed_stop_rx) = watch::channel(false);
         let historian_feed = tokio::spawn(sinks::historian_feed(
             plant.clone(),

@@ -8,8 +8,12 @@
 //!
 //! Maintenance is incremental: a batch is rolled up in memory, and each of
 //! its buckets is either new, appended to the stored bucket (all its samples
-//! after the stored last one: merged without reading raw rows), or, for a
-//! late or repeated sample, recomputed from the raw rows of that one bucket.
+//! after the stored last one: merged by the database in the upsert itself,
+//! one statement per level, without reading the stored bucket first), or,
+//! for a late or repeated sample, recomputed from the raw rows of that one
+//! bucket.
+
+use std::collections::HashSet;
 
 use sqlx::{PgConnection, QueryBuilder, SqliteConnection};
 
@@ -64,22 +68,6 @@ fn is_bad(code: i32) -> bool {
 /// The columns of a roll-up row, in table order.
 const COLUMNS: &str = "tag_id, bucket, n, n_value, min_value, max_value, sum_value, \
                        first_ts, first_value, last_ts, last_value, last_quality, bad_ms";
-
-type AggRow = (
-    i64,
-    i64,
-    i64,
-    i64,
-    Option<f64>,
-    Option<f64>,
-    Option<f64>,
-    i64,
-    Option<f64>,
-    i64,
-    Option<f64>,
-    i32,
-    i64,
-);
 
 /// One roll-up bucket of one tag.
 #[derive(Debug, Clone, PartialEq)]
@@ -143,7 +131,9 @@ impl Agg {
         self.last_quality = q;
     }
 
-    /// `self` followed by `later`, whose samples all come after `self`'s.
+    /// `self` followed by `later`, whose samples all come after `self`'s:
+    /// the reference for the merge the database does (`merge_sql`).
+    #[cfg(test)]
     fn append(&mut self, w: i64, later: &Agg) {
         let end = self.bucket + w;
         if is_bad(self.last_quality) {
@@ -159,26 +149,9 @@ impl Agg {
         self.last_value = later.last_value;
         self.last_quality = later.last_quality;
     }
-
-    fn from_row(r: AggRow) -> Agg {
-        Agg {
-            tag_id: r.0,
-            bucket: r.1,
-            n: r.2,
-            n_value: r.3,
-            min: r.4,
-            max: r.5,
-            sum: r.6,
-            first_ts: r.7,
-            first_value: r.8,
-            last_ts: r.9,
-            last_value: r.10,
-            last_quality: r.11,
-            bad_ms: r.12,
-        }
-    }
 }
 
+#[cfg(test)]
 fn opt(a: Option<f64>, b: Option<f64>, f: impl Fn(f64, f64) -> f64) -> Option<f64> {
     match (a, b) {
         (Some(a), Some(b)) => Some(f(a, b)),
@@ -203,22 +176,40 @@ pub(crate) fn roll_up(
     out
 }
 
-/// What a batch's bucket becomes, given the stored bucket (if any): merged
-/// when the batch only appends, else `None` (recompute it from raw rows).
-fn combine(stored: Option<&Agg>, batch: &Agg, w: i64) -> Option<Agg> {
-    match stored {
-        None => Some(batch.clone()),
-        Some(s) if batch.first_ts > s.last_ts => {
-            let mut m = s.clone();
-            m.append(w, batch);
-            Some(m)
-        }
-        Some(_) => None,
-    }
-}
-
 /// Raw rows of SQLite per roll-up statement: 13 parameters each.
 const SQLITE_ROWS: usize = 500;
+
+/// Inserts a batch's buckets, or appends each to the stored bucket in the
+/// same statement where all its samples come after the stored last one
+/// (the merge of [`Agg::append`], in SQL: no read of the stored buckets
+/// first). Returns the keys it wrote; a bucket it did not (a late or
+/// repeated sample) is recomputed from raw rows by the caller.
+fn merge_sql(level: Level) -> String {
+    let end = format!("(r.bucket + {})", level.width());
+    let pick = |f: &str, op: &str| {
+        format!(
+            "{f} = CASE WHEN r.{f} IS NULL THEN excluded.{f} \
+             WHEN excluded.{f} IS NULL THEN r.{f} \
+             WHEN excluded.{f} {op} r.{f} THEN excluded.{f} ELSE r.{f} END"
+        )
+    };
+    format!(
+        " ON CONFLICT (tag_id, bucket) DO UPDATE SET \
+         n = r.n + excluded.n, n_value = r.n_value + excluded.n_value, {}, {}, \
+         sum_value = COALESCE(r.sum_value + excluded.sum_value, r.sum_value, excluded.sum_value), \
+         last_ts = excluded.last_ts, last_value = excluded.last_value, \
+         last_quality = excluded.last_quality, \
+         bad_ms = r.bad_ms + excluded.bad_ms - CASE WHEN r.last_quality IN (0, 1) THEN 0 \
+         ELSE {end} - excluded.first_ts END \
+         WHERE excluded.first_ts > r.last_ts RETURNING tag_id, bucket",
+        pick("min_value", "<"),
+        pick("max_value", ">"),
+    )
+}
+
+/// The statement re-reading one bucket's raw rows (`$1` tag, `$2..$3`).
+const BUCKET_RAW: &str = "SELECT tag_id, ts, value, quality FROM samples \
+     WHERE tag_id = $1 AND ts >= $2 AND ts < $3 ORDER BY ts";
 
 /// Brings both levels up to date with a batch already inserted in the raw
 /// table in the same transaction. `rows`: `(tag_id, ts, value, quality)`,
@@ -230,66 +221,36 @@ pub(crate) async fn maintain_sqlite(
     for level in Level::ALL {
         let w = level.width();
         let batch = roll_up(rows.iter().copied(), w);
-        let mut stored = std::collections::HashMap::new();
+        let mut written = HashSet::with_capacity(batch.len());
         for chunk in batch.chunks(SQLITE_ROWS) {
-            let mut qb = QueryBuilder::new(format!(
-                "SELECT {COLUMNS} FROM {} WHERE (tag_id, bucket) IN (VALUES ",
-                level.table()
-            ));
-            let mut sep = qb.separated(", ");
-            for a in chunk {
-                sep.push("(")
-                    .push_bind_unseparated(a.tag_id)
-                    .push_unseparated(", ")
-                    .push_bind_unseparated(a.bucket)
-                    .push_unseparated(")");
-            }
-            qb.push(")");
-            let found: Vec<AggRow> = qb
+            let mut qb =
+                QueryBuilder::new(format!("INSERT INTO {} AS r ({COLUMNS}) ", level.table()));
+            push_sqlite_values(&mut qb, chunk);
+            qb.push(merge_sql(level));
+            let keys: Vec<(i64, i64)> = qb
                 .build_query_as()
                 .fetch_all(&mut *conn)
                 .await
-                .map_err(db("reading historian roll-ups"))?;
-            for r in found {
-                stored.insert((r.0, r.1), Agg::from_row(r));
-            }
+                .map_err(db("writing historian roll-ups"))?;
+            written.extend(keys);
         }
-        let mut out = Vec::with_capacity(batch.len());
-        for a in &batch {
-            match combine(stored.get(&(a.tag_id, a.bucket)), a, w) {
-                Some(m) => out.push(m),
-                None => {
-                    let raw: Vec<(i64, i64, Option<f64>, i32)> = sqlx::query_as(
-                        "SELECT tag_id, ts, value, quality FROM samples \
-                         WHERE tag_id = $1 AND ts >= $2 AND ts < $3 ORDER BY ts",
-                    )
-                    .bind(a.tag_id)
-                    .bind(a.bucket)
-                    .bind(a.bucket + w)
-                    .fetch_all(&mut *conn)
-                    .await
-                    .map_err(db("re-reading a historian bucket"))?;
-                    out.extend(roll_up(raw, w));
-                }
-            }
+        let mut redo = Vec::new();
+        for a in batch
+            .iter()
+            .filter(|a| !written.contains(&(a.tag_id, a.bucket)))
+        {
+            let raw: Vec<(i64, i64, Option<f64>, i32)> = sqlx::query_as(BUCKET_RAW)
+                .bind(a.tag_id)
+                .bind(a.bucket)
+                .bind(a.bucket + w)
+                .fetch_all(&mut *conn)
+                .await
+                .map_err(db("re-reading a historian bucket"))?;
+            redo.extend(roll_up(raw, w));
         }
-        for chunk in out.chunks(SQLITE_ROWS) {
+        for chunk in redo.chunks(SQLITE_ROWS) {
             let mut qb = QueryBuilder::new(format!("INSERT INTO {} ({COLUMNS}) ", level.table()));
-            qb.push_values(chunk, |mut b, a| {
-                b.push_bind(a.tag_id)
-                    .push_bind(a.bucket)
-                    .push_bind(a.n)
-                    .push_bind(a.n_value)
-                    .push_bind(a.min)
-                    .push_bind(a.max)
-                    .push_bind(a.sum)
-                    .push_bind(a.first_ts)
-                    .push_bind(a.first_value)
-                    .push_bind(a.last_ts)
-                    .push_bind(a.last_value)
-                    .push_bind(a.last_quality)
-                    .push_bind(a.bad_ms);
-            });
+            push_sqlite_values(&mut qb, chunk);
             qb.push(UPSERT);
             qb.build()
                 .execute(&mut *conn)
@@ -300,6 +261,25 @@ pub(crate) async fn maintain_sqlite(
     Ok(())
 }
 
+fn push_sqlite_values(qb: &mut QueryBuilder<'_, sqlx::Sqlite>, chunk: &[Agg]) {
+    qb.push_values(chunk, |mut b, a| {
+        b.push_bind(a.tag_id)
+            .push_bind(a.bucket)
+            .push_bind(a.n)
+            .push_bind(a.n_value)
+            .push_bind(a.min)
+            .push_bind(a.max)
+            .push_bind(a.sum)
+            .push_bind(a.first_ts)
+            .push_bind(a.first_value)
+            .push_bind(a.last_ts)
+            .push_bind(a.last_value)
+            .push_bind(a.last_quality)
+            .push_bind(a.bad_ms);
+    });
+}
+
+/// A recomputed bucket replaces the stored one.
 const UPSERT: &str = " ON CONFLICT (tag_id, bucket) DO UPDATE SET \
     n = excluded.n, n_value = excluded.n_value, min_value = excluded.min_value, \
     max_value = excluded.max_value, sum_value = excluded.sum_value, \
@@ -307,8 +287,8 @@ const UPSERT: &str = " ON CONFLICT (tag_id, bucket) DO UPDATE SET \
     last_ts = excluded.last_ts, last_value = excluded.last_value, \
     last_quality = excluded.last_quality, bad_ms = excluded.bad_ms";
 
-/// [`maintain_sqlite`] for PostgreSQL: one read and one upsert per level,
-/// as arrays. The caller holds the historian's advisory lock, so two writers
+/// [`maintain_sqlite`] for PostgreSQL: one merging upsert per level, as
+/// arrays. The caller holds the historian's advisory lock, so two writers
 /// never merge into the same bucket at once.
 pub(crate) async fn maintain_pg(
     conn: &mut PgConnection,
@@ -317,55 +297,56 @@ pub(crate) async fn maintain_pg(
     for level in Level::ALL {
         let w = level.width();
         let batch = roll_up(rows.iter().copied(), w);
-        let (tags, buckets): (Vec<i64>, Vec<i64>) =
-            batch.iter().map(|a| (a.tag_id, a.bucket)).unzip();
-        let found: Vec<AggRow> = sqlx::query_as(&format!(
-            // LATERAL: one primary-key look-up per bucket, whatever the
-            // planner would guess of an UNNEST's size.
-            "SELECT r.* FROM UNNEST($1::bigint[], $2::bigint[]) AS k(t, b) \
-             CROSS JOIN LATERAL (SELECT {COLUMNS} FROM {} \
-             WHERE tag_id = k.t AND bucket = k.b) r",
-            level.table()
-        ))
-        .bind(&tags)
-        .bind(&buckets)
-        .fetch_all(&mut *conn)
-        .await
-        .map_err(db("reading historian roll-ups"))?;
-        let stored: std::collections::HashMap<(i64, i64), Agg> = found
+        let written: HashSet<(i64, i64)> = pg_upsert(&mut *conn, level, &batch, &merge_sql(level))
+            .await?
             .into_iter()
-            .map(|r| ((r.0, r.1), Agg::from_row(r)))
             .collect();
-        let mut out = Vec::with_capacity(batch.len());
-        for a in &batch {
-            match combine(stored.get(&(a.tag_id, a.bucket)), a, w) {
-                Some(m) => out.push(m),
-                None => {
-                    let raw: Vec<(i64, i64, Option<f64>, i32)> = sqlx::query_as(
-                        "SELECT tag_id, ts, value, quality FROM samples \
-                         WHERE tag_id = $1 AND ts >= $2 AND ts < $3 ORDER BY ts",
-                    )
-                    .bind(a.tag_id)
-                    .bind(a.bucket)
-                    .bind(a.bucket + w)
-                    .fetch_all(&mut *conn)
-                    .await
-                    .map_err(db("re-reading a historian bucket"))?;
-                    out.extend(roll_up(raw, w));
-                }
-            }
+        let mut redo = Vec::new();
+        for a in batch
+            .iter()
+            .filter(|a| !written.contains(&(a.tag_id, a.bucket)))
+        {
+            let raw: Vec<(i64, i64, Option<f64>, i32)> = sqlx::query_as(BUCKET_RAW)
+                .bind(a.tag_id)
+                .bind(a.bucket)
+                .bind(a.bucket + w)
+                .fetch_all(&mut *conn)
+                .await
+                .map_err(db("re-reading a historian bucket"))?;
+            redo.extend(roll_up(raw, w));
         }
-        macro_rules! col {
-            ($f:ident) => {
-                out.iter().map(|a| a.$f).collect::<Vec<_>>()
-            };
+        if !redo.is_empty() {
+            pg_upsert(&mut *conn, level, &redo, UPSERT).await?;
         }
-        sqlx::query(&format!(
-            "INSERT INTO {} ({COLUMNS}) SELECT * FROM UNNEST($1::bigint[], $2::bigint[], \
-             $3::bigint[], $4::bigint[], $5::float8[], $6::float8[], $7::float8[], $8::bigint[], \
-             $9::float8[], $10::bigint[], $11::float8[], $12::int4[], $13::bigint[]){UPSERT}",
-            level.table()
-        ))
+    }
+    Ok(())
+}
+
+/// The buckets as one `INSERT ... SELECT FROM UNNEST` of arrays, with
+/// `conflict` (a merge returning the keys written, or a replace).
+async fn pg_upsert(
+    conn: &mut PgConnection,
+    level: Level,
+    batch: &[Agg],
+    conflict: &str,
+) -> Result<Vec<(i64, i64)>> {
+    macro_rules! col {
+        ($f:ident) => {
+            batch.iter().map(|a| a.$f).collect::<Vec<_>>()
+        };
+    }
+    let returning = if conflict.contains("RETURNING") {
+        ""
+    } else {
+        " RETURNING tag_id, bucket"
+    };
+    let sql = format!(
+        "INSERT INTO {} AS r ({COLUMNS}) SELECT * FROM UNNEST($1::bigint[], $2::bigint[], \
+         $3::bigint[], $4::bigint[], $5::float8[], $6::float8[], $7::float8[], $8::bigint[], \
+         $9::float8[], $10::bigint[], $11::float8[], $12::int4[], $13::bigint[]){conflict}{returning}",
+        level.table()
+    );
+    sqlx::query_as(&sql)
         .bind(col!(tag_id))
         .bind(col!(bucket))
         .bind(col!(n))
@@ -379,11 +360,9 @@ pub(crate) async fn maintain_pg(
         .bind(col!(last_value))
         .bind(col!(last_quality))
         .bind(col!(bad_ms))
-        .execute(&mut *conn)
+        .fetch_all(conn)
         .await
-        .map_err(db("writing historian roll-ups"))?;
-    }
-    Ok(())
+        .map_err(db("writing historian roll-ups"))
 }
 
 /// The edges of a trend of `n` buckets over `f..t` read from `level`: bucket

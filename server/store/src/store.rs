@@ -104,6 +104,10 @@ pub(crate) struct Inner {
     /// Historian tag name -> id. Ids never change once given, so the cache
     /// never goes stale, even with several servers on one PostgreSQL database.
     pub(crate) tag_ids: Mutex<HashMap<Arc<str>, i64>>,
+    /// Whether `tag_ids` holds every name this site had registered when the
+    /// historian first wrote (loaded once, in one query: asking per batch
+    /// would make a restarted server with a million tags ask for them all).
+    tag_ids_loaded: tokio::sync::OnceCell<()>,
     description: String,
 }
 
@@ -437,6 +441,7 @@ impl Store {
             inner: Arc::new(Inner {
                 backend: Backend::Sqlite(SqliteBackend { write, read }),
                 tag_ids: Mutex::new(HashMap::new()),
+                tag_ids_loaded: tokio::sync::OnceCell::new(),
                 description: format!("sqlite {shown}"),
             }),
         })
@@ -491,6 +496,7 @@ impl Store {
             inner: Arc::new(Inner {
                 backend: Backend::Postgres(pool),
                 tag_ids: Mutex::new(HashMap::new()),
+                tag_ids_loaded: tokio::sync::OnceCell::new(),
                 description: format!(
                     "postgres {shown}{}",
                     options
@@ -671,6 +677,12 @@ impl Store {
         let mut missing: Vec<&str> = Vec::new();
         if create {
             self.writable("registering historian tags")?;
+            if !self.view {
+                self.inner
+                    .tag_ids_loaded
+                    .get_or_try_init(|| self.load_tag_ids())
+                    .await?;
+            }
         }
         if self.view {
             // Another site's ids: looked up each time, not mixed into the
@@ -701,21 +713,31 @@ impl Store {
             let mut out = Vec::with_capacity(missing.len());
             let mut tx = p.begin().await.map_err(db("registering historian tags"))?;
             for chunk in missing.chunks(TAG_NAMES_PER_STATEMENT) {
+                let mut unresolved: Vec<&str> = chunk.to_vec();
                 if create {
                     let mut qb = QueryBuilder::new("INSERT INTO tags (site, name) ");
                     qb.push_values(chunk, |mut b, n| {
                         b.push_bind(&*self.site).push_bind(*n);
                     });
-                    qb.push(" ON CONFLICT (site, name) DO NOTHING");
-                    qb.build()
-                        .execute(&mut *tx)
+                    qb.push(" ON CONFLICT (site, name) DO NOTHING RETURNING name, id");
+                    let created: Vec<(String, i64)> = qb
+                        .build_query_as()
+                        .fetch_all(&mut *tx)
                         .await
                         .map_err(db("registering historian tags"))?;
+                    // Registered by someone else meanwhile: looked up below.
+                    let made: std::collections::HashSet<&str> =
+                        created.iter().map(|(n, _)| n.as_str()).collect();
+                    unresolved.retain(|n| !made.contains(n));
+                    out.extend(created);
+                }
+                if unresolved.is_empty() {
+                    continue;
                 }
                 let mut qb = QueryBuilder::new("SELECT name, id FROM tags WHERE site = ");
                 qb.push_bind(&*self.site).push(" AND name IN (");
                 let mut names = qb.separated(", ");
-                for n in chunk {
+                for n in &unresolved {
                     names.push_bind(*n);
                 }
                 qb.push(")");
@@ -742,6 +764,25 @@ impl Store {
             found.insert(k, id);
         }
         Ok(found)
+    }
+}
+
+impl Store {
+    /// Every historian tag of this site into the name cache, in one query.
+    async fn load_tag_ids(&self) -> Result<()> {
+        let all: Vec<(String, i64)> = on_backend!(self, writer, |p| {
+            sqlx::query_as("SELECT name, id FROM tags WHERE site = $1")
+                .bind(&*self.site)
+                .fetch_all(p)
+                .await
+                .map_err(db("loading historian tag ids"))?
+        });
+        let mut cache = self.inner.tag_ids.lock();
+        cache.reserve(all.len());
+        for (name, id) in all {
+            cache.insert(name.into(), id);
+        }
+        Ok(())
     }
 }
 

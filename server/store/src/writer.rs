@@ -147,7 +147,11 @@ impl HistorianHandle {
 
     /// Queues many samples; returns how many were accepted.
     pub fn push_all(&self, samples: impl IntoIterator<Item = HistorySample>) -> usize {
-        samples.into_iter().filter(|s| self.push(s.clone())).count()
+        samples
+            .into_iter()
+            .map(|s| self.push(s))
+            .filter(|&ok| ok)
+            .count()
     }
 
     pub fn metrics(&self) -> HistorianMetrics {

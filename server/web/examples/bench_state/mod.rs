@@ -57,7 +57,6 @@ pub async fn web_state(db: Arc<TagDb>, dir: &Path) -> (WebState, String) {
         )
         .await
         .expect("session");
-    let plant_ref = plant.clone();
     let state = WebState {
         db,
         plant: Arc::new(plant),

@@ -43,6 +43,11 @@ const FEED_RING: usize = 64;
 #[derive(Default)]
 pub struct LiveFeeds {
     feeds: parking_lot::Mutex<HashMap<Arc<[TagId]>, Weak<Feed>>>,
+    /// The last `alarms` message and the alarm version it shows: built
+    /// once per change of the alarms and sent to every socket that asked
+    /// for them (the list does not depend on the user), not rebuilt and
+    /// serialized per socket.
+    alarm_summary: parking_lot::Mutex<Option<(u64, Utf8Bytes)>>,
 }
 
 /// One feed: its task and the ring of serialized `tags` messages.
@@ -58,6 +63,26 @@ impl Drop for Feed {
 }
 
 impl LiveFeeds {
+    /// The `alarms` message for a socket that has seen `since`, if the
+    /// alarms changed since; made once per alarm version for all sockets.
+    fn alarm_message(&self, s: &WebState, since: Option<u64>) -> Option<(u64, Utf8Bytes)> {
+        let e = s.components.alarms.as_ref()?;
+        let version = *e.subscribe_version().borrow();
+        if since == Some(version) {
+            return None;
+        }
+        let mut cached = self.alarm_summary.lock();
+        if let Some((v, msg)) = cached.as_ref().filter(|(v, _)| *v == version) {
+            return Some((*v, msg.clone()));
+        }
+        let (version, alarms) = crate::api::alarms::live_summary(s, None)?;
+        let msg: Utf8Bytes = json!({"type": "alarms", "version": version, "alarms": alarms})
+            .to_string()
+            .into();
+        *cached = Some((version, msg.clone()));
+        Some((version, msg))
+    }
+
     /// The feed of `ids` (sorted, unique), started if none runs, and a
     /// receiver of its messages from now on.
     fn join(
@@ -388,10 +413,9 @@ async fn run(
                     socket.send(Message::Text(beat.to_string().into())).await?;
                 }
                 if alarms_wanted {
-                    if let Some((version, summary)) = crate::api::alarms::live_summary(&s, alarm_version) {
+                    if let Some((version, msg)) = s.live.alarm_message(&s, alarm_version) {
                         alarm_version = Some(version);
-                        let msg = json!({"type": "alarms", "version": version, "alarms": summary});
-                        socket.send(Message::Text(msg.to_string().into())).await?;
+                        socket.send(Message::Text(msg)).await?;
                     }
                 }
                 // Re-check the session now and then even without a logout event
