@@ -27,6 +27,7 @@ use crate::{demo_plant, settings, sinks, users};
 #[cfg(test)]
 mod audit_tests;
 mod field;
+mod memory;
 pub mod northbound;
 pub(crate) mod opcua;
 #[cfg(test)]
@@ -768,6 +769,8 @@ impl Stack {
             None => None,
         };
 
+        // Detached, not in `tasks`: it must never hold up a shutdown.
+        tokio::spawn(memory::trim_after_start_up());
         Ok(Stack {
             plant,
             clock,

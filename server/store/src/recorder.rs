@@ -62,19 +62,47 @@ impl RecordPolicy {
     }
 }
 
+/// A sample as the policy remembers it. Laid out for a million tags: 40
+/// bytes, where `Option<f64>` and `Option<i128>` (16-aligned) took 64.
 #[derive(Debug, Clone, Copy)]
 struct Seen {
-    value: Option<f64>,
-    /// The exact integer where `value` rounds it (outside ±2^53).
-    exact: Option<i128>,
+    /// NaN for none (Bad, or not a finite number: never a logged value).
+    value: f64,
+    /// The exact integer where `value` rounds it (outside ±2^53), as two
+    /// words, if `has_exact`.
+    exact: [u64; 2],
+    has_exact: bool,
     quality: QualityCode,
     ts: Timestamp,
+}
+
+impl Seen {
+    fn new(value: Option<f64>, exact: Option<i128>, quality: QualityCode, ts: Timestamp) -> Seen {
+        let bits = exact.unwrap_or(0) as u128;
+        Seen {
+            value: value.filter(|v| v.is_finite()).unwrap_or(f64::NAN),
+            exact: [(bits >> 64) as u64, bits as u64],
+            has_exact: exact.is_some(),
+            quality,
+            ts,
+        }
+    }
+
+    fn value(&self) -> Option<f64> {
+        Some(self.value).filter(|v| !v.is_nan())
+    }
+
+    fn exact(&self) -> Option<i128> {
+        self.has_exact
+            .then(|| ((u128::from(self.exact[0]) << 64) | u128::from(self.exact[1])) as i128)
+    }
 }
 
 #[derive(Debug)]
 struct TagState {
     name: Arc<str>,
-    policy: RecordPolicy,
+    /// Index in [`Recorder::policies`]: tags share a handful of policies.
+    policy: u32,
     last_logged: Option<Seen>,
     last_seen: Option<Seen>,
     /// The time of the last late row, so a device that sends the same old
@@ -104,6 +132,9 @@ impl IntoIterator for Rows {
 pub struct Recorder {
     tags: Vec<Option<TagState>>,
     registered: usize,
+    /// The distinct policies, and where each is in the list.
+    policies: Vec<RecordPolicy>,
+    policy_index: std::collections::HashMap<(bool, u64, Option<Duration>), u32>,
 }
 
 /// Whether `a` and `b` differ by more than `deadband`; NaN/None count as a
@@ -130,6 +161,16 @@ impl Recorder {
     /// Registers a tag (or replaces its policy, keeping what was logged).
     pub fn set_policy(&mut self, id: TagId, name: impl Into<Arc<str>>, policy: RecordPolicy) {
         let name = name.into();
+        let key = (
+            policy.enabled,
+            policy.deadband.to_bits(),
+            policy.max_interval,
+        );
+        let policies = &mut self.policies;
+        let policy = *self.policy_index.entry(key).or_insert_with(|| {
+            policies.push(policy);
+            (policies.len() - 1) as u32
+        });
         if self.tags.len() <= id.index() {
             self.tags.resize_with(id.index() + 1, || None);
         }
@@ -179,7 +220,7 @@ impl Recorder {
         let Some(Some(t)) = self.tags.get_mut(id.index()) else {
             return Rows::default();
         };
-        Rows(t.offer(sample))
+        Rows(t.offer(&self.policies[t.policy as usize], sample))
     }
 }
 
@@ -188,15 +229,15 @@ impl TagState {
         HistorySample {
             tag: self.name.clone(),
             ts: s.ts,
-            value: s.value,
-            exact: s.exact,
+            value: s.value(),
+            exact: s.exact(),
             quality: s.quality,
         }
     }
 
-    fn offer(&mut self, sample: &Sample) -> [Option<HistorySample>; 2] {
+    fn offer(&mut self, policy: &RecordPolicy, sample: &Sample) -> [Option<HistorySample>; 2] {
         let t = self;
-        if !t.policy.enabled || matches!(sample.value, Value::Str(_)) {
+        if !policy.enabled || matches!(sample.value, Value::Str(_)) {
             return [None, None];
         }
         // A tag never read yet has no history to log: logging its start
@@ -208,15 +249,15 @@ impl TagState {
         // A Bad value is not a measurement: it is logged as a gap, so that
         // trend minima and averages never include it.
         let bad = sample.quality.code == gridscada_tagdb::QualityCode::Bad;
-        let now = Seen {
-            value: sample.value.as_f64().filter(|v| v.is_finite() && !bad),
-            exact: sample
+        let now = Seen::new(
+            sample.value.as_f64().filter(|_| !bad),
+            sample
                 .value
                 .as_i128()
                 .filter(|_| sample.value.is_wide_integer() && !bad),
-            quality: sample.quality.code,
-            ts: sample.timestamp,
-        };
+            sample.quality.code,
+            sample.timestamp,
+        );
         if let Some(l) = t.last_logged {
             if now.ts < l.ts {
                 if t.last_late == Some(now.ts) {
@@ -245,9 +286,9 @@ impl TagState {
             None => true,
             Some(l) => {
                 l.quality != now.quality
-                    || moved(l.value, now.value, t.policy.deadband)
+                    || moved(l.value(), now.value(), policy.deadband)
                     // A float cannot see a step of one in a wide integer.
-                    || (t.policy.deadband == 0.0 && l.exact != now.exact)
+                    || (policy.deadband == 0.0 && l.exact() != now.exact())
             }
         };
         if !log {
@@ -265,7 +306,8 @@ impl Recorder {
     pub fn tick(&mut self, now: Timestamp) -> Vec<HistorySample> {
         let mut out = Vec::new();
         for t in self.tags.iter_mut().flatten() {
-            let (Some(interval), true) = (t.policy.max_interval, t.policy.enabled) else {
+            let policy = &self.policies[t.policy as usize];
+            let (Some(interval), true) = (policy.max_interval, policy.enabled) else {
                 continue;
             };
             let (Some(logged), Some(seen)) = (t.last_logged, t.last_seen) else {
@@ -277,13 +319,7 @@ impl Recorder {
             let row = Seen { ts: now, ..seen };
             t.last_logged = Some(row);
             t.last_seen = Some(row);
-            out.push(HistorySample {
-                tag: t.name.clone(),
-                ts: now,
-                value: row.value,
-                exact: row.exact,
-                quality: row.quality,
-            });
+            out.push(t.row(row));
         }
         out
     }
@@ -293,6 +329,33 @@ impl Recorder {
 mod tests {
     use super::*;
     use gridscada_tagdb::Quality;
+
+    /// A million tags each hold one of these for the whole run.
+    #[test]
+    fn a_tag_state_is_compact() {
+        let state = std::mem::size_of::<Option<TagState>>();
+        println!("Seen {} B, TagState {state} B", std::mem::size_of::<Seen>());
+        assert!(state <= 136, "{state} bytes a tag");
+    }
+
+    #[test]
+    fn a_seen_sample_keeps_its_value_and_exact_integer() {
+        let wide = i128::from(u64::MAX) + 5;
+        let s = Seen::new(
+            Some(1.5),
+            Some(-wide),
+            QualityCode::Good,
+            Timestamp::from_millis(7),
+        );
+        assert_eq!((s.value(), s.exact()), (Some(1.5), Some(-wide)));
+        let none = Seen::new(
+            Some(f64::INFINITY),
+            None,
+            QualityCode::Bad,
+            Timestamp::from_millis(7),
+        );
+        assert_eq!((none.value(), none.exact()), (None, None));
+    }
 
     fn at(ms: i64, v: f64) -> Sample {
         Sample::good(v, Timestamp::from_millis(ms))
