@@ -207,6 +207,28 @@ fn merge_sql(level: Level) -> String {
     )
 }
 
+/// The buckets of `batch` the merge did not write (not in `written`),
+/// recomputed from their raw rows on `conn` (either backend's connection).
+macro_rules! recompute {
+    ($conn:expr, $batch:expr, $written:expr, $w:expr) => {{
+        let mut redo = Vec::new();
+        for a in $batch
+            .iter()
+            .filter(|a| !$written.contains(&(a.tag_id, a.bucket)))
+        {
+            let raw: Vec<(i64, i64, Option<f64>, i32)> = sqlx::query_as(BUCKET_RAW)
+                .bind(a.tag_id)
+                .bind(a.bucket)
+                .bind(a.bucket + $w)
+                .fetch_all(&mut *$conn)
+                .await
+                .map_err(db("re-reading a historian bucket"))?;
+            redo.extend(roll_up(raw, $w));
+        }
+        redo
+    }};
+}
+
 /// The statement re-reading one bucket's raw rows (`$1` tag, `$2..$3`).
 const BUCKET_RAW: &str = "SELECT tag_id, ts, value, quality FROM samples \
      WHERE tag_id = $1 AND ts >= $2 AND ts < $3 ORDER BY ts";
@@ -234,20 +256,7 @@ pub(crate) async fn maintain_sqlite(
                 .map_err(db("writing historian roll-ups"))?;
             written.extend(keys);
         }
-        let mut redo = Vec::new();
-        for a in batch
-            .iter()
-            .filter(|a| !written.contains(&(a.tag_id, a.bucket)))
-        {
-            let raw: Vec<(i64, i64, Option<f64>, i32)> = sqlx::query_as(BUCKET_RAW)
-                .bind(a.tag_id)
-                .bind(a.bucket)
-                .bind(a.bucket + w)
-                .fetch_all(&mut *conn)
-                .await
-                .map_err(db("re-reading a historian bucket"))?;
-            redo.extend(roll_up(raw, w));
-        }
+        let redo = recompute!(conn, &batch, &written, w);
         for chunk in redo.chunks(SQLITE_ROWS) {
             let mut qb = QueryBuilder::new(format!("INSERT INTO {} ({COLUMNS}) ", level.table()));
             push_sqlite_values(&mut qb, chunk);
@@ -301,20 +310,7 @@ pub(crate) async fn maintain_pg(
             .await?
             .into_iter()
             .collect();
-        let mut redo = Vec::new();
-        for a in batch
-            .iter()
-            .filter(|a| !written.contains(&(a.tag_id, a.bucket)))
-        {
-            let raw: Vec<(i64, i64, Option<f64>, i32)> = sqlx::query_as(BUCKET_RAW)
-                .bind(a.tag_id)
-                .bind(a.bucket)
-                .bind(a.bucket + w)
-                .fetch_all(&mut *conn)
-                .await
-                .map_err(db("re-reading a historian bucket"))?;
-            redo.extend(roll_up(raw, w));
-        }
+        let redo = recompute!(conn, &batch, &written, w);
         if !redo.is_empty() {
             pg_upsert(&mut *conn, level, &redo, UPSERT).await?;
         }
