@@ -350,11 +350,8 @@ impl Router {
                 .expect("fewer than 255 protocol writers");
             all.push(writer);
             for t in tags {
-                if let Some(id) = db.id(t) {
-                    if route.len() <= id.index() {
-                        route.resize(id.index() + 1, NO_ROUTE);
-                    }
-                    route[id.index()] = index;
+                if let Some(slot) = db.id(t).and_then(|id| route.get_mut(id.index())) {
+                    *slot = index;
                 }
             }
         }

@@ -182,8 +182,8 @@ const SQLITE_ROWS: usize = 500;
 /// Inserts a batch's buckets, or appends each to the stored bucket in the
 /// same statement where all its samples come after the stored last one
 /// (the merge of [`Agg::append`], in SQL: no read of the stored buckets
-/// first). Returns the keys it wrote; a bucket it did not (a late or
-/// repeated sample) is recomputed from raw rows by the caller.
+/// first). With [`RETURNING_KEYS`] it gives the keys it wrote; a bucket it
+/// did not (a late or repeated sample) is recomputed from raw rows.
 fn merge_sql(level: Level) -> String {
     let end = format!("(r.bucket + {})", level.width());
     let pick = |f: &str, op: &str| {
@@ -201,11 +201,14 @@ fn merge_sql(level: Level) -> String {
          last_quality = excluded.last_quality, \
          bad_ms = r.bad_ms + excluded.bad_ms - CASE WHEN r.last_quality IN (0, 1) THEN 0 \
          ELSE {end} - excluded.first_ts END \
-         WHERE excluded.first_ts > r.last_ts RETURNING tag_id, bucket",
+         WHERE excluded.first_ts > r.last_ts",
         pick("min_value", "<"),
         pick("max_value", ">"),
     )
 }
+
+/// The keys an upsert wrote (inserted or merged).
+const RETURNING_KEYS: &str = " RETURNING tag_id, bucket";
 
 /// The buckets of `batch` the merge did not write (not in `written`),
 /// recomputed from their raw rows on `conn` (either backend's connection).
@@ -248,7 +251,7 @@ pub(crate) async fn maintain_sqlite(
             let mut qb =
                 QueryBuilder::new(format!("INSERT INTO {} AS r ({COLUMNS}) ", level.table()));
             push_sqlite_values(&mut qb, chunk);
-            qb.push(merge_sql(level));
+            qb.push(merge_sql(level)).push(RETURNING_KEYS);
             let keys: Vec<(i64, i64)> = qb
                 .build_query_as()
                 .fetch_all(&mut *conn)
@@ -319,7 +322,7 @@ pub(crate) async fn maintain_pg(
 }
 
 /// The buckets as one `INSERT ... SELECT FROM UNNEST` of arrays, with
-/// `conflict` (a merge returning the keys written, or a replace).
+/// `conflict` (the merge or a replace); returns the keys it wrote.
 async fn pg_upsert(
     conn: &mut PgConnection,
     level: Level,
@@ -331,15 +334,10 @@ async fn pg_upsert(
             batch.iter().map(|a| a.$f).collect::<Vec<_>>()
         };
     }
-    let returning = if conflict.contains("RETURNING") {
-        ""
-    } else {
-        " RETURNING tag_id, bucket"
-    };
     let sql = format!(
         "INSERT INTO {} AS r ({COLUMNS}) SELECT * FROM UNNEST($1::bigint[], $2::bigint[], \
          $3::bigint[], $4::bigint[], $5::float8[], $6::float8[], $7::float8[], $8::bigint[], \
-         $9::float8[], $10::bigint[], $11::float8[], $12::int4[], $13::bigint[]){conflict}{returning}",
+         $9::float8[], $10::bigint[], $11::float8[], $12::int4[], $13::bigint[]){conflict}{RETURNING_KEYS}",
         level.table()
     );
     sqlx::query_as(&sql)

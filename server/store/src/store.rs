@@ -765,9 +765,7 @@ impl Store {
         }
         Ok(found)
     }
-}
 
-impl Store {
     /// Every historian tag of this site into the name cache, in one query.
     async fn load_tag_ids(&self) -> Result<()> {
         let all: Vec<(String, i64)> = on_backend!(self, writer, |p| {

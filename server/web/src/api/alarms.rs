@@ -514,14 +514,3 @@ pub async fn metrics(
     out["targets"] = json!(gridscada_alarms::MetricTargets::default());
     Ok(Json(out))
 }
-
-/// The alarm summary for live push, if it changed since `since`.
-pub fn live_summary(s: &WebState, since: Option<u64>) -> Option<(u64, Value)> {
-    let e = s.components.alarms.as_ref()?;
-    let version = *e.subscribe_version().borrow();
-    if since == Some(version) {
-        return None;
-    }
-    let alarms = e.summary(&AlarmFilter::default());
-    Some((version, json!(alarms)))
-}

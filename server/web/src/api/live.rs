@@ -75,7 +75,7 @@ impl LiveFeeds {
         if let Some((v, msg)) = cached.as_ref().filter(|(v, _)| *v == version) {
             return Some((*v, msg.clone()));
         }
-        let (version, alarms) = crate::api::alarms::live_summary(s, None)?;
+        let alarms = e.summary(&gridscada_alarms::AlarmFilter::default());
         let msg: Utf8Bytes = json!({"type": "alarms", "version": version, "alarms": alarms})
             .to_string()
             .into();
