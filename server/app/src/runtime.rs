@@ -337,6 +337,11 @@ pub struct StackOptions {
     /// With `simulate`: devices left out of the simulation, reached on
     /// their configured addresses (a real RTU beside simulated panels).
     pub real_devices: Vec<String>,
+    /// With `simulate`: the poller reaches the simulated Modbus devices over
+    /// in-process pipes instead of loopback TCP, with the same frames
+    /// (replay: nothing outside the process needs them, and the kernel's
+    /// loopback was a third of its time).
+    pub simulator_pipes: bool,
     /// How the microgrid's outer loop makes setpoints (replay's rule-based
     /// baseline forces the rule).
     pub dispatch_policy: dispatch::DispatchPolicy,
@@ -393,6 +398,8 @@ impl Stack {
         tasks.spawn(sinks::events(audit.handle(), events_rx));
 
         // Simulators first, so the poller finds its devices.
+        let pipes = (opts.simulate && opts.simulator_pipes)
+            .then(|| Arc::new(gridscada_field::Switchboard::new()));
         let simulator = if opts.simulate {
             let mut simulated = plant.clone();
             simulated
@@ -401,13 +408,13 @@ impl Stack {
             simulated
                 .tags
                 .retain(|t| !opts.real_devices.contains(t.device.get_ref()));
-            let sim = gridscada_sim::start(
-                &simulated,
-                clock.clone(),
-                gridscada_sim::BindMode::Ephemeral,
-            )
-            .await
-            .context("starting the simulated plant")?;
+            let bind = match &pipes {
+                Some(board) => gridscada_sim::BindMode::InProcess(board.clone()),
+                None => gridscada_sim::BindMode::Ephemeral,
+            };
+            let sim = gridscada_sim::start(&simulated, clock.clone(), bind)
+                .await
+                .context("starting the simulated plant")?;
             sim.patch_plant(&mut plant);
             Some(sim)
         } else {
@@ -550,6 +557,7 @@ impl Stack {
             clock.clone(),
             leadership.clone(),
             events_tx.clone(),
+            pipes,
         )
         .context("starting field I/O")?;
 
@@ -892,6 +900,7 @@ async fn run(
             clock,
             simulate: mode == Mode::Demo,
             real_devices,
+            simulator_pipes: false,
             dispatch_policy: Default::default(),
             // A scenario starts from its own initial state.
             restore_panels: scenario.is_none(),

@@ -6,7 +6,8 @@
 //! and `/metrics` show, the engineering write limits every write is checked
 //! against ([`check_limits`]), the returned status point that confirms a
 //! telecontrol command ([`ReturnedStatus`]), the serial line settings
-//! ([`open_serial`]), the notices a device's task leaves for the event
+//! ([`open_serial`]), in-process pipes to the simulated devices a replay
+//! serves itself ([`Switchboard`]), the notices a device's task leaves for the event
 //! log ([`Notices`]), and the writer that sends each tag's write to
 //! the protocol its device speaks ([`Router`]).
 //!
@@ -17,6 +18,7 @@
 
 mod feedback;
 mod notice;
+mod pipe;
 mod round_trip;
 mod serial;
 
@@ -29,6 +31,7 @@ use gridscada_tagdb::{
 
 pub use feedback::{within_resolution, ReturnedStatus};
 pub use notice::{DeviceNotice, Notices};
+pub use pipe::Switchboard;
 pub use round_trip::{RoundTripHistogram, RoundTrips, ROUND_TRIP_BOUNDS};
 pub use serial::open_serial;
 

@@ -122,18 +122,20 @@ impl FieldIo {
     /// serial port. Must be called inside a Tokio runtime. The plant's tags
     /// and `gridscada_field::device_status_tags` must already be in `db`.
     pub fn start(plant: &Plant, db: Arc<TagDb>, clock: Arc<dyn Clock>) -> Result<FieldIo, Error> {
-        Self::start_fenced(plant, db, clock, Leadership::sole())
+        Self::start_fenced(plant, db, clock, Leadership::sole(), None)
     }
 
     /// [`FieldIo::start`] for a server of a redundant pair: every write
     /// asks `leadership` for its epoch the moment its frame goes out, and
     /// is refused ([`WriteError::NotActive`]) without it. Polling goes on
-    /// either way, so a standby's tag database stays warm.
+    /// either way, so a standby's tag database stays warm. A TCP device
+    /// whose address `pipes` serves is reached over an in-process pipe.
     pub fn start_fenced(
         plant: &Plant,
         db: Arc<TagDb>,
         clock: Arc<dyn Clock>,
         leadership: Leadership,
+        pipes: Option<Arc<gridscada_field::Switchboard>>,
     ) -> Result<FieldIo, Error> {
         let (shutdown, shutdown_rx) = watch::channel(false);
         // Group devices by transport, keeping configuration order.
@@ -303,6 +305,7 @@ impl FieldIo {
                             .as_ref()
                             .map(|a| a.get_ref().clone())
                             .unwrap_or_default(),
+                        pipes.clone(),
                     ))
                 }
                 Protocol::Rtu => {

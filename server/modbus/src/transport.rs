@@ -12,11 +12,16 @@
 //! the reply is searched for by slave id, function code, length and CRC.
 
 use std::future::Future;
+use std::io;
+use std::pin::Pin;
+use std::sync::Arc;
+use std::task::{Context, Poll};
 use std::time::Duration;
 
 use gridscada_config::{Parity, SerialConfig};
+use gridscada_field::Switchboard;
 use gridscada_tagdb::SleepFuture;
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, DuplexStream, ReadBuf};
 use tokio::net::TcpStream;
 use tokio::time::{timeout_at, Instant};
 use tokio_modbus::Request;
@@ -174,19 +179,71 @@ impl Transport {
     }
 }
 
+/// The byte stream under a Modbus TCP line: a socket, or an in-process pipe
+/// to a device this process simulates itself (a replay's, see
+/// [`Switchboard`]). The same frames cross either.
+enum LineStream {
+    Socket(TcpStream),
+    Pipe(DuplexStream),
+}
+
+impl AsyncRead for LineStream {
+    fn poll_read(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &mut ReadBuf<'_>,
+    ) -> Poll<io::Result<()>> {
+        match self.get_mut() {
+            LineStream::Socket(s) => Pin::new(s).poll_read(cx, buf),
+            LineStream::Pipe(p) => Pin::new(p).poll_read(cx, buf),
+        }
+    }
+}
+
+impl AsyncWrite for LineStream {
+    fn poll_write(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        data: &[u8],
+    ) -> Poll<io::Result<usize>> {
+        match self.get_mut() {
+            LineStream::Socket(s) => Pin::new(s).poll_write(cx, data),
+            LineStream::Pipe(p) => Pin::new(p).poll_write(cx, data),
+        }
+    }
+
+    fn poll_flush(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        match self.get_mut() {
+            LineStream::Socket(s) => Pin::new(s).poll_flush(cx),
+            LineStream::Pipe(p) => Pin::new(p).poll_flush(cx),
+        }
+    }
+
+    fn poll_shutdown(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        match self.get_mut() {
+            LineStream::Socket(s) => Pin::new(s).poll_shutdown(cx),
+            LineStream::Pipe(p) => Pin::new(p).poll_shutdown(cx),
+        }
+    }
+}
+
 /// A Modbus TCP connection, possibly to a gateway serving several unit ids.
 pub struct TcpLine {
     address: String,
-    stream: Option<TcpStream>,
+    /// Addresses served in process; `None` (or an address it does not
+    /// serve) connects over the network.
+    pipes: Option<Arc<Switchboard>>,
+    stream: Option<LineStream>,
     buf: Vec<u8>,
     transaction: u16,
     counters: LineCounters,
 }
 
 impl TcpLine {
-    pub fn new(address: String) -> Self {
+    pub fn new(address: String, pipes: Option<Arc<Switchboard>>) -> Self {
         TcpLine {
             address,
+            pipes,
             stream: None,
             buf: Vec::with_capacity(512),
             transaction: 0,
@@ -197,13 +254,18 @@ impl TcpLine {
     async fn connect(&mut self, timeout: Duration) -> Result<(), String> {
         self.stream = None;
         self.buf.clear();
+        if let Some(pipe) = self.pipes.as_ref().and_then(|p| p.dial(&self.address)) {
+            let pipe = pipe.map_err(|e| format!("cannot connect to {}: {e}", self.address))?;
+            self.stream = Some(LineStream::Pipe(pipe));
+            return Ok(());
+        }
         let stream = tokio::time::timeout(timeout, TcpStream::connect(&self.address))
             .await
             .map_err(|_| format!("connecting to {} timed out", self.address))?
             .map_err(|e| format!("cannot connect to {}: {e}", self.address))?;
         // Requests are small and answered one at a time: send at once.
         let _ = stream.set_nodelay(true);
-        self.stream = Some(stream);
+        self.stream = Some(LineStream::Socket(stream));
         Ok(())
     }
 

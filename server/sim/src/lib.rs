@@ -79,13 +79,17 @@ pub enum Error {
 }
 
 /// Where the gateways listen.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone)]
 pub enum BindMode {
     /// The addresses in the device configuration (`gridscada sim`).
     Configured,
     /// `127.0.0.1:0` per gateway, so nothing collides (`gridscada demo`,
     /// tests); see [`Simulator::addresses`].
     Ephemeral,
+    /// The Modbus gateways answer in-process pipes on their configured
+    /// addresses, reachable only by a poller given the same switchboard
+    /// (a scenario replay); telecontrol stations listen as with `Ephemeral`.
+    InProcess(Arc<gridscada_field::Switchboard>),
 }
 
 /// Simulator settings that are not part of the plant configuration.
@@ -219,16 +223,18 @@ pub async fn start_with(
     // Bind everything before serving anything, so a failure leaves nothing behind.
     let mut listeners = vec![];
     let mut addresses = HashMap::new();
-    for g in &gateways {
-        let listener = bind_one(bind, &g.address).await?;
-        addresses.insert(g.address.clone(), listener.local_addr()?);
-        listeners.push((g.clone(), listener));
+    if !matches!(bind, BindMode::InProcess(_)) {
+        for g in &gateways {
+            let listener = bind_one(&bind, &g.address).await?;
+            addresses.insert(g.address.clone(), listener.local_addr()?);
+            listeners.push((g.clone(), listener));
+        }
     }
     let mut station_listeners = vec![];
     for s in &station_specs {
         let mut ls = vec![];
         for address in std::iter::once(&s.address).chain(&s.redundant) {
-            let listener = bind_one(bind, address).await?;
+            let listener = bind_one(&bind, address).await?;
             addresses.insert(address.clone(), listener.local_addr()?);
             ls.push(listener);
         }
@@ -248,6 +254,20 @@ pub async fn start_with(
             gw,
             rx.clone(),
         )));
+    }
+    if let BindMode::InProcess(board) = &bind {
+        for g in &gateways {
+            let gw = Arc::new(Gateway {
+                label: g.address.clone(),
+                units: g.units.clone(),
+            });
+            tasks.push(tokio::spawn(server::serve_pipes(
+                board.listen(&g.address),
+                shared.clone(),
+                gw,
+                rx.clone(),
+            )));
+        }
     }
     let mut stations = vec![];
     for (i, (spec, ls)) in station_specs.iter().zip(station_listeners).enumerate() {
@@ -279,17 +299,15 @@ const STATION_REPORT_PERIOD: Duration = Duration::from_millis(20);
 
 /// One listener: on its configured address, or on an ephemeral port of
 /// loopback.
-async fn bind_one(bind: BindMode, address: &str) -> Result<TcpListener, Error> {
+async fn bind_one(bind: &BindMode, address: &str) -> Result<TcpListener, Error> {
     match bind {
         BindMode::Configured => bind_configured(address).await,
-        BindMode::Ephemeral => {
-            TcpListener::bind(("127.0.0.1", 0))
-                .await
-                .map_err(|source| Error::Bind {
-                    address: "127.0.0.1:0".into(),
-                    source,
-                })
-        }
+        BindMode::Ephemeral | BindMode::InProcess(_) => TcpListener::bind(("127.0.0.1", 0))
+            .await
+            .map_err(|source| Error::Bind {
+                address: "127.0.0.1:0".into(),
+                source,
+            }),
     }
 }
 

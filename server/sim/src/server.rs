@@ -1,10 +1,12 @@
 //! The I/O shell: one Modbus TCP listener per gateway address, serving the
-//! devices behind it by unit id, with communication faults applied.
+//! devices behind it by unit id, with communication faults applied; or, in
+//! a replay, the same gateways answering in-process pipes
+//! ([`gridscada_field::Switchboard`]) with the same Modbus TCP frames.
 //!
-//! Owns sockets, the tokio-modbus service, and the byte-level link wrapper
-//! that (a) answers malformed requests with an exception before the protocol
-//! decoder sees them and (b) corrupts outgoing frames on request. Must not
-//! touch plant behaviour: every request goes to `PlantSim::request`.
+//! Owns sockets and pipes, the tokio-modbus service, and the byte-level link
+//! wrapper that (a) answers malformed requests with an exception before the
+//! protocol decoder sees them and (b) corrupts outgoing frames on request.
+//! Must not touch plant behaviour: every request goes to `PlantSim::request`.
 
 use std::collections::HashMap;
 use std::future::Future;
@@ -16,12 +18,13 @@ use std::time::Duration;
 
 use gridscada_tagdb::Clock;
 use parking_lot::{Mutex, RwLock};
-use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, DuplexStream, ReadBuf};
 use tokio::net::{TcpListener, TcpStream};
-use tokio::sync::watch;
+use tokio::sync::{mpsc, watch};
+use tokio_modbus::bytes::Bytes;
 use tokio_modbus::server::tcp::Server;
 use tokio_modbus::server::Service;
-use tokio_modbus::{ExceptionCode, Response, SlaveRequest};
+use tokio_modbus::{ExceptionCode, Request, Response, SlaveRequest};
 
 use crate::plant::PlantSim;
 
@@ -140,13 +143,158 @@ pub(crate) async fn serve(
     }
 }
 
+/// Serves one gateway over in-process pipes until `shutdown` flips: each
+/// pipe the switchboard hands over is one master connection.
+pub(crate) async fn serve_pipes(
+    mut incoming: mpsc::UnboundedReceiver<DuplexStream>,
+    shared: Arc<Shared>,
+    gateway: Arc<Gateway>,
+    mut shutdown: watch::Receiver<bool>,
+) {
+    let mut connections = tokio::task::JoinSet::new();
+    loop {
+        tokio::select! {
+            pipe = incoming.recv() => {
+                let Some(pipe) = pipe else { break };
+                let service = GatewayService {
+                    shared: shared.clone(),
+                    gateway: gateway.clone(),
+                };
+                let link = FieldLink::new(pipe, shared.clone(), gateway.clone());
+                let label = gateway.label.clone();
+                connections.spawn(async move {
+                    if let Err(e) = answer_requests(link, service).await {
+                        tracing::debug!(gateway = %label, error = %e, "simulator: connection closed on error");
+                    }
+                });
+            }
+            Some(_) = connections.join_next(), if !connections.is_empty() => {}
+            _ = shutdown.wait_for(|s| *s) => break,
+        }
+    }
+}
+
+/// One master connection over a pipe, request by request, as tokio-modbus's
+/// TCP server does over a socket: a request that does not decode closes the
+/// connection; an offline device gives no answer.
+async fn answer_requests<S: AsyncRead + AsyncWrite + Unpin>(
+    mut link: FieldLink<S>,
+    service: GatewayService,
+) -> io::Result<()> {
+    let mut inbuf: Vec<u8> = Vec::with_capacity(512);
+    let mut chunk = [0u8; 512];
+    loop {
+        // The link passes whole, checked frames only.
+        while inbuf.len() >= MBAP_LEN {
+            let total = 6 + usize::from(u16::from_be_bytes([inbuf[4], inbuf[5]]));
+            if inbuf.len() < total {
+                break;
+            }
+            let frame: Vec<u8> = inbuf.drain(..total).collect();
+            let (transaction, unit) = ([frame[0], frame[1]], frame[6]);
+            let function = frame[MBAP_LEN];
+            let request = Request::try_from(Bytes::copy_from_slice(&frame[MBAP_LEN..]))
+                .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, e.to_string()))?;
+            let pdu = match service
+                .call(SlaveRequest {
+                    slave: unit,
+                    request,
+                })
+                .await
+            {
+                Ok(Some(response)) => encode_response(&response),
+                Ok(None) => continue,
+                Err(code) => vec![function | 0x80, u8::from(code)],
+            };
+            let mut adu = Vec::with_capacity(MBAP_LEN + pdu.len());
+            adu.extend_from_slice(&transaction);
+            adu.extend_from_slice(&[0, 0]);
+            adu.extend_from_slice(&(pdu.len() as u16 + 1).to_be_bytes());
+            adu.push(unit);
+            adu.extend_from_slice(&pdu);
+            link.write_all(&adu).await?;
+            link.flush().await?;
+        }
+        let n = link.read(&mut chunk).await?;
+        if n == 0 {
+            return Ok(());
+        }
+        inbuf.extend_from_slice(&chunk[..n]);
+    }
+}
+
+/// A response PDU on the wire (function code first), as the Modbus
+/// application protocol specification lays it out.
+fn encode_response(response: &Response) -> Vec<u8> {
+    let mut pdu = vec![response.function_code().value()];
+    let word = |pdu: &mut Vec<u8>, w: u16| pdu.extend_from_slice(&w.to_be_bytes());
+    match response {
+        Response::ReadCoils(bits) | Response::ReadDiscreteInputs(bits) => {
+            let mut packed = vec![0u8; bits.len().div_ceil(8)];
+            for (i, b) in bits.iter().enumerate() {
+                packed[i / 8] |= u8::from(*b) << (i % 8);
+            }
+            pdu.push(packed.len() as u8);
+            pdu.extend_from_slice(&packed);
+        }
+        Response::ReadInputRegisters(words)
+        | Response::ReadHoldingRegisters(words)
+        | Response::ReadWriteMultipleRegisters(words) => {
+            pdu.push((2 * words.len()) as u8);
+            for w in words {
+                word(&mut pdu, *w);
+            }
+        }
+        Response::WriteSingleCoil(address, on) => {
+            word(&mut pdu, *address);
+            word(&mut pdu, if *on { 0xFF00 } else { 0x0000 });
+        }
+        Response::WriteMultipleCoils(address, quantity)
+        | Response::WriteMultipleRegisters(address, quantity) => {
+            word(&mut pdu, *address);
+            word(&mut pdu, *quantity);
+        }
+        Response::WriteSingleRegister(address, value) => {
+            word(&mut pdu, *address);
+            word(&mut pdu, *value);
+        }
+        Response::MaskWriteRegister(address, and, or) => {
+            word(&mut pdu, *address);
+            word(&mut pdu, *and);
+            word(&mut pdu, *or);
+        }
+        Response::ReportServerId(id, running, data) => {
+            pdu.push(2 + data.len() as u8);
+            pdu.push(*id);
+            pdu.push(if *running { 0xFF } else { 0x00 });
+            pdu.extend_from_slice(data);
+        }
+        Response::ReadDeviceIdentification(r) => {
+            pdu.push(0x0E); // MEI type: read device identification
+            pdu.push(r.read_code.value());
+            pdu.push(r.conformity_level.value());
+            pdu.push(if r.more_follows { 0xFF } else { 0x00 });
+            pdu.push(r.next_object_id);
+            pdu.push(r.device_id_objects.len() as u8);
+            for o in &r.device_id_objects {
+                pdu.push(o.id);
+                pdu.push(o.value.len() as u8);
+                pdu.extend_from_slice(&o.value);
+            }
+        }
+        Response::Custom(_, data) => pdu.extend_from_slice(data),
+    }
+    pdu
+}
+
 // ----- The link wrapper -----------------------------------------------------
 
 const MBAP_LEN: usize = 7;
 
-/// The TCP stream of one master connection, seen frame by frame.
-struct FieldLink {
-    io: TcpStream,
+/// The byte stream of one master connection (a socket, or an in-process
+/// pipe), seen frame by frame.
+struct FieldLink<S = TcpStream> {
+    io: S,
     shared: Arc<Shared>,
     gateway: Arc<Gateway>,
     /// Received bytes not yet framed.
@@ -161,8 +309,8 @@ struct FieldLink {
     corrupted: u64,
 }
 
-impl FieldLink {
-    fn new(io: TcpStream, shared: Arc<Shared>, gateway: Arc<Gateway>) -> Self {
+impl<S: AsyncRead + AsyncWrite + Unpin> FieldLink<S> {
+    fn new(io: S, shared: Arc<Shared>, gateway: Arc<Gateway>) -> Self {
         FieldLink {
             io,
             shared,
@@ -299,7 +447,7 @@ fn corrupt_frame(frame: &mut [u8], n: u64) {
     }
 }
 
-impl AsyncRead for FieldLink {
+impl<S: AsyncRead + AsyncWrite + Unpin> AsyncRead for FieldLink<S> {
     fn poll_read(
         self: Pin<&mut Self>,
         cx: &mut Context<'_>,
@@ -337,7 +485,7 @@ impl AsyncRead for FieldLink {
     }
 }
 
-impl AsyncWrite for FieldLink {
+impl<S: AsyncRead + AsyncWrite + Unpin> AsyncWrite for FieldLink<S> {
     fn poll_write(
         self: Pin<&mut Self>,
         cx: &mut Context<'_>,
@@ -385,6 +533,42 @@ mod tests {
         // Write single coil with a value other than 0xFF00 / 0x0000.
         assert!(malformed_request(&[0x05, 0, 0, 0x12, 0x34]));
         assert!(!malformed_request(&[0x03, 0, 0, 0, 200]));
+    }
+
+    #[test]
+    fn responses_are_encoded_as_a_client_decodes_them() {
+        let responses = [
+            Response::ReadCoils(vec![
+                true, false, true, true, false, false, false, false, true,
+            ]),
+            Response::ReadDiscreteInputs(vec![
+                false, true, false, false, false, false, false, false,
+            ]),
+            Response::ReadHoldingRegisters(vec![0x1234, 0, 0xFFFF]),
+            Response::ReadInputRegisters(vec![7]),
+            Response::ReadWriteMultipleRegisters(vec![0x0FF0, 9]),
+            Response::WriteSingleCoil(17, true),
+            Response::WriteSingleCoil(18, false),
+            Response::WriteMultipleCoils(100, 9),
+            Response::WriteSingleRegister(3, 0xBEEF),
+            Response::WriteMultipleRegisters(40, 2),
+            Response::MaskWriteRegister(5, 0xF0F0, 0x0101),
+            Response::ReportServerId(9, true, vec![1, 2, 3]),
+        ];
+        for r in responses {
+            let pdu = encode_response(&r);
+            let back = Response::try_from(Bytes::from(pdu.clone()))
+                .unwrap_or_else(|e| panic!("{r:?} -> {pdu:02x?}: {e}"));
+            // Coils come back padded to whole bytes.
+            match (&r, &back) {
+                (Response::ReadCoils(a), Response::ReadCoils(b))
+                | (Response::ReadDiscreteInputs(a), Response::ReadDiscreteInputs(b)) => {
+                    assert_eq!(a[..], b[..a.len()], "{pdu:02x?}");
+                    assert!(b[a.len()..].iter().all(|x| !x));
+                }
+                _ => assert_eq!(r, back, "{pdu:02x?}"),
+            }
+        }
     }
 
     #[test]

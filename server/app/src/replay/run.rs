@@ -118,6 +118,7 @@ async fn run_stack(
             clock: clock.clone(),
             simulate: true,
             real_devices: Vec::new(),
+            simulator_pipes: true,
             dispatch_policy: policy,
             restore_panels: false,
             data_dir: data.to_path_buf(),

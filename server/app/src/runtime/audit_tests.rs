@@ -149,6 +149,7 @@ async fn postgres_down_during_fault_isolation_and_an_alarm_flood_loses_nothing()
             clock: clock.clone(),
             simulate: true,
             real_devices: Vec::new(),
+            simulator_pipes: false,
             dispatch_policy: Default::default(),
             restore_panels: false,
             data_dir: dir.path().to_path_buf(),

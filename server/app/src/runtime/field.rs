@@ -22,6 +22,7 @@ pub(crate) struct Field {
 
 impl Field {
     /// Starts every protocol's tasks; writes are fenced by `leadership`;
+    /// Modbus devices `pipes` serves are reached in process;
     /// the devices' notices (a restart, lost events, a clock set) go to the
     /// event log through `events`.
     pub(crate) fn start(
@@ -30,12 +31,14 @@ impl Field {
         clock: Arc<dyn Clock>,
         leadership: Leadership,
         events: mpsc::Sender<NewEvent>,
+        pipes: Option<Arc<gridscada_field::Switchboard>>,
     ) -> anyhow::Result<Field> {
         let modbus = gridscada_modbus::FieldIo::start_fenced(
             plant,
             db.clone(),
             clock.clone(),
             leadership.clone(),
+            pipes,
         )
         .context("starting Modbus field I/O")?;
         let mut iec104 =

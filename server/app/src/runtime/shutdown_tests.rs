@@ -58,6 +58,7 @@ async fn orderly_shutdown_writes_every_sample_offered_and_drops_none() {
             clock: clock.clone(),
             simulate: true,
             real_devices: Vec::new(),
+            simulator_pipes: false,
             dispatch_policy: Default::default(),
             restore_panels: false,
             data_dir: dir.path().to_path_buf(),

@@ -190,3 +190,99 @@ async fn protocol_errors_get_exceptions_not_panics() {
     let mut c = rig.client("SS1.IO3").await;
     assert!(c.read_coils(0, 4).await.unwrap().is_ok());
 }
+
+/// A replay's pipes answer with the very frames the TCP server sends:
+/// the same requests (reads, a write, a malformed one, an unknown unit, a
+/// corrupted reply, an offline device) to two simulators of the same plant
+/// on frozen clocks, one over loopback TCP, one over the switchboard.
+#[tokio::test]
+async fn in_process_pipes_answer_with_the_same_frames_as_tcp() {
+    use gridscada_sim::BindMode;
+    use gridscada_tagdb::{ScaledClock, Timestamp};
+    use std::sync::Arc;
+
+    let plant = demo_plant();
+    let frozen = || Arc::new(ScaledClock::new(Timestamp::from_millis(NOON), 1e-9));
+    let tcp_sim = gridscada_sim::start(&plant, frozen(), BindMode::Ephemeral)
+        .await
+        .unwrap();
+    let board = Arc::new(gridscada_field::Switchboard::new());
+    let pipe_sim = gridscada_sim::start(&plant, frozen(), BindMode::InProcess(board.clone()))
+        .await
+        .unwrap();
+    // The pipe simulator binds no Modbus socket.
+    assert!(pipe_sim.addresses().len() < tcp_sim.addresses().len());
+    for sim in [&tcp_sim, &pipe_sim] {
+        let h = sim.handle();
+        h.set_corrupt_frames("SS1.IO3", true).unwrap();
+        h.set_device_offline("SS1.IO2", true).unwrap();
+    }
+
+    let gateway = plant
+        .device("SS1.IO1")
+        .unwrap()
+        .address
+        .as_ref()
+        .unwrap()
+        .get_ref()
+        .clone();
+    let analyzer = plant.device("SS1.PA").map(|d| *d.unit_id.get_ref());
+    let mut requests: Vec<(u8, Vec<u8>)> = vec![
+        (1, vec![0x01, 0, 0, 0, 9]),       // read coils
+        (1, vec![0x02, 0, 0, 0, 8]),       // read discrete inputs
+        (1, vec![0x05, 0, 1, 0xFF, 0]),    // write single coil
+        (1, vec![0x01, 0, 0, 0, 9]),       // and read it back
+        (1, vec![0x05, 0, 0, 0x12, 0x34]), // malformed: answered by the link
+        (42, vec![0x03, 0, 0, 0, 1]),      // a unit the gateway does not have
+        (3, vec![0x01, 0, 0, 0, 4]),       // a corrupted reply
+        (3, vec![0x01, 0, 0, 0, 4]),       // and the next kind of corruption
+        (1, vec![0x2B, 0x0E, 1, 0]),       // a function the devices lack
+    ];
+    if let Some(unit) = analyzer {
+        requests.push((unit, vec![0x04, 0, 0, 0, 10]));
+    }
+
+    let mut over_tcp = TcpStream::connect(tcp_sim.addresses()[&gateway])
+        .await
+        .unwrap();
+    let mut over_pipe = board.dial(&gateway).expect("served in process").unwrap();
+    for (tid, (unit, pdu)) in requests.iter().enumerate() {
+        let mut adu = vec![0, tid as u8, 0, 0, 0, pdu.len() as u8 + 1, *unit];
+        adu.extend_from_slice(pdu);
+        over_tcp.write_all(&adu).await.unwrap();
+        over_pipe.write_all(&adu).await.unwrap();
+        let a = read_adu(&mut over_tcp).await;
+        let b = read_adu(&mut over_pipe).await;
+        assert_eq!(a, b, "request {adu:02x?}");
+    }
+    // An offline device answers neither way.
+    let adu = [0, 99, 0, 0, 0, 6, 2, 0x02, 0, 0, 0, 4];
+    over_tcp.write_all(&adu).await.unwrap();
+    over_pipe.write_all(&adu).await.unwrap();
+    let mut buf = [0u8; 16];
+    assert!(timeout(WALL_TIMEOUT, over_tcp.read(&mut buf))
+        .await
+        .is_err());
+    assert!(timeout(WALL_TIMEOUT, over_pipe.read(&mut buf))
+        .await
+        .is_err());
+    // After the simulator stops, a dial is refused.
+    pipe_sim.shutdown().await;
+    drop(over_pipe);
+    assert!(board.dial(&gateway).unwrap().is_err());
+}
+
+/// One Modbus TCP frame, whole.
+async fn read_adu<S: tokio::io::AsyncRead + Unpin>(s: &mut S) -> Vec<u8> {
+    let mut head = [0u8; 6];
+    timeout(Duration::from_secs(5), s.read_exact(&mut head))
+        .await
+        .expect("an answer")
+        .unwrap();
+    let len = usize::from(u16::from_be_bytes([head[4], head[5]]));
+    let mut rest = vec![0u8; len];
+    s.read_exact(&mut rest).await.unwrap();
+    let mut all = head.to_vec();
+    all.extend(rest);
+    all
+}
