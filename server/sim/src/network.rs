@@ -43,6 +43,10 @@ pub(crate) struct NetworkSim {
     /// Per source: the microgrid unit it is, if any.
     unit_of_source: Vec<Option<usize>>,
     delay: Duration,
+    /// The positions the topology was last computed from, and whether each
+    /// `supply` entry was energised then: the plant advances on every
+    /// request, its switches move seldom.
+    last: Option<(Inputs, Vec<bool>)>,
 }
 
 impl NetworkSim {
@@ -118,6 +122,7 @@ impl NetworkSim {
             supply,
             unit_of_source,
             delay,
+            last: None,
         })
     }
 
@@ -232,9 +237,20 @@ impl NetworkSim {
                 (Some(_), None) => Pos::Open,
             })
             .collect();
-        let topology = compute(&self.network.model, &Inputs { switches, sources });
-        for &(p, section) in &self.supply {
-            panels[p].set_supply(topology.state[section as usize].energised(), now);
+        let inputs = Inputs { switches, sources };
+        if self.last.as_ref().is_none_or(|(last, _)| *last != inputs) {
+            let topology = compute(&self.network.model, &inputs);
+            let energised = self
+                .supply
+                .iter()
+                .map(|&(_, section)| topology.state[section as usize].energised())
+                .collect();
+            self.last = Some((inputs, energised));
+        }
+        if let Some((_, energised)) = &self.last {
+            for (&(p, _), &on) in self.supply.iter().zip(energised) {
+                panels[p].set_supply(on, now);
+            }
         }
     }
 }

@@ -41,6 +41,10 @@ pub(crate) struct PlantSim {
     pub unmodelled: Vec<String>,
     pub unserved: Vec<String>,
     now: Timestamp,
+    /// The plant time of the last publish, while nothing has changed since:
+    /// the many requests of one scan arrive at the same instant, and the
+    /// models are pure functions of their state and the time.
+    published_at: Option<Timestamp>,
 }
 
 impl PlantSim {
@@ -100,6 +104,7 @@ impl PlantSim {
             unmodelled: layout.unmodelled,
             unserved: layout.unserved,
             now,
+            published_at: None,
         };
         sim.init_commands();
         sim.publish();
@@ -181,6 +186,9 @@ impl PlantSim {
     /// time never goes backwards here.
     pub fn advance_to(&mut self, now: Timestamp) {
         let now = now.max(self.now);
+        if self.published_at == Some(now) {
+            return;
+        }
         for p in &mut self.panels {
             p.advance_to(now);
         }
@@ -198,6 +206,7 @@ impl PlantSim {
     /// station's point values.
     fn publish(&mut self) {
         let t = self.now;
+        self.published_at = Some(t);
         let readings: Vec<AnalyzerReading> = self.panels.iter().map(|p| p.analyzer(t)).collect();
         for (b, src) in &self.outputs {
             if let Some(v) = output_value(
@@ -399,6 +408,12 @@ impl PlantSim {
 
     pub fn after_change(&mut self) {
         self.publish();
+    }
+
+    /// Something may have changed the models from outside (the handle):
+    /// the next advance publishes again, even at the same instant.
+    pub fn touched(&mut self) {
+        self.published_at = None;
     }
 }
 

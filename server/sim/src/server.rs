@@ -51,7 +51,9 @@ impl Shared {
         let now = self.clock.now();
         let mut plant = self.plant.lock();
         plant.advance_to(now);
-        f(&mut plant)
+        let r = f(&mut plant);
+        plant.touched();
+        r
     }
 }
 

@@ -63,6 +63,12 @@ pub struct HorizonConfig {
     /// How often the horizon is solved again, s (at least the dispatch period).
     #[serde(default = "default_horizon_resolve_s")]
     pub resolve_s: Spanned<f64>,
+    /// Plant time from a plan's measurements to its use, s: the plan is
+    /// solved on its own thread meanwhile and used at this fixed delay
+    /// however long the solve took (so a replay is the same on every run).
+    /// Absent: 0, the plan is used in the period it is made in.
+    #[serde(default, rename = "adopt_after_s")]
+    pub adopt_after: Option<Spanned<f64>>,
     /// How fast today's deviation from a daily forecast curve fades towards
     /// the curve, h (e-folding time of the ratio measured / curve).
     #[serde(default = "default_blend_h")]
@@ -73,6 +79,14 @@ pub struct HorizonConfig {
     /// Spinning reserve to hold in every look-ahead period.
     #[serde(default)]
     pub reserve: Option<ReserveConfig>,
+}
+
+impl HorizonConfig {
+    /// Plant time from a plan's measurements to its use, s: as configured,
+    /// else 0 (the plan is used in the dispatch period it is made in).
+    pub fn adopt_after_s(&self) -> f64 {
+        self.adopt_after.as_ref().map_or(0.0, |v| *v.get_ref())
+    }
 }
 
 fn default_horizon_periods() -> Spanned<f64> {

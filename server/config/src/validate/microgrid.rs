@@ -38,6 +38,24 @@ pub(super) fn check_horizon(cx: &mut Ctx<'_>, mg: &MicrogridConfig, h: &HorizonC
             );
         }
     }
+    if let Some(adopt) = &h.adopt_after {
+        let (a, resolve, period) = (
+            *adopt.get_ref(),
+            *h.resolve_s.get_ref(),
+            *h.period_s.get_ref(),
+        );
+        if !(a.is_finite() && a >= 0.0 && a < resolve && a < period) {
+            cx.err(
+                0,
+                adopt.span(),
+                format!(
+                    "{owner}: adopt_after_s ({a} s) must be 0 or more and shorter than \
+                     resolve_s ({resolve} s) and period_s ({period} s): a plan is used \
+                     before the next is due, while its first period lasts"
+                ),
+            );
+        }
+    }
     if !(h.blend_h.get_ref().is_finite() && *h.blend_h.get_ref() > 0.0) {
         cx.err(
             0,

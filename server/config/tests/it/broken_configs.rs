@@ -500,6 +500,8 @@ fn the_demo_plant_looks_ahead_with_forecasts() {
     let mg = plant.microgrid.unwrap();
     let h = mg.horizon.expect("the demo plant has a horizon");
     assert_eq!(*h.periods.get_ref(), 16.0);
+    // A plan is used in the dispatch period it is made in.
+    assert_eq!(h.adopt_after_s(), 0.0);
     // Integers and floats both read as numbers.
     assert_eq!(h.demand_forecast_kw.unwrap().get_ref()[0], (0.0, 61.0));
     assert!(mg.units[0].forecast_kw.is_some());
@@ -529,6 +531,28 @@ fn horizon_settings_and_forecast_curves_are_checked() {
             "no '{w}' in {got:#?}"
         );
     }
+    // A plan must be adopted before the next one is due.
+    let got = demo_plant_with(|s| {
+        s.replace(
+            "resolve_s = 300.0",
+            "resolve_s = 300.0\nadopt_after_s = 300",
+        )
+    });
+    assert!(
+        got.len() == 1
+            && got[0].starts_with("DIR/gridscada.toml:")
+            && got[0].contains(
+                "adopt_after_s (300 s) must be 0 or more and shorter than resolve_s (300 s)"
+            ),
+        "{got:#?}"
+    );
+    let got = demo_plant_with(|s| {
+        s.replace("resolve_s = 300.0", "resolve_s = 300.0\nadopt_after_s = -1")
+    });
+    assert!(
+        got.len() == 1 && got[0].contains("adopt_after_s (-1 s)"),
+        "{got:#?}"
+    );
     // A forecast on a storage unit is refused by name.
     let got = demo_plant_with(|s| {
         s.replace(

@@ -97,16 +97,116 @@ pub struct Dispatcher {
     /// Run commands the field confirmed.
     run_written: HashMap<String, bool>,
     policy: DispatchPolicy,
-    /// The last look-ahead plan (made every `resolve_s`), and which diesels
-    /// ran when it was made.
+    /// The last look-ahead plan adopted (made every `resolve_s`), and which
+    /// diesels ran when it was made.
     plan: Option<HorizonPlan>,
     plan_running: Vec<bool>,
+    /// The next plan, being solved on its own thread until its adoption.
+    pending: Option<PendingPlan>,
     /// Setpoints the field accepted last period: where the plan's ramps start.
     last_setpoints: Setpoints,
 }
 
 /// One measurement: the value, or why it cannot be used.
 type Meas = Result<f64, String>;
+
+/// A look-ahead plan on its way: solved from the measurements of one
+/// period, adopted at a fixed plant time after them.
+struct PendingPlan {
+    adopt_at: Timestamp,
+    /// Which diesels the plan saw running.
+    running: Vec<bool>,
+    solve: PlanSolve,
+}
+
+/// What a plan is made from, owned, so that another thread can make it.
+struct PlanInputs {
+    cfg: MicrogridConfig,
+    now: Timestamp,
+    measured: DispatchProblem,
+    /// Where the plan's ramps start: the setpoints last accepted.
+    initial_kw: Setpoints,
+    /// Hours each diesel has been in its present state.
+    hours_in_state: HashMap<String, f64>,
+}
+
+impl PlanInputs {
+    /// The plan: the day-long relaxation first, which prices what the plan
+    /// leaves in storage (the fixed estimate where it fails), then the
+    /// horizon with its commitment search.
+    fn solve(&self) -> HorizonPlan {
+        let cfg = &self.cfg;
+        let Some(h) = cfg.horizon.as_ref() else {
+            return HorizonPlan::failed(self.now, "no look-ahead is configured".into());
+        };
+        let fixed = |id: &str| {
+            cfg.units
+                .iter()
+                .find(|u| u.id.get_ref() == id)
+                .map_or(0.0, |u| stored_energy_value(cfg, u))
+        };
+        let in_state = |id: &str| self.hours_in_state.get(id).copied();
+        let n = (*h.periods.get_ref()).max(1.0) as usize;
+        let day = horizon_problem_over(
+            cfg,
+            h,
+            value_periods(h),
+            self.now,
+            &self.measured,
+            &self.initial_kw,
+            &fixed,
+            &in_state,
+        );
+        let values = day.relaxed_stored_energy_values().ok();
+        let terminal = |id: &str| {
+            values
+                .as_ref()
+                .and_then(|v| v.get(n))
+                .and_then(|s| s.get(id))
+                .filter(|v| v.is_finite())
+                .map_or_else(|| fixed(id), |v| v.max(0.0))
+        };
+        let problem = horizon_problem(
+            cfg,
+            h,
+            self.now,
+            &self.measured,
+            &self.initial_kw,
+            &terminal,
+            &in_state,
+        );
+        plan(&problem, self.now)
+    }
+}
+
+/// A plan being solved on its own thread, so the control loop's thread
+/// (a replay's only runtime thread) goes on meanwhile.
+struct PlanSolve {
+    thread: Option<std::thread::JoinHandle<HorizonPlan>>,
+    now: Timestamp,
+}
+
+impl PlanSolve {
+    fn start(inputs: PlanInputs) -> PlanSolve {
+        let now = inputs.now;
+        let thread = std::thread::Builder::new()
+            .name("look-ahead".into())
+            .spawn(move || inputs.solve())
+            .map_err(|e| tracing::warn!("cannot start the look-ahead's thread: {e}"))
+            .ok();
+        PlanSolve { thread, now }
+    }
+
+    /// The plan, waiting for it if need be; a failed plan (with its reason)
+    /// if the thread could not run or did not end well.
+    fn finish(self) -> HorizonPlan {
+        match self.thread.map(std::thread::JoinHandle::join) {
+            Some(Ok(plan)) => plan,
+            Some(Err(_)) => HorizonPlan::failed(self.now, "the look-ahead's solve panicked".into()),
+            None => HorizonPlan::failed(self.now, "the look-ahead's thread did not start".into()),
+        }
+    }
+}
 
 impl Dispatcher {
     pub fn new(cfg: MicrogridConfig, now: Timestamp) -> Self {
@@ -149,6 +249,7 @@ impl Dispatcher {
             policy: DispatchPolicy::Optimal,
             plan: None,
             plan_running: Vec::new(),
+            pending: None,
             last_setpoints: Setpoints::default(),
         }
     }
@@ -337,9 +438,13 @@ impl Dispatcher {
         for o in &mut problem.oil {
             o.running = self.diesels.iter().any(|d| d.id == o.id && d.run);
         }
-        // Look ahead when a plan is due, and price stored energy with it.
-        if self.policy == DispatchPolicy::Optimal && problems.is_empty() {
-            self.look_ahead(&problem, now, &mut notices);
+        // Look ahead when a plan is due (from usable measurements only), and
+        // adopt the plan whose time has come; stored energy is priced with it.
+        if self.policy == DispatchPolicy::Optimal {
+            if problems.is_empty() {
+                self.look_ahead(&problem, now);
+            }
+            self.adopt_plan(now, &mut notices);
         }
         // Commitment: the plan's first period while the plan is fresh, else
         // the rule (an alarm says so where a look-ahead is configured).
@@ -547,18 +652,17 @@ impl Dispatcher {
         (st, notices)
     }
 
-    /// Makes a new plan when none exists, the last is `resolve_s` old, or the
-    /// diesel commitment just changed; events when planning starts failing
-    /// and when it recovers.
-    fn look_ahead(
-        &mut self,
-        measured: &DispatchProblem,
-        now: Timestamp,
-        notices: &mut Vec<DispatchNotice>,
-    ) {
-        let Some(h) = self.cfg.horizon.clone() else {
+    /// Starts a new plan when none exists, the last is `resolve_s` old, or
+    /// the diesel commitment changed since it was made; unless one is being
+    /// solved already. It is solved on its own thread from what is measured
+    /// now and adopted `adopt_after_s` later (the first plan at once).
+    fn look_ahead(&mut self, measured: &DispatchProblem, now: Timestamp) {
+        let Some(h) = self.cfg.horizon.as_ref() else {
             return;
         };
+        if self.pending.is_some() {
+            return;
+        }
         let running: Vec<bool> = measured.oil.iter().map(|o| o.running).collect();
         let due = match &self.plan {
             None => true,
@@ -571,53 +675,45 @@ impl Dispatcher {
         if !due {
             return;
         }
-        let cfg = &self.cfg;
-        let fixed = |id: &str| {
-            cfg.units
-                .iter()
-                .find(|u| u.id.get_ref() == id)
-                .map_or(0.0, |u| stored_energy_value(cfg, u))
+        let adopt_at = match self.plan {
+            None => now,
+            Some(_) => now.add(std::time::Duration::from_secs_f64(h.adopt_after_s())),
         };
-        let diesels = &self.diesels;
-        let in_state = |id: &str| {
-            diesels
-                .iter()
-                .find(|d| d.id == id)
-                .map(|d| now.since(d.since).as_secs_f64().max(0.0) / 3600.0)
-        };
-        // What the plan leaves in storage is worth what the day ahead says:
-        // the day's LP relaxation (commitment in fractions of a period)
-        // prices a kWh at the plan's end; the fixed estimate where it fails.
-        let n = (*h.periods.get_ref()).max(1.0) as usize;
-        let day = horizon_problem_over(
-            cfg,
-            &h,
-            value_periods(&h),
+        let inputs = PlanInputs {
+            cfg: self.cfg.clone(),
             now,
-            measured,
-            &self.last_setpoints,
-            &fixed,
-            &in_state,
-        );
-        let values = day.relaxed_stored_energy_values().ok();
-        let terminal = |id: &str| {
-            values
-                .as_ref()
-                .and_then(|v| v.get(n))
-                .and_then(|s| s.get(id))
-                .filter(|v| v.is_finite())
-                .map_or_else(|| fixed(id), |v| v.max(0.0))
+            measured: measured.clone(),
+            initial_kw: self.last_setpoints.clone(),
+            hours_in_state: self
+                .diesels
+                .iter()
+                .map(|d| {
+                    (
+                        d.id.clone(),
+                        now.since(d.since).as_secs_f64().max(0.0) / 3600.0,
+                    )
+                })
+                .collect(),
         };
-        let problem = horizon_problem(
-            cfg,
-            &h,
-            now,
-            measured,
-            &self.last_setpoints,
-            &terminal,
-            &in_state,
-        );
-        let new = plan(&problem, now);
+        self.pending = Some(PendingPlan {
+            adopt_at,
+            running,
+            solve: PlanSolve::start(inputs),
+        });
+    }
+
+    /// Adopts the plan being solved once its time has come, waiting for the
+    /// solve to end if it has not: the thread blocks rather than lets plant
+    /// time move, so the plan is used at the same plant time on every run.
+    /// Events when planning starts failing and when it recovers.
+    fn adopt_plan(&mut self, now: Timestamp, notices: &mut Vec<DispatchNotice>) {
+        if self.pending.as_ref().is_none_or(|p| now < p.adopt_at) {
+            return;
+        }
+        let Some(pending) = self.pending.take() else {
+            return;
+        };
+        let new = pending.solve.finish();
         let was_ok = self.plan.as_ref().is_none_or(HorizonPlan::is_optimal);
         match (was_ok, new.is_optimal()) {
             (true, false) => {
@@ -637,7 +733,7 @@ impl Dispatcher {
             _ => {}
         }
         self.plan = Some(new);
-        self.plan_running = running;
+        self.plan_running = pending.running;
     }
 
     /// What the plan says a stored kWh in `id` is worth, while the plan is

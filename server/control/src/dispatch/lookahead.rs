@@ -103,6 +103,27 @@ pub struct HorizonPlan {
 }
 
 impl HorizonPlan {
+    /// No plan at `at`, for `reason` (status "error").
+    pub fn failed(at: Timestamp, reason: String) -> HorizonPlan {
+        HorizonPlan {
+            at,
+            periods: 0,
+            period_s: 0.0,
+            status: "error".into(),
+            reason: Some(reason),
+            objective: None,
+            solve_ms: None,
+            demand_kw: Vec::new(),
+            renewable_kw: Vec::new(),
+            soc_kwh: BTreeMap::new(),
+            diesel_kw: BTreeMap::new(),
+            diesel_run: BTreeMap::new(),
+            commitment_nodes: None,
+            commitment_proven: None,
+            stored_energy_value_per_kwh: Setpoints::default(),
+        }
+    }
+
     /// Whether the plan was solved (its values may be used).
     pub fn is_optimal(&self) -> bool {
         self.status == "optimal"

@@ -21,6 +21,7 @@
 
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
+use std::sync::mpsc;
 
 use super::lp::{Model, SolveFailure};
 
@@ -111,7 +112,17 @@ pub(crate) fn solve_binary_from(
     limits: MipLimits,
     start: Option<Vec<f64>>,
 ) -> Result<MipSolution, SolveFailure> {
-    let mut works = [model.clone(), model.clone()];
+    with_workers(model, |works| search(model, works, binaries, limits, start))
+}
+
+/// The branch and bound of [`solve_binary_from`] on `works`.
+fn search(
+    model: &Model,
+    works: &mut Workers<'_>,
+    binaries: &[usize],
+    limits: MipLimits,
+    start: Option<Vec<f64>>,
+) -> Result<MipSolution, SolveFailure> {
     let mut nodes = 0usize;
     let mut seq = 0usize;
     let mut best: Option<(f64, Vec<f64>)> = start.map(|x| (model.objective(&x), x));
@@ -146,9 +157,9 @@ pub(crate) fn solve_binary_from(
         }
         let solved = match batch.as_slice() {
             [] => break,
-            [a] => vec![relax(model, &mut works[0], &a.fixes)],
+            [a] => vec![works.relax(&a.fixes)],
             [a, b, ..] => {
-                let (ra, rb) = relax_pair(model, &mut works, &a.fixes, &b.fixes);
+                let (ra, rb) = works.relax_pair(&a.fixes, &b.fixes);
                 vec![ra, rb]
             }
         };
@@ -200,7 +211,7 @@ pub(crate) fn solve_binary_from(
                 };
                 let (low, half) = (rounded(INT_TOL), rounded(0.5));
                 nodes += 2;
-                let (rl, rh) = relax_pair(model, &mut works, &low, &half);
+                let (rl, rh) = works.relax_pair(&low, &half);
                 for xr in [rl, rh].into_iter().flatten() {
                     let v = model.objective(&xr);
                     if best.as_ref().is_none_or(|(inc, _)| v < *inc) {
@@ -225,7 +236,7 @@ pub(crate) fn solve_binary_from(
     // one improves it.
     if !proven {
         if let Some((v, x)) = best.take() {
-            let (v, x, tried) = improve_by_flips(model, &mut works, binaries, v, x);
+            let (v, x, tried) = improve_by_flips(model, works, binaries, v, x);
             nodes += tried;
             best = Some((v, x));
         }
@@ -263,7 +274,7 @@ pub(crate) fn solve_binary_from(
 /// and tried again from the new one, so the walk is that of one at a time.
 fn improve_by_flips(
     model: &Model,
-    works: &mut [Model; 2],
+    works: &mut Workers<'_>,
     binaries: &[usize],
     mut value: f64,
     mut x: Vec<f64>,
@@ -287,13 +298,13 @@ fn improve_by_flips(
             let (r1, r2) = match binaries.get(i + 1) {
                 Some(&next) => {
                     let second = flipped(&x, next);
-                    let (r1, r2) = relax_pair(model, works, &first, &second);
+                    let (r1, r2) = works.relax_pair(&first, &second);
                     tried += 2;
                     (r1, Some(r2))
                 }
                 None => {
                     tried += 1;
-                    (relax(model, &mut works[0], &first), None)
+                    (works.relax(&first), None)
                 }
             };
             i += 1;
@@ -369,27 +380,72 @@ pub(crate) fn relax_and_fix(
     Some(x)
 }
 
-/// The relaxations of `model` under `a` and under `b`, solved at once on
-/// two threads (each on its own working copy).
-fn relax_pair(
-    model: &Model,
-    works: &mut [Model; 2],
-    a: &[(usize, f64)],
-    b: &[(usize, f64)],
-) -> (
-    Result<Vec<f64>, SolveFailure>,
-    Result<Vec<f64>, SolveFailure>,
-) {
-    let [wa, wb] = works;
-    std::thread::scope(|s| {
-        let second = s.spawn(|| relax(model, wb, b));
-        let ra = relax(model, wa, a);
-        let rb = second.join().unwrap_or_else(|_| {
-            Err(SolveFailure::Solver(
-                "the relaxation's worker thread failed".into(),
-            ))
-        });
+type Fixes = Vec<(usize, f64)>;
+type Relaxed = Result<Vec<f64>, SolveFailure>;
+
+/// A search's two working copies of the model: the first solved on the
+/// searching thread, the second on one helper thread that lives as long as
+/// the search (a thread started for every pair cost as much as a small
+/// relaxation).
+struct Workers<'m> {
+    model: &'m Model,
+    first: Model,
+    jobs: Option<mpsc::Sender<Fixes>>,
+    done: mpsc::Receiver<Relaxed>,
+}
+
+impl Workers<'_> {
+    /// The relaxation under `fixes`, on this thread.
+    fn relax(&mut self, fixes: &[(usize, f64)]) -> Relaxed {
+        relax(self.model, &mut self.first, fixes)
+    }
+
+    /// The relaxations under `a` and under `b`, solved at once on the two
+    /// threads.
+    fn relax_pair(&mut self, a: &[(usize, f64)], b: &[(usize, f64)]) -> (Relaxed, Relaxed) {
+        let sent = self
+            .jobs
+            .as_ref()
+            .is_some_and(|j| j.send(b.to_vec()).is_ok());
+        let ra = self.relax(a);
+        let rb = if sent {
+            self.done.recv().unwrap_or_else(|_| Err(helper_failed()))
+        } else {
+            Err(helper_failed())
+        };
         (ra, rb)
+    }
+}
+
+fn helper_failed() -> SolveFailure {
+    SolveFailure::Solver("the relaxation's worker thread failed".into())
+}
+
+/// Runs `f` with a search's [`Workers`]; the helper thread ends with it.
+fn with_workers<R>(model: &Model, f: impl FnOnce(&mut Workers<'_>) -> R) -> R {
+    std::thread::scope(|s| {
+        let (jobs, inbox) = mpsc::channel::<Fixes>();
+        let (outbox, done) = mpsc::channel::<Relaxed>();
+        let helper = s.spawn(move || {
+            let mut second = model.clone();
+            for fixes in inbox {
+                if outbox.send(relax(model, &mut second, &fixes)).is_err() {
+                    break;
+                }
+            }
+        });
+        let mut works = Workers {
+            model,
+            first: model.clone(),
+            jobs: Some(jobs),
+            done,
+        };
+        let r = f(&mut works);
+        works.jobs = None; // the helper's inbox closes: it returns
+                           // Joined here, so a helper that panicked (its pairs already failed
+                           // as "worker thread failed") does not take the search down.
+        let _ = helper.join();
+        r
     })
 }
 

@@ -320,6 +320,69 @@ async fn the_plan_is_renewed_every_resolve_interval_and_a_failed_one_is_reported
 }
 
 #[tokio::test]
+async fn a_plan_is_used_adopt_after_s_after_its_measurements() {
+    // As above, with adopt_after_s = 30: the failed first plan (the first
+    // plan is adopted at once) stands until the next one's time.
+    let cfg: MicrogridConfig = toml::from_str(&format!(
+        "{CFG}\n[horizon]\nperiods = 16\nperiod_s = 900.0\nresolve_s = 60.0\n\
+         adopt_after_s = 30\nblend_h = 2.0\ndemand_forecast_kw = [[0, 60]]\n"
+    ))
+    .unwrap();
+    let db = db(&cfg);
+    let t0 = Timestamp::from_millis(FIVE_PM);
+    let w = fake_writer(&db, t0);
+    plant(&db, t0, 10.0, 0.0, 189.9, true);
+    let mut d = Dispatcher::new(cfg, t0);
+    let (st, _) = d.step(&db, &w, t0).await;
+    assert_eq!(st.horizon.as_ref().unwrap().status, "infeasible");
+    // A minute on, demand is back: a plan is made from what is measured
+    // now, and used 30 s later however soon its solve ends.
+    let t2 = t0.add(Duration::from_secs(60));
+    plant(&db, t2, 60.0, 0.0, 20.0, true);
+    let (st, notices) = d.step(&db, &w, t2).await;
+    assert_eq!(st.horizon.as_ref().unwrap().at, t0);
+    assert!(notices.is_empty(), "{notices:?}");
+    std::thread::sleep(Duration::from_millis(300));
+    let t3 = t2.add(Duration::from_secs(25));
+    plant(&db, t3, 60.0, 0.0, 20.0, true);
+    let (st, _) = d.step(&db, &w, t3).await;
+    assert_eq!(st.horizon.as_ref().unwrap().at, t0, "not before its time");
+    // Adopted at its time even though the measurements then are unusable:
+    // it was made from usable ones.
+    let t4 = t2.add(Duration::from_secs(30));
+    plant(&db, t4, 60.0, 0.0, 20.0, true);
+    db.set(
+        db.id("MG.Load.P_kW").unwrap(),
+        60.0,
+        Quality::bad("comm failure"),
+        t4,
+    );
+    let (st, notices) = d.step(&db, &w, t4).await;
+    let plan = st.horizon.as_ref().unwrap();
+    assert_eq!((plan.at, plan.status.as_str()), (t2, "optimal"), "{plan:?}");
+    assert_eq!(plan.demand_kw[0], 60.0, "the plan saw the demand at t2");
+    assert!(notices.iter().any(|n| matches!(n,
+        DispatchNotice::Event { message, .. } if message.contains("planning again"))));
+}
+
+#[tokio::test]
+async fn by_default_a_plan_is_used_in_the_period_it_is_made() {
+    let cfg = with_horizon("[[0, 60]]");
+    assert_eq!(cfg.horizon.as_ref().unwrap().adopt_after_s(), 0.0);
+    let db = db(&cfg);
+    let t0 = Timestamp::from_millis(FIVE_PM);
+    let w = fake_writer(&db, t0);
+    let mut d = Dispatcher::new(cfg, t0);
+    for (i, demand) in [60.0, 70.0, 80.0].into_iter().enumerate() {
+        let t = t0.add(Duration::from_secs(60 * i as u64));
+        plant(&db, t, demand, 0.0, 100.0, true);
+        let (st, _) = d.step(&db, &w, t).await;
+        let plan = st.horizon.as_ref().unwrap();
+        assert_eq!((plan.at, plan.demand_kw[0]), (t, demand), "{plan:?}");
+    }
+}
+
+#[tokio::test]
 async fn failed_write_switches_to_the_rule() {
     let (cfg, db, w) = fixture();
     let now = Timestamp::from_millis(1_000_000);
