@@ -309,25 +309,17 @@ pub fn horizon_problem_over(
 /// Solves `p` and summarises it as a plan made at `now`.
 pub fn plan(p: &HorizonProblem, now: Timestamp) -> HorizonPlan {
     let mut plan = HorizonPlan {
-        at: now,
         periods: p.periods.len(),
         period_s: p.dt_h * 3600.0,
         status: "optimal".into(),
         reason: None,
-        objective: None,
-        solve_ms: None,
         demand_kw: p.periods.iter().map(|f| f.demand_kw).collect(),
         renewable_kw: p
             .periods
             .iter()
             .map(|f| f.available_kw.values().sum())
             .collect(),
-        soc_kwh: BTreeMap::new(),
-        diesel_kw: BTreeMap::new(),
-        diesel_run: BTreeMap::new(),
-        commitment_nodes: None,
-        commitment_proven: None,
-        stored_energy_value_per_kwh: Setpoints::default(),
+        ..HorizonPlan::failed(now, String::new())
     };
     match p.solve() {
         Ok(sol) => {
