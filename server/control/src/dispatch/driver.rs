@@ -7,12 +7,15 @@
 //! to the rule-based fallback on stale or Bad measurements, a failed solve or
 //! a failed write; writing each unit's setpoint and the diesels' run commands
 //! through the `TagWriter`; publishing a [`DispatchStatus`] and emitting
-//! [`DispatchNotice`]s (events, the "dispatch fallback" alarm).
+//! [`DispatchNotice`]s (events, the "dispatch fallback" alarm); the
+//! look-ahead plan's thread, started when a plan is due and joined at the
+//! plant time the plan is adopted (`adopt_after_s` after its measurements).
 //!
 //! **Must not touch:** Modbus or any device directly (only `TagWriter`), the
 //! alarm engine and the event store (it only sends notices), wall time (plant
-//! time comes from the `Clock`). [`Dispatcher::step`] is one period without
-//! sleeping, so tests drive it with a fake writer and tag database.
+//! time comes from the `Clock`; a plan is adopted at its plant time, never
+//! when its solve happens to end). [`Dispatcher::step`] is one period
+//! without sleeping, so tests drive it with a fake writer and tag database.
 //!
 //! This file holds the [`Dispatcher`] (one period); its task is in
 //! `driver/run.rs`, what it reports in `driver/status.rs`.
