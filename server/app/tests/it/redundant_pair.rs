@@ -300,6 +300,14 @@ fn the_pair_keeps_isolating_faults_through_kills_freezes_and_a_cut_database() {
             let p = settled(&mut op, panel, Duration::from_secs(60));
             let outcome = if p["lockout"] == true {
                 println!("round {round}: {panel} locked out: {p}");
+                // Why, from both servers' logs and the simulator's.
+                for s in &servers {
+                    println!("--- {}.log ---\n{}", s.name, common::tail(&s.log));
+                }
+                println!(
+                    "--- sim.log ---\n{}",
+                    common::tail(&dir.path().join("sim.log"))
+                );
                 "lockout".to_string()
             } else {
                 format!("isolated {}", p["faulty_zones"])
