@@ -60,14 +60,6 @@ impl Switchboard {
             )),
         })
     }
-
-    /// Whether `address` is served in process.
-    pub fn serves(&self, address: &str) -> bool {
-        self.lines
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .contains_key(address)
-    }
 }
 
 #[cfg(test)]
@@ -80,7 +72,6 @@ mod tests {
         let board = Switchboard::new();
         assert!(board.dial("127.0.0.1:502").is_none());
         let mut incoming = board.listen("127.0.0.1:502");
-        assert!(board.serves("127.0.0.1:502"));
         let mut client = board.dial("127.0.0.1:502").unwrap().unwrap();
         let mut served = incoming.recv().await.unwrap();
         client.write_all(b"ping").await.unwrap();

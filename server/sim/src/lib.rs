@@ -221,14 +221,17 @@ pub async fn start_with(
     });
 
     // Bind everything before serving anything, so a failure leaves nothing behind.
-    let mut listeners = vec![];
+    let mut wires = vec![];
     let mut addresses = HashMap::new();
-    if !matches!(bind, BindMode::InProcess(_)) {
-        for g in &gateways {
-            let listener = bind_one(&bind, &g.address).await?;
-            addresses.insert(g.address.clone(), listener.local_addr()?);
-            listeners.push((g.clone(), listener));
-        }
+    for g in &gateways {
+        wires.push(match &bind {
+            BindMode::InProcess(board) => server::Wire::Pipes(board.listen(&g.address)),
+            _ => {
+                let listener = bind_one(&bind, &g.address).await?;
+                addresses.insert(g.address.clone(), listener.local_addr()?);
+                server::Wire::Socket(listener)
+            }
+        });
     }
     let mut station_listeners = vec![];
     for s in &station_specs {
@@ -243,31 +246,18 @@ pub async fn start_with(
 
     let (tx, rx) = watch::channel(false);
     let mut tasks = vec![];
-    for (g, listener) in listeners {
+    for (g, wire) in gateways.iter().zip(wires) {
         let gw = Arc::new(Gateway {
             label: g.address.clone(),
             units: g.units.clone(),
         });
-        tasks.push(tokio::spawn(server::serve(
-            listener,
-            shared.clone(),
-            gw,
-            rx.clone(),
-        )));
-    }
-    if let BindMode::InProcess(board) = &bind {
-        for g in &gateways {
-            let gw = Arc::new(Gateway {
-                label: g.address.clone(),
-                units: g.units.clone(),
-            });
-            tasks.push(tokio::spawn(server::serve_pipes(
-                board.listen(&g.address),
-                shared.clone(),
-                gw,
-                rx.clone(),
-            )));
-        }
+        let (shared, rx) = (shared.clone(), rx.clone());
+        tasks.push(match wire {
+            server::Wire::Socket(listener) => tokio::spawn(server::serve(listener, shared, gw, rx)),
+            server::Wire::Pipes(incoming) => {
+                tokio::spawn(server::serve_pipes(incoming, shared, gw, rx))
+            }
+        });
     }
     let mut stations = vec![];
     for (i, (spec, ls)) in station_specs.iter().zip(station_listeners).enumerate() {

@@ -145,6 +145,13 @@ pub(crate) async fn serve(
     }
 }
 
+/// How a gateway is reached: a TCP listener, or the in-process pipes a
+/// switchboard hands over (a replay).
+pub(crate) enum Wire {
+    Socket(TcpListener),
+    Pipes(mpsc::UnboundedReceiver<DuplexStream>),
+}
+
 /// Serves one gateway over in-process pipes until `shutdown` flips: each
 /// pipe the switchboard hands over is one master connection.
 pub(crate) async fn serve_pipes(
@@ -192,11 +199,12 @@ async fn answer_requests<S: AsyncRead + AsyncWrite + Unpin>(
             if inbuf.len() < total {
                 break;
             }
-            let frame: Vec<u8> = inbuf.drain(..total).collect();
-            let (transaction, unit) = ([frame[0], frame[1]], frame[6]);
-            let function = frame[MBAP_LEN];
-            let request = Request::try_from(Bytes::copy_from_slice(&frame[MBAP_LEN..]))
-                .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, e.to_string()))?;
+            let (transaction, unit) = ([inbuf[0], inbuf[1]], inbuf[6]);
+            let function = inbuf[MBAP_LEN];
+            let request = Request::try_from(Bytes::copy_from_slice(&inbuf[MBAP_LEN..total]))
+                .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, e.to_string()));
+            inbuf.drain(..total);
+            let request = request?;
             let pdu = match service
                 .call(SlaveRequest {
                     slave: unit,
@@ -209,11 +217,7 @@ async fn answer_requests<S: AsyncRead + AsyncWrite + Unpin>(
                 Err(code) => vec![function | 0x80, u8::from(code)],
             };
             let mut adu = Vec::with_capacity(MBAP_LEN + pdu.len());
-            adu.extend_from_slice(&transaction);
-            adu.extend_from_slice(&[0, 0]);
-            adu.extend_from_slice(&(pdu.len() as u16 + 1).to_be_bytes());
-            adu.push(unit);
-            adu.extend_from_slice(&pdu);
+            push_adu(&mut adu, transaction, unit, &pdu);
             link.write_all(&adu).await?;
             link.flush().await?;
         }
@@ -223,6 +227,16 @@ async fn answer_requests<S: AsyncRead + AsyncWrite + Unpin>(
         }
         inbuf.extend_from_slice(&chunk[..n]);
     }
+}
+
+/// Appends a Modbus TCP frame: the MBAP header (transaction, protocol 0,
+/// length, unit) and `pdu`.
+fn push_adu(out: &mut Vec<u8>, transaction: [u8; 2], unit: u8, pdu: &[u8]) {
+    out.extend_from_slice(&transaction);
+    out.extend_from_slice(&[0, 0]);
+    out.extend_from_slice(&(pdu.len() as u16 + 1).to_be_bytes());
+    out.push(unit);
+    out.extend_from_slice(pdu);
 }
 
 /// A response PDU on the wire (function code first), as the Modbus
@@ -347,17 +361,8 @@ impl<S: AsyncRead + AsyncWrite + Unpin> FieldLink<S> {
             let pdu = &frame[MBAP_LEN..];
             if malformed_request(pdu) {
                 let fc = pdu[0];
-                self.out.extend_from_slice(&[
-                    frame[0],
-                    frame[1],
-                    0,
-                    0,
-                    0,
-                    3,
-                    frame[6],
-                    fc | 0x80,
-                    u8::from(ExceptionCode::IllegalDataValue),
-                ]);
+                let exception = [fc | 0x80, u8::from(ExceptionCode::IllegalDataValue)];
+                push_adu(&mut self.out, [frame[0], frame[1]], frame[6], &exception);
             } else {
                 self.ready.extend_from_slice(&frame);
             }

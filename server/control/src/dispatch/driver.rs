@@ -710,10 +710,7 @@ impl Dispatcher {
     /// time move, so the plan is used at the same plant time on every run.
     /// Events when planning starts failing and when it recovers.
     fn adopt_plan(&mut self, now: Timestamp, notices: &mut Vec<DispatchNotice>) {
-        if self.pending.as_ref().is_none_or(|p| now < p.adopt_at) {
-            return;
-        }
-        let Some(pending) = self.pending.take() else {
+        let Some(pending) = self.pending.take_if(|p| now >= p.adopt_at) else {
             return;
         };
         let new = pending.solve.finish();
