@@ -202,13 +202,31 @@ impl PlanSolve {
 
     /// The plan, waiting for it if need be; a failed plan (with its reason)
     /// if the thread could not run or did not end well.
+    ///
+    /// The wait blocks the calling thread on purpose: a replay's plant time
+    /// must not move while the plan is made. On a server's multi-thread
+    /// runtime the wait hands this worker's other tasks (the pair's lease
+    /// renewal among them) to another worker first: a slow plan in a debug
+    /// build once starved the lease and flapped the pair.
     fn finish(self) -> HorizonPlan {
-        match self.thread.map(std::thread::JoinHandle::join) {
+        let join = |t: std::thread::JoinHandle<HorizonPlan>| {
+            if t.is_finished() || !on_multi_thread_runtime() {
+                t.join()
+            } else {
+                tokio::task::block_in_place(|| t.join())
+            }
+        };
+        match self.thread.map(join) {
             Some(Ok(plan)) => plan,
             Some(Err(_)) => HorizonPlan::failed(self.now, "the look-ahead's solve panicked".into()),
             None => HorizonPlan::failed(self.now, "the look-ahead's thread did not start".into()),
         }
     }
+}
+
+fn on_multi_thread_runtime() -> bool {
+    tokio::runtime::Handle::try_current()
+        .is_ok_and(|h| h.runtime_flavor() == tokio::runtime::RuntimeFlavor::MultiThread)
 }
 
 impl Dispatcher {

@@ -491,3 +491,37 @@ async fn run_dispatch_publishes_status_and_notices() {
     assert_eq!(srx.borrow().mode, DispatchMode::Fallback);
     task.abort();
 }
+
+/// A slow look-ahead must not hold up the server's other tasks: the pair's
+/// lease renewal shares the runtime, and a plan that took seconds in a
+/// debug build once let the lease run out and the pair flap.
+#[tokio::test(flavor = "multi_thread", worker_threads = 1)]
+async fn waiting_for_a_slow_plan_leaves_the_runtime_to_other_tasks() {
+    let now = Timestamp::from_millis(1_000);
+    let slow = PlanSolve {
+        thread: Some(std::thread::spawn(move || {
+            std::thread::sleep(Duration::from_millis(600));
+            HorizonPlan::failed(now, "slow on purpose".into())
+        })),
+        now,
+    };
+    let ticks = Arc::new(std::sync::atomic::AtomicU32::new(0));
+    let counter = ticks.clone();
+    let ticker = tokio::spawn(async move {
+        loop {
+            tokio::time::sleep(Duration::from_millis(20)).await;
+            counter.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+        }
+    });
+    // Let the ticker start on the only worker, then wait there.
+    tokio::time::sleep(Duration::from_millis(30)).await;
+    let before = ticks.load(std::sync::atomic::Ordering::SeqCst);
+    let plan = tokio::spawn(async move { slow.finish() }).await.unwrap();
+    let during = ticks.load(std::sync::atomic::Ordering::SeqCst) - before;
+    ticker.abort();
+    assert_eq!(plan.reason.as_deref(), Some("slow on purpose"));
+    assert!(
+        during >= 10,
+        "the other task ran {during} times in the 600 ms wait"
+    );
+}
