@@ -211,6 +211,14 @@ async fn run(
         if let Some(&c) = copy.last() {
             ratios.push(writer[round] / c);
         }
+        eprintln!(
+            "{backend} round {round}: writer {:.0}/s, plain INSERT {:.0}/s{}",
+            writer[round],
+            plain[round],
+            copy.last()
+                .map(|c| format!(", COPY {c:.0}/s"))
+                .unwrap_or_default()
+        );
     }
     // A day of 1 s data for 10 tags; the day starts on a minute, so a
     // minute-aligned trend holds exactly the day.

@@ -20,7 +20,7 @@ use crate::{Result, Store, StoreError};
 /// pixels wide; more would only load the database).
 pub const MAX_TREND_BUCKETS: u32 = 20_000;
 
-/// Rows per multi-row INSERT statement on SQLite (4 parameters each, well
+/// Rows per multi-row INSERT statement on SQLite (4 or 5 parameters each, well
 /// under SQLite's 32,766 parameter limit).
 const SQLITE_ROWS_PER_STATEMENT: usize = 1_000;
 
@@ -196,6 +196,28 @@ struct Row {
     quality: i32,
 }
 
+/// A batch of samples made ready for the database without touching it: its
+/// rows with their tag ids, sorted by key and one per key, its COPY text
+/// (PostgreSQL) and its roll-up buckets at both levels. The historian's
+/// writer prepares the next batch while this one is in the database.
+pub(crate) struct PreparedSamples {
+    rows: Vec<Row>,
+    copy: Option<Vec<u8>>,
+    buckets: Vec<(Level, Vec<rollup::Agg>)>,
+}
+
+impl Row {
+    fn of(tag_id: i64, s: &HistorySample) -> Row {
+        Row {
+            tag_id,
+            ts: s.ts.as_millis(),
+            value: s.value.filter(|v| v.is_finite()),
+            exact: s.exact.map(|i| i.to_string()),
+            quality: quality_to_code(s.quality),
+        }
+    }
+}
+
 impl Store {
     /// Writes samples in one transaction, as multi-row inserts (SQLite) or a
     /// COPY (PostgreSQL), and brings the roll-ups up to date. A second sample
@@ -214,14 +236,29 @@ impl Store {
             let tag_id = *ids.get(&*s.tag).ok_or_else(|| {
                 StoreError::Invalid(format!("historian tag '{}' could not be registered", s.tag))
             })?;
-            rows.push(Row {
-                tag_id,
-                ts: s.ts.as_millis(),
-                value: s.value.filter(|v| v.is_finite()),
-                exact: s.exact.map(|i| i.to_string()),
-                quality: quality_to_code(s.quality),
-            });
+            rows.push(Row::of(tag_id, s));
         }
+        self.write_prepared(&self.prepared(rows)).await
+    }
+
+    /// [`Store::insert_samples`]'s work that needs no database: `None` when
+    /// a tag of the batch is not registered yet (or this store is another
+    /// site's view), and then `insert_samples` does it all.
+    pub(crate) fn prepare_samples(&self, samples: &[HistorySample]) -> Option<PreparedSamples> {
+        if self.view || self.inner.tag_ids_loaded.get().is_none() || samples.is_empty() {
+            return None;
+        }
+        let rows = {
+            let ids = self.inner.tag_ids.lock();
+            samples
+                .iter()
+                .map(|s| ids.get(&*s.tag).map(|&id| Row::of(id, s)))
+                .collect::<Option<Vec<Row>>>()?
+        };
+        Some(self.prepared(rows))
+    }
+
+    fn prepared(&self, mut rows: Vec<Row>) -> PreparedSamples {
         // Sorted by key for B-tree locality; of duplicates keep the last given
         // (a stable sort keeps arrival order within equal keys).
         rows.sort_by_key(|r| (r.tag_id, r.ts));
@@ -232,11 +269,29 @@ impl Store {
                 _ => deduped.push(r),
             }
         }
-        let n = deduped.len() as u64;
-        let keys: Vec<(i64, i64, Option<f64>, i32)> = deduped
-            .iter()
-            .map(|r| (r.tag_id, r.ts, r.value, r.quality))
+        let copy = matches!(self.inner.backend, crate::store::Backend::Postgres(_))
+            .then(|| copy_text(&deduped));
+        let buckets = Level::ALL
+            .into_iter()
+            .map(|level| {
+                let keys = deduped.iter().map(|r| (r.tag_id, r.ts, r.value, r.quality));
+                (level, rollup::roll_up(keys, level.width()))
+            })
             .collect();
+        PreparedSamples {
+            rows: deduped,
+            copy,
+            buckets,
+        }
+    }
+
+    /// Writes a prepared batch in one transaction, roll-ups included.
+    pub(crate) async fn write_prepared(&self, batch: &PreparedSamples) -> Result<u64> {
+        self.writable("inserting historian samples")?;
+        let n = batch.rows.len() as u64;
+        if n == 0 {
+            return Ok(0);
+        }
         match &self.inner.backend {
             crate::store::Backend::Sqlite(s) => {
                 let mut tx = s
@@ -244,49 +299,58 @@ impl Store {
                     .begin()
                     .await
                     .map_err(db("inserting historian samples"))?;
-                for chunk in deduped.chunks(SQLITE_ROWS_PER_STATEMENT) {
-                    let mut qb = QueryBuilder::new(
-                        "INSERT INTO samples (tag_id, ts, value, exact, quality) ",
-                    );
-                    qb.push_values(chunk, |mut b, r| {
-                        b.push_bind(r.tag_id)
-                            .push_bind(r.ts)
-                            .push_bind(r.value)
-                            .push_bind(r.exact.as_deref())
-                            .push_bind(r.quality);
+                for chunk in rollup::statement_chunks(&batch.rows, SQLITE_ROWS_PER_STATEMENT) {
+                    // Exact integers are rare: without any, one parameter
+                    // less per row.
+                    let exact = chunk.iter().any(|r| r.exact.is_some());
+                    let mut qb = QueryBuilder::new(if exact {
+                        "INSERT INTO samples (tag_id, ts, value, exact, quality) "
+                    } else {
+                        "INSERT INTO samples (tag_id, ts, value, quality) "
                     });
-                    qb.push(
-                        " ON CONFLICT (tag_id, ts) DO UPDATE SET \
-                         value = excluded.value, exact = excluded.exact, quality = excluded.quality",
-                    );
+                    qb.push_values(chunk, |mut b, r| {
+                        b.push_bind(r.tag_id).push_bind(r.ts).push_bind(r.value);
+                        if exact {
+                            b.push_bind(r.exact.as_deref());
+                        }
+                        b.push_bind(r.quality);
+                    });
+                    qb.push(if exact {
+                        " ON CONFLICT (tag_id, ts) DO UPDATE SET value = excluded.value, \
+                         exact = excluded.exact, quality = excluded.quality"
+                    } else {
+                        " ON CONFLICT (tag_id, ts) DO UPDATE SET value = excluded.value, \
+                         exact = NULL, quality = excluded.quality"
+                    });
                     qb.build()
                         .execute(&mut *tx)
                         .await
                         .map_err(db("inserting historian samples"))?;
                 }
-                rollup::maintain_sqlite(&mut tx, &keys).await?;
+                rollup::maintain_sqlite(&mut tx, &batch.buckets).await?;
                 tx.commit()
                     .await
                     .map_err(db("inserting historian samples"))?;
             }
             crate::store::Backend::Postgres(p) => {
-                let text = copy_text(&deduped);
-                let mut tx = p.begin().await.map_err(db("inserting historian samples"))?;
+                let text = match &batch.copy {
+                    Some(t) => std::borrow::Cow::Borrowed(t),
+                    None => std::borrow::Cow::Owned(copy_text(&batch.rows)),
+                };
                 // One historian writer at a time per schema (several servers
-                // may share a database): roll-ups are read, merged and written.
-                sqlx::query(
-                    "SELECT pg_advisory_xact_lock(hashtext(current_schema() || '.historian'))",
-                )
-                .execute(&mut *tx)
-                .await
-                .map_err(db("locking the historian"))?;
+                // may share a database): roll-ups are read, merged and
+                // written. The lock is taken in BEGIN's round trip.
+                let begin = || {
+                    p.begin_with(
+                        "BEGIN; SELECT pg_advisory_xact_lock(hashtext(current_schema() || '.historian'))",
+                    )
+                };
+                let mut tx = begin().await.map_err(db("locking the historian"))?;
                 // A plain COPY into the table: as fast as PostgreSQL ingests.
                 // A repeated sample makes it fail on the primary key; then the
-                // batch goes through a staging table and is merged instead.
-                sqlx::query("SAVEPOINT historian_copy")
-                    .execute(&mut *tx)
-                    .await
-                    .map_err(db("inserting historian samples"))?;
+                // batch goes again, through a staging table, merged (no
+                // savepoint: the common batch opens no subtransaction, and
+                // the rare one that needs the merge is redone whole).
                 match copy_in(
                     &mut tx,
                     "COPY samples (tag_id, ts, value, exact, quality) FROM STDIN",
@@ -299,10 +363,10 @@ impl Store {
                         if e.as_database_error()
                             .is_some_and(|d| d.is_unique_violation()) =>
                     {
-                        sqlx::query("ROLLBACK TO SAVEPOINT historian_copy")
-                            .execute(&mut *tx)
+                        tx.rollback()
                             .await
                             .map_err(db("inserting historian samples"))?;
+                        tx = begin().await.map_err(db("locking the historian"))?;
                         sqlx::query(
                             "CREATE TEMP TABLE IF NOT EXISTS samples_in \
                              (tag_id BIGINT, ts BIGINT, value DOUBLE PRECISION, exact TEXT, quality INTEGER) \
@@ -326,7 +390,7 @@ impl Store {
                     }
                     Err(e) => return Err(db("inserting historian samples")(e)),
                 }
-                rollup::maintain_pg(&mut tx, &keys).await?;
+                rollup::maintain_pg(&mut tx, &batch.buckets).await?;
                 tx.commit()
                     .await
                     .map_err(db("inserting historian samples"))?;

@@ -9,7 +9,8 @@
 //! Maintenance is incremental: a batch is rolled up in memory, and each of
 //! its buckets is either new, appended to the stored bucket (all its samples
 //! after the stored last one: merged by the database in the upsert itself,
-//! one statement per level, without reading the stored bucket first), or,
+//! without reading the stored bucket first; one statement for both levels
+//! on PostgreSQL, one per level on SQLite), or,
 //! for a late or repeated sample, recomputed from the raw rows of that one
 //! bucket.
 
@@ -179,11 +180,34 @@ pub(crate) fn roll_up(
 /// Raw rows of SQLite per roll-up statement: 13 parameters each.
 const SQLITE_ROWS: usize = 500;
 
+/// `items` in multi-row statements of `max` rows, the rest in chunks of
+/// descending powers of two: a statement's text depends on its row count,
+/// and this way a few shapes recur (and stay prepared in the connection's
+/// cache) instead of a new one to parse for every batch's remainder.
+pub(crate) fn statement_chunks<T>(items: &[T], max: usize) -> impl Iterator<Item = &[T]> {
+    let max = max.max(1);
+    let mut rest = items;
+    std::iter::from_fn(move || {
+        if rest.is_empty() {
+            return None;
+        }
+        let n = if rest.len() >= max {
+            max
+        } else {
+            1 << rest.len().ilog2()
+        };
+        let (chunk, tail) = rest.split_at(n);
+        rest = tail;
+        Some(chunk)
+    })
+}
+
 /// Inserts a batch's buckets, or appends each to the stored bucket in the
 /// same statement where all its samples come after the stored last one
 /// (the merge of [`Agg::append`], in SQL: no read of the stored buckets
-/// first). With [`RETURNING_KEYS`] it gives the keys it wrote; a bucket it
-/// did not (a late or repeated sample) is recomputed from raw rows.
+/// first). A bucket it does not write (a late or repeated sample: the
+/// `WHERE` fails) is recomputed from raw rows; PostgreSQL returns the keys
+/// written, SQLite's count of changed rows says whether any was left.
 fn merge_sql(level: Level) -> String {
     let end = format!("(r.bucket + {})", level.width());
     let pick = |f: &str, op: &str| {
@@ -206,9 +230,6 @@ fn merge_sql(level: Level) -> String {
         pick("max_value", ">"),
     )
 }
-
-/// The keys an upsert wrote (inserted or merged).
-const RETURNING_KEYS: &str = " RETURNING tag_id, bucket";
 
 /// The buckets of `batch` the merge did not write (not in `written`),
 /// recomputed from their raw rows on `conn` (either backend's connection).
@@ -237,30 +258,36 @@ const BUCKET_RAW: &str = "SELECT tag_id, ts, value, quality FROM samples \
      WHERE tag_id = $1 AND ts >= $2 AND ts < $3 ORDER BY ts";
 
 /// Brings both levels up to date with a batch already inserted in the raw
-/// table in the same transaction. `rows`: `(tag_id, ts, value, quality)`,
-/// sorted by tag then time, one per key.
+/// table in the same transaction: `levels`, the batch rolled up per level
+/// ([`roll_up`] of its rows, sorted by tag then time, one per key).
 pub(crate) async fn maintain_sqlite(
     conn: &mut SqliteConnection,
-    rows: &[(i64, i64, Option<f64>, i32)],
+    levels: &[(Level, Vec<Agg>)],
 ) -> Result<()> {
-    for level in Level::ALL {
-        let w = level.width();
-        let batch = roll_up(rows.iter().copied(), w);
+    for (level, batch) in levels {
+        let (level, w) = (*level, level.width());
         let mut written = HashSet::with_capacity(batch.len());
-        for chunk in batch.chunks(SQLITE_ROWS) {
+        for chunk in statement_chunks(batch, SQLITE_ROWS) {
             let mut qb =
                 QueryBuilder::new(format!("INSERT INTO {} AS r ({COLUMNS}) ", level.table()));
             push_sqlite_values(&mut qb, chunk);
-            qb.push(merge_sql(level)).push(RETURNING_KEYS);
-            let keys: Vec<(i64, i64)> = qb
-                .build_query_as()
-                .fetch_all(&mut *conn)
+            qb.push(merge_sql(level));
+            // Each row is inserted or merged, or (a late or repeated sample)
+            // left for a recompute. The count says whether any was left;
+            // then the whole chunk is recomputed, which is rare and cheaper
+            // than returning every key of every batch.
+            let changed = qb
+                .build()
+                .execute(&mut *conn)
                 .await
-                .map_err(db("writing historian roll-ups"))?;
-            written.extend(keys);
+                .map_err(db("writing historian roll-ups"))?
+                .rows_affected();
+            if changed == chunk.len() as u64 {
+                written.extend(chunk.iter().map(|a| (a.tag_id, a.bucket)));
+            }
         }
-        let redo = recompute!(conn, &batch, &written, w);
-        for chunk in redo.chunks(SQLITE_ROWS) {
+        let redo = recompute!(conn, batch, &written, w);
+        for chunk in statement_chunks(&redo, SQLITE_ROWS) {
             let mut qb = QueryBuilder::new(format!("INSERT INTO {} ({COLUMNS}) ", level.table()));
             push_sqlite_values(&mut qb, chunk);
             qb.push(UPSERT);
@@ -299,61 +326,105 @@ const UPSERT: &str = " ON CONFLICT (tag_id, bucket) DO UPDATE SET \
     last_ts = excluded.last_ts, last_value = excluded.last_value, \
     last_quality = excluded.last_quality, bad_ms = excluded.bad_ms";
 
-/// [`maintain_sqlite`] for PostgreSQL: one merging upsert per level, as
-/// arrays. The caller holds the historian's advisory lock, so two writers
-/// never merge into the same bucket at once.
+/// [`maintain_sqlite`] for PostgreSQL: one statement merges both levels
+/// (an upsert per level, as arrays, each in a `WITH`). The caller holds the
+/// historian's advisory lock, so two writers never merge into the same
+/// bucket at once.
 pub(crate) async fn maintain_pg(
     conn: &mut PgConnection,
-    rows: &[(i64, i64, Option<f64>, i32)],
+    levels: &[(Level, Vec<Agg>)],
 ) -> Result<()> {
-    for level in Level::ALL {
-        let w = level.width();
-        let batch = roll_up(rows.iter().copied(), w);
-        let written: HashSet<(i64, i64)> = pg_upsert(&mut *conn, level, &batch, &merge_sql(level))
-            .await?
-            .into_iter()
+    let merges: Vec<String> = levels.iter().map(|(l, _)| merge_sql(*l)).collect();
+    let parts: Vec<(Level, &[Agg], &str)> = levels
+        .iter()
+        .zip(&merges)
+        .map(|((l, b), m)| (*l, b.as_slice(), m.as_str()))
+        .collect();
+    let written: HashSet<(i64, i64, i64)> =
+        pg_upsert(&mut *conn, &parts).await?.into_iter().collect();
+    let mut redone: Vec<(Level, Vec<Agg>)> = Vec::new();
+    for (i, (level, batch)) in levels.iter().enumerate() {
+        let written: HashSet<(i64, i64)> = written
+            .iter()
+            .filter(|k| k.0 == i as i64)
+            .map(|k| (k.1, k.2))
             .collect();
-        let redo = recompute!(conn, &batch, &written, w);
+        let redo = recompute!(conn, batch, &written, level.width());
         if !redo.is_empty() {
-            pg_upsert(&mut *conn, level, &redo, UPSERT).await?;
+            redone.push((*level, redo));
         }
+    }
+    if !redone.is_empty() {
+        let parts: Vec<(Level, &[Agg], &str)> = redone
+            .iter()
+            .map(|(l, b)| (*l, b.as_slice(), UPSERT))
+            .collect();
+        pg_upsert(&mut *conn, &parts).await?;
     }
     Ok(())
 }
 
-/// The buckets as one `INSERT ... SELECT FROM UNNEST` of arrays, with
-/// `conflict` (the merge or a replace); returns the keys it wrote.
+/// Each part's buckets as an `INSERT ... SELECT FROM UNNEST` of arrays with
+/// its `ON CONFLICT` clause (the merge or a replace), all in one statement;
+/// returns the keys written as (part's index, tag id, bucket).
 async fn pg_upsert(
     conn: &mut PgConnection,
-    level: Level,
-    batch: &[Agg],
-    conflict: &str,
-) -> Result<Vec<(i64, i64)>> {
-    macro_rules! col {
-        ($f:ident) => {
-            batch.iter().map(|a| a.$f).collect::<Vec<_>>()
-        };
+    parts: &[(Level, &[Agg], &str)],
+) -> Result<Vec<(i64, i64, i64)>> {
+    use std::fmt::Write;
+    let mut sql = String::from("WITH ");
+    for (i, (level, _, conflict)) in parts.iter().enumerate() {
+        let p = |k: usize| i * 13 + k;
+        let _ = write!(
+            sql,
+            "{}u{i} AS (INSERT INTO {} AS r ({COLUMNS}) SELECT * FROM UNNEST(${}::bigint[], \
+             ${}::bigint[], ${}::bigint[], ${}::bigint[], ${}::float8[], ${}::float8[], \
+             ${}::float8[], ${}::bigint[], ${}::float8[], ${}::bigint[], ${}::float8[], \
+             ${}::int4[], ${}::bigint[]){conflict} RETURNING {i}::bigint, tag_id, bucket)",
+            if i == 0 { "" } else { ", " },
+            level.table(),
+            p(1),
+            p(2),
+            p(3),
+            p(4),
+            p(5),
+            p(6),
+            p(7),
+            p(8),
+            p(9),
+            p(10),
+            p(11),
+            p(12),
+            p(13),
+        );
     }
-    let sql = format!(
-        "INSERT INTO {} AS r ({COLUMNS}) SELECT * FROM UNNEST($1::bigint[], $2::bigint[], \
-         $3::bigint[], $4::bigint[], $5::float8[], $6::float8[], $7::float8[], $8::bigint[], \
-         $9::float8[], $10::bigint[], $11::float8[], $12::int4[], $13::bigint[]){conflict}{RETURNING_KEYS}",
-        level.table()
-    );
-    sqlx::query_as(&sql)
-        .bind(col!(tag_id))
-        .bind(col!(bucket))
-        .bind(col!(n))
-        .bind(col!(n_value))
-        .bind(col!(min))
-        .bind(col!(max))
-        .bind(col!(sum))
-        .bind(col!(first_ts))
-        .bind(col!(first_value))
-        .bind(col!(last_ts))
-        .bind(col!(last_value))
-        .bind(col!(last_quality))
-        .bind(col!(bad_ms))
+    let selects: Vec<String> = (0..parts.len())
+        .map(|i| format!("SELECT * FROM u{i}"))
+        .collect();
+    let _ = write!(sql, " {}", selects.join(" UNION ALL "));
+    let mut query = sqlx::query_as(&sql);
+    for (_, batch, _) in parts {
+        macro_rules! col {
+            ($f:ident) => {
+                batch.iter().map(|a| a.$f).collect::<Vec<_>>()
+            };
+        }
+        query = query
+            .bind(col!(tag_id))
+            .bind(col!(bucket))
+            .bind(col!(n))
+            .bind(col!(n_value))
+            .bind(col!(min))
+            .bind(col!(max))
+            .bind(col!(sum))
+            .bind(col!(first_ts))
+            .bind(col!(first_value))
+            .bind(col!(last_ts))
+            .bind(col!(last_value))
+            .bind(col!(last_quality))
+            .bind(col!(bad_ms));
+    }
+    query
         .fetch_all(conn)
         .await
         .map_err(db("writing historian roll-ups"))
@@ -420,6 +491,22 @@ mod tests {
             a.append(w, &b);
             assert_eq!(a, whole[0], "cut at {cut}");
         }
+    }
+
+    #[test]
+    fn statements_take_whole_chunks_then_powers_of_two() {
+        let items: Vec<u32> = (0..1_300).collect();
+        let sizes: Vec<usize> = statement_chunks(&items, 500).map(<[u32]>::len).collect();
+        assert_eq!(sizes, [500, 500, 256, 32, 8, 4]);
+        let again: Vec<u32> = statement_chunks(&items, 500).flatten().copied().collect();
+        assert_eq!(again, items, "every item once, in order");
+        assert_eq!(statement_chunks(&items[..0], 500).count(), 0);
+        assert_eq!(
+            statement_chunks(&items[..3], 0)
+                .map(<[u32]>::len)
+                .collect::<Vec<_>>(),
+            [1, 1, 1]
+        );
     }
 
     #[test]

@@ -107,7 +107,7 @@ pub(crate) struct Inner {
     /// Whether `tag_ids` holds every name this site had registered when the
     /// historian first wrote (loaded once, in one query: asking per batch
     /// would make a restarted server with a million tags ask for them all).
-    tag_ids_loaded: tokio::sync::OnceCell<()>,
+    pub(crate) tag_ids_loaded: tokio::sync::OnceCell<()>,
     description: String,
 }
 
@@ -121,7 +121,7 @@ pub struct Store {
     /// The site whose rows this handle reads (and, unless a view, writes).
     pub(crate) site: Arc<str>,
     /// A view of another site: it refuses every write.
-    view: bool,
+    pub(crate) view: bool,
 }
 
 impl std::fmt::Debug for Store {

@@ -1,7 +1,10 @@
 //! The historian writer task: a bounded buffer in front of the database.
 //!
 //! Producers [`HistorianHandle::push`] without waiting. One task drains the
-//! buffer in batches into [`Store::insert_samples`]. When the database is slow
+//! buffer in batches and prepares each (tag ids, order, roll-ups: the work
+//! of [`Store::insert_samples`] that needs no database); a second writes
+//! them in order, so the next batch is prepared while one is in the
+//! database. When the database is slow
 //! the buffer absorbs it; when the buffer is full, new samples are dropped,
 //! counted, and the overflow flag goes up (for a system alarm) until the buffer
 //! is back under half full. A batch that fails to write is retried with
@@ -24,6 +27,7 @@ use serde::Serialize;
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 
+use crate::historian::PreparedSamples;
 use crate::{HistorySample, Store};
 
 /// Sizes and pacing of the writer.
@@ -54,7 +58,8 @@ impl Default for HistorianConfig {
 /// A snapshot of the writer's health.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct HistorianMetrics {
-    /// Samples waiting in the buffer (not counting a batch being written).
+    /// Samples waiting in the buffer (not counting the batch being written
+    /// and at most two being prepared or waiting for it).
     pub buffered: usize,
     pub capacity: usize,
     /// Samples lost: dropped because the buffer was full, offered after the
@@ -223,15 +228,59 @@ impl Historian {
     }
 }
 
+/// A batch on its way from the buffer to the database.
+enum Batch {
+    /// Made ready (tag ids, order, COPY text, roll-ups) before its turn.
+    Prepared {
+        samples: usize,
+        rows: PreparedSamples,
+    },
+    /// Holding a tag not registered yet: [`Store::insert_samples`] does it all.
+    Raw(Vec<HistorySample>),
+}
+
+impl Batch {
+    fn of(store: &Store, samples: Vec<HistorySample>) -> Batch {
+        match store.prepare_samples(&samples) {
+            Some(rows) => Batch::Prepared {
+                samples: samples.len(),
+                rows,
+            },
+            None => Batch::Raw(samples),
+        }
+    }
+
+    fn len(&self) -> usize {
+        match self {
+            Batch::Prepared { samples, .. } => *samples,
+            Batch::Raw(s) => s.len(),
+        }
+    }
+}
+
+/// The buffer's side of the writer: takes batches and prepares them, while
+/// [`write_batches`] writes the one before. One prepared batch waits while
+/// one is written, so a batch's CPU work overlaps the database's time on
+/// the previous one.
 async fn run(
     store: Store,
     config: HistorianConfig,
     mut rx: mpsc::Receiver<HistorySample>,
     shared: Arc<Shared>,
-    mut stop: watch::Receiver<bool>,
+    stop: watch::Receiver<bool>,
     mut pause: watch::Receiver<bool>,
 ) {
     let batch_max = config.batch_max.max(1);
+    let (ready_tx, ready_rx) = mpsc::channel::<Batch>(1);
+    let writer = tokio::spawn(write_batches(
+        store.clone(),
+        config.clone(),
+        ready_rx,
+        shared.clone(),
+        stop.clone(),
+        pause.clone(),
+    ));
+    let mut stop = stop;
     let mut batch: Vec<HistorySample> = Vec::with_capacity(batch_max);
     loop {
         // Paused: leave samples in the buffer until resumed or stopped.
@@ -244,37 +293,37 @@ async fn run(
         if stopping(&stop) || pause.has_changed().is_err() {
             break;
         }
-        if batch.is_empty() {
-            // Biased: a pause or stop that is already signalled wins over
-            // samples waiting, so a pause takes effect before the next batch.
-            tokio::select! {
-                biased;
-                _ = stop.changed() => continue,
-                _ = pause.changed() => continue,
-                n = rx.recv_many(&mut batch, batch_max) => {
-                    if n == 0 { break; } // every handle dropped
-                }
+        // Biased: a pause or stop that is already signalled wins over
+        // samples waiting, so a pause takes effect before the next batch.
+        tokio::select! {
+            biased;
+            _ = stop.changed() => continue,
+            _ = pause.changed() => continue,
+            n = rx.recv_many(&mut batch, batch_max) => {
+                if n == 0 { break; } // every handle dropped
             }
-            // Linger for a fuller batch, but only until it is full: under a
-            // burst the batch fills in microseconds, and sleeping out the
-            // whole linger there cost a third of a 200,000-sample burst's
-            // time (docs/BENCHMARKS.md).
-            if batch.len() < batch_max && !config.linger.is_zero() {
-                let until = tokio::time::Instant::now() + config.linger;
-                while batch.len() < batch_max {
-                    let room = batch_max - batch.len();
-                    tokio::select! {
-                        _ = tokio::time::sleep_until(until) => break,
-                        _ = stop.changed() => break,
-                        n = rx.recv_many(&mut batch, room) => if n == 0 { break },
-                    }
+        }
+        // Linger for a fuller batch, but only until it is full: under a
+        // burst the batch fills in microseconds, and sleeping out the
+        // whole linger there cost a third of a 200,000-sample burst's
+        // time (docs/BENCHMARKS.md).
+        if batch.len() < batch_max && !config.linger.is_zero() {
+            let until = tokio::time::Instant::now() + config.linger;
+            while batch.len() < batch_max {
+                let room = batch_max - batch.len();
+                tokio::select! {
+                    _ = tokio::time::sleep_until(until) => break,
+                    _ = stop.changed() => break,
+                    n = rx.recv_many(&mut batch, room) => if n == 0 { break },
                 }
             }
         }
-        if write_with_retry(&store, &config, &batch, &shared, &mut stop).await {
-            batch.clear();
-        } else {
-            break; // stopping; the batch is handled below
+        let full = std::mem::replace(&mut batch, Vec::with_capacity(batch_max));
+        // Waits while the writer is busy with the batch before; the buffer
+        // takes what comes meanwhile.
+        if let Err(lost) = ready_tx.send(Batch::of(&store, full)).await {
+            count_lost(&shared, lost.0.len());
+            break;
         }
         // Clear the overflow flag once the buffer is back under half full.
         let buffered = rx.max_capacity() - rx.capacity();
@@ -284,18 +333,59 @@ async fn run(
                 .send_if_modified(|o| std::mem::replace(o, false));
         }
     }
-    // Shutdown: one attempt at everything still here.
+    // Shutdown: everything still here goes to the writer, which makes one
+    // attempt at each batch.
     rx.close();
     while let Ok(s) = rx.try_recv() {
         batch.push(s);
     }
-    for chunk in batch.chunks(batch_max) {
-        if let Err(e) = write_once(&store, chunk, &shared).await {
-            let n = chunk.len() as u64;
-            shared.counters.dropped.fetch_add(n, Ordering::Relaxed);
-            tracing::error!(error = %e, lost = n, "historian could not write at shutdown");
+    while !batch.is_empty() {
+        let rest = batch.split_off(batch.len().min(batch_max));
+        if let Err(lost) = ready_tx.send(Batch::of(&store, batch)).await {
+            count_lost(&shared, lost.0.len() + rest.len());
+            break;
+        }
+        batch = rest;
+    }
+    drop(ready_tx);
+    if let Err(e) = writer.await {
+        tracing::error!(error = %e, "historian writer task failed");
+    }
+}
+
+/// The database's side of the writer: each batch in order, retried until
+/// written; once stopping, one attempt each.
+async fn write_batches(
+    store: Store,
+    config: HistorianConfig,
+    mut ready: mpsc::Receiver<Batch>,
+    shared: Arc<Shared>,
+    mut stop: watch::Receiver<bool>,
+    mut pause: watch::Receiver<bool>,
+) {
+    while let Some(batch) = ready.recv().await {
+        // A pause holds the batch already prepared too.
+        while *pause.borrow() && !stopping(&stop) {
+            tokio::select! {
+                r = pause.changed() => if r.is_err() { break },
+                _ = stop.changed() => {}
+            }
+        }
+        if !stopping(&stop) && write_with_retry(&store, &config, &batch, &shared, &mut stop).await {
+            continue;
+        }
+        if let Err(e) = write_once(&store, &batch, &shared).await {
+            count_lost(&shared, batch.len());
+            tracing::error!(error = %e, lost = batch.len(), "historian could not write at shutdown");
         }
     }
+}
+
+fn count_lost(shared: &Shared, n: usize) {
+    shared
+        .counters
+        .dropped
+        .fetch_add(n as u64, Ordering::Relaxed);
 }
 
 /// Told to stop, or the [`Historian`] owning the stop signal was dropped.
@@ -303,9 +393,12 @@ fn stopping(stop: &watch::Receiver<bool>) -> bool {
     *stop.borrow() || stop.has_changed().is_err()
 }
 
-async fn write_once(store: &Store, batch: &[HistorySample], shared: &Shared) -> crate::Result<()> {
+async fn write_once(store: &Store, batch: &Batch, shared: &Shared) -> crate::Result<()> {
     let started = Instant::now();
-    let res = store.insert_samples(batch).await;
+    let res = match batch {
+        Batch::Prepared { rows, .. } => store.write_prepared(rows).await,
+        Batch::Raw(samples) => store.insert_samples(samples).await,
+    };
     let us = started.elapsed().as_micros().min(u64::MAX as u128) as u64;
     let c = &shared.counters;
     match res {
@@ -328,7 +421,7 @@ async fn write_once(store: &Store, batch: &[HistorySample], shared: &Shared) -> 
 async fn write_with_retry(
     store: &Store,
     config: &HistorianConfig,
-    batch: &[HistorySample],
+    batch: &Batch,
     shared: &Shared,
     stop: &mut watch::Receiver<bool>,
 ) -> bool {

@@ -267,6 +267,23 @@ async fn wide_integers_are_exact(db: TestDb) {
         text.contains(",Meter.Energy,-9007199254740993,good\n"),
         "{text}"
     );
+    // A repeated sample replaces the digits too: none clears them, new
+    // ones replace them.
+    s.insert_samples(&[
+        sample("Meter.Energy", 1000, Some(5.0), QualityCode::Good),
+        HistorySample {
+            exact: Some(42),
+            ..sample("Meter.Energy", 2000, Some(42.0), QualityCode::Good)
+        },
+    ])
+    .await
+    .unwrap();
+    let raw = s
+        .raw_samples(&["Meter.Energy"], ts(0), ts(3000), 10)
+        .await
+        .unwrap();
+    assert_eq!((raw[0].value, raw[0].exact), (Some(5.0), None));
+    assert_eq!((raw[1].value, raw[1].exact), (Some(42.0), Some(42)));
     db.cleanup().await;
 }
 both_backends!(wide_integers, wide_integers_are_exact);
