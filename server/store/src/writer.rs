@@ -24,7 +24,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use serde::Serialize;
-use tokio::sync::{mpsc, watch};
+use tokio::sync::{mpsc, watch, Semaphore};
 use tokio::task::JoinHandle;
 
 use crate::historian::PreparedSamples;
@@ -58,8 +58,9 @@ impl Default for HistorianConfig {
 /// A snapshot of the writer's health.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct HistorianMetrics {
-    /// Samples waiting in the buffer (not counting the batch being written
-    /// and at most two being prepared or waiting for it).
+    /// Samples waiting in the buffer (not counting the batch being written;
+    /// a batch taken while another is in the database counts until its
+    /// turn).
     pub buffered: usize,
     pub capacity: usize,
     /// Samples lost: dropped because the buffer was full, offered after the
@@ -89,6 +90,12 @@ struct Shared {
     counters: Counters,
     overflow: watch::Sender<bool>,
     capacity: usize,
+    /// Room left: `capacity` minus the samples held in the buffer, where a
+    /// batch taken from it while another is in the database still counts
+    /// (so a stuck database gets no more room than before the two stages).
+    room: Semaphore,
+    /// A batch is in the database (from its hand-over to its last attempt).
+    writing: AtomicBool,
     /// A sample was offered after the writer stopped (logged once).
     stopped_drop: AtomicBool,
 }
@@ -96,7 +103,7 @@ struct Shared {
 /// Pushes samples into the historian buffer. Cheap to clone.
 #[derive(Clone)]
 pub struct HistorianHandle {
-    tx: mpsc::Sender<HistorySample>,
+    tx: mpsc::UnboundedSender<HistorySample>,
     shared: Arc<Shared>,
 }
 
@@ -120,9 +127,23 @@ impl HistorianHandle {
     /// stops every producer before the writer, so an orderly shutdown offers
     /// none.)
     pub fn push(&self, sample: HistorySample) -> bool {
-        match self.tx.try_send(sample) {
+        let sent = if self.tx.is_closed() {
+            Err(Refused::Stopped)
+        } else {
+            match self.shared.room.try_acquire() {
+                Ok(permit) => {
+                    permit.forget();
+                    self.tx.send(sample).map_err(|_| {
+                        self.shared.room.add_permits(1);
+                        Refused::Stopped
+                    })
+                }
+                Err(_) => Err(Refused::Full),
+            }
+        };
+        match sent {
             Ok(()) => true,
-            Err(mpsc::error::TrySendError::Full(_)) => {
+            Err(Refused::Full) => {
                 let dropped = self.shared.counters.dropped.fetch_add(1, Ordering::Relaxed) + 1;
                 let raised = self
                     .shared
@@ -136,7 +157,7 @@ impl HistorianHandle {
                 }
                 false
             }
-            Err(mpsc::error::TrySendError::Closed(_)) => {
+            Err(Refused::Stopped) => {
                 let dropped = self.shared.counters.dropped.fetch_add(1, Ordering::Relaxed) + 1;
                 if !self.shared.stopped_drop.swap(true, Ordering::Relaxed) {
                     tracing::error!(
@@ -162,7 +183,7 @@ impl HistorianHandle {
     pub fn metrics(&self) -> HistorianMetrics {
         let c = &self.shared.counters;
         HistorianMetrics {
-            buffered: self.tx.max_capacity() - self.tx.capacity(),
+            buffered: self.shared.held(),
             capacity: self.shared.capacity,
             dropped: c.dropped.load(Ordering::Relaxed),
             samples_written: c.written.load(Ordering::Relaxed),
@@ -184,12 +205,14 @@ impl HistorianHandle {
 impl Historian {
     /// Starts the writer task on the current tokio runtime.
     pub fn spawn(store: Store, config: HistorianConfig) -> Historian {
-        let capacity = config.capacity.max(1);
-        let (tx, rx) = mpsc::channel(capacity);
+        let capacity = config.capacity.clamp(1, Semaphore::MAX_PERMITS);
+        let (tx, rx) = mpsc::unbounded_channel();
         let shared = Arc::new(Shared {
             counters: Counters::default(),
             overflow: watch::channel(false).0,
             capacity,
+            room: Semaphore::new(capacity),
+            writing: AtomicBool::new(false),
             stopped_drop: AtomicBool::new(false),
         });
         let (stop, stop_rx) = watch::channel(false);
@@ -265,13 +288,13 @@ impl Batch {
 async fn run(
     store: Store,
     config: HistorianConfig,
-    mut rx: mpsc::Receiver<HistorySample>,
+    mut rx: mpsc::UnboundedReceiver<HistorySample>,
     shared: Arc<Shared>,
     stop: watch::Receiver<bool>,
     mut pause: watch::Receiver<bool>,
 ) {
     let batch_max = config.batch_max.max(1);
-    let (ready_tx, ready_rx) = mpsc::channel::<Batch>(1);
+    let (ready_tx, ready_rx) = mpsc::channel::<(Batch, usize)>(1);
     let writer = tokio::spawn(write_batches(
         store.clone(),
         config.clone(),
@@ -282,6 +305,15 @@ async fn run(
     ));
     let mut stop = stop;
     let mut batch: Vec<HistorySample> = Vec::with_capacity(batch_max);
+    // Of the batch being collected, the samples that still hold room.
+    let mut held = 0;
+    let take = |n: usize, held: &mut usize| {
+        if shared.writing.load(Ordering::SeqCst) {
+            *held += n;
+        } else {
+            shared.release(n);
+        }
+    };
     loop {
         // Paused: leave samples in the buffer until resumed or stopped.
         while *pause.borrow() && !stopping(&stop) {
@@ -301,6 +333,7 @@ async fn run(
             _ = pause.changed() => continue,
             n = rx.recv_many(&mut batch, batch_max) => {
                 if n == 0 { break; } // every handle dropped
+                take(n, &mut held);
             }
         }
         // Linger for a fuller batch, but only until it is full: under a
@@ -314,23 +347,21 @@ async fn run(
                 tokio::select! {
                     _ = tokio::time::sleep_until(until) => break,
                     _ = stop.changed() => break,
-                    n = rx.recv_many(&mut batch, room) => if n == 0 { break },
+                    n = rx.recv_many(&mut batch, room) => {
+                        if n == 0 { break }
+                        take(n, &mut held);
+                    }
                 }
             }
         }
         let full = std::mem::replace(&mut batch, Vec::with_capacity(batch_max));
         // Waits while the writer is busy with the batch before; the buffer
         // takes what comes meanwhile.
-        if let Err(lost) = ready_tx.send(Batch::of(&store, full)).await {
-            count_lost(&shared, lost.0.len());
+        let ready = (Batch::of(&store, full), std::mem::take(&mut held));
+        if let Err(lost) = ready_tx.send(ready).await {
+            shared.release(lost.0 .1);
+            count_lost(&shared, lost.0 .0.len());
             break;
-        }
-        // Clear the overflow flag once the buffer is back under half full.
-        let buffered = rx.max_capacity() - rx.capacity();
-        if buffered <= shared.capacity / 2 {
-            shared
-                .overflow
-                .send_if_modified(|o| std::mem::replace(o, false));
         }
     }
     // Shutdown: everything still here goes to the writer, which makes one
@@ -338,11 +369,13 @@ async fn run(
     rx.close();
     while let Ok(s) = rx.try_recv() {
         batch.push(s);
+        held += 1;
     }
+    shared.release(std::mem::take(&mut held));
     while !batch.is_empty() {
         let rest = batch.split_off(batch.len().min(batch_max));
-        if let Err(lost) = ready_tx.send(Batch::of(&store, batch)).await {
-            count_lost(&shared, lost.0.len() + rest.len());
+        if let Err(lost) = ready_tx.send((Batch::of(&store, batch), 0)).await {
+            count_lost(&shared, lost.0 .0.len() + rest.len());
             break;
         }
         batch = rest;
@@ -358,12 +391,16 @@ async fn run(
 async fn write_batches(
     store: Store,
     config: HistorianConfig,
-    mut ready: mpsc::Receiver<Batch>,
+    mut ready: mpsc::Receiver<(Batch, usize)>,
     shared: Arc<Shared>,
     mut stop: watch::Receiver<bool>,
     mut pause: watch::Receiver<bool>,
 ) {
-    while let Some(batch) = ready.recv().await {
+    while let Some((batch, held)) = ready.recv().await {
+        // Handed to the database: its room in the buffer is free again (as
+        // before the stages, the batch being written is not counted).
+        shared.writing.store(true, Ordering::SeqCst);
+        shared.release(held);
         // A pause holds the batch already prepared too.
         while *pause.borrow() && !stopping(&stop) {
             tokio::select! {
@@ -371,13 +408,15 @@ async fn write_batches(
                 _ = stop.changed() => {}
             }
         }
-        if !stopping(&stop) && write_with_retry(&store, &config, &batch, &shared, &mut stop).await {
-            continue;
+        let written =
+            !stopping(&stop) && write_with_retry(&store, &config, &batch, &shared, &mut stop).await;
+        if !written {
+            if let Err(e) = write_once(&store, &batch, &shared).await {
+                count_lost(&shared, batch.len());
+                tracing::error!(error = %e, lost = batch.len(), "historian could not write at shutdown");
+            }
         }
-        if let Err(e) = write_once(&store, &batch, &shared).await {
-            count_lost(&shared, batch.len());
-            tracing::error!(error = %e, lost = batch.len(), "historian could not write at shutdown");
-        }
+        shared.writing.store(false, Ordering::SeqCst);
     }
 }
 
@@ -386,6 +425,32 @@ fn count_lost(shared: &Shared, n: usize) {
         .counters
         .dropped
         .fetch_add(n as u64, Ordering::Relaxed);
+}
+
+/// Why [`HistorianHandle::push`] refused a sample.
+enum Refused {
+    Full,
+    Stopped,
+}
+
+impl Shared {
+    /// Samples held in the buffer (see `room`).
+    fn held(&self) -> usize {
+        self.capacity.saturating_sub(self.room.available_permits())
+    }
+
+    /// Frees the room of `n` samples; clears the overflow flag once the
+    /// buffer is back under half full.
+    fn release(&self, n: usize) {
+        if n == 0 {
+            return;
+        }
+        self.room.add_permits(n);
+        if self.held() <= self.capacity / 2 {
+            self.overflow
+                .send_if_modified(|o| std::mem::replace(o, false));
+        }
+    }
 }
 
 /// Told to stop, or the [`Historian`] owning the stop signal was dropped.
