@@ -372,30 +372,25 @@ async fn pg_upsert(
     parts: &[(Level, &[Agg], &str)],
 ) -> Result<Vec<(i64, i64, i64)>> {
     use std::fmt::Write;
+    // The array type of each column of COLUMNS, in order.
+    const ARRAYS: [&str; 13] = [
+        "bigint", "bigint", "bigint", "bigint", "float8", "float8", "float8", "bigint", "float8",
+        "bigint", "float8", "int4", "bigint",
+    ];
     let mut sql = String::from("WITH ");
     for (i, (level, _, conflict)) in parts.iter().enumerate() {
-        let p = |k: usize| i * 13 + k;
+        let arrays: Vec<String> = ARRAYS
+            .iter()
+            .enumerate()
+            .map(|(k, ty)| format!("${}::{ty}[]", i * ARRAYS.len() + k + 1))
+            .collect();
         let _ = write!(
             sql,
-            "{}u{i} AS (INSERT INTO {} AS r ({COLUMNS}) SELECT * FROM UNNEST(${}::bigint[], \
-             ${}::bigint[], ${}::bigint[], ${}::bigint[], ${}::float8[], ${}::float8[], \
-             ${}::float8[], ${}::bigint[], ${}::float8[], ${}::bigint[], ${}::float8[], \
-             ${}::int4[], ${}::bigint[]){conflict} RETURNING {i}::bigint, tag_id, bucket)",
+            "{}u{i} AS (INSERT INTO {} AS r ({COLUMNS}) SELECT * FROM UNNEST({}){conflict} \
+             RETURNING {i}::bigint, tag_id, bucket)",
             if i == 0 { "" } else { ", " },
             level.table(),
-            p(1),
-            p(2),
-            p(3),
-            p(4),
-            p(5),
-            p(6),
-            p(7),
-            p(8),
-            p(9),
-            p(10),
-            p(11),
-            p(12),
-            p(13),
+            arrays.join(", "),
         );
     }
     let selects: Vec<String> = (0..parts.len())

@@ -290,7 +290,7 @@ async fn run(
     config: HistorianConfig,
     mut rx: mpsc::UnboundedReceiver<HistorySample>,
     shared: Arc<Shared>,
-    stop: watch::Receiver<bool>,
+    mut stop: watch::Receiver<bool>,
     mut pause: watch::Receiver<bool>,
 ) {
     let batch_max = config.batch_max.max(1);
@@ -303,7 +303,6 @@ async fn run(
         stop.clone(),
         pause.clone(),
     ));
-    let mut stop = stop;
     let mut batch: Vec<HistorySample> = Vec::with_capacity(batch_max);
     // Of the batch being collected, the samples that still hold room.
     let mut held = 0;
