@@ -4,10 +4,16 @@
 A generated plant of DEVICES Modbus TCP devices (one pymodbus server each, in
 a child process) with TAGS tags in all, every one logged by the historian
 (deadband 0.5 % of its 0-100 span), a high-limit alarm on every tenth tag,
-and CLIENTS WebSocket clients on /api/live (each subscribed to one device's
-tags). Every second a tenth of the registers take a random step, so the
-poller, the historian, the alarms and the push all have work. The server's
-RSS and CPU are sampled every 10 s; the verdict is whether RSS grew after
+and CLIENTS WebSocket clients on /api/live, each subscribed as the HMI is: to
+one device's tags and to the alarm list (whole once, then its changes;
+`--whole-alarm-lists` for the whole list each time, `--no-alarm-clients` for
+tags only). Every second a tenth of the registers take a random step, so the
+poller, the historian, the alarms and the push all have work. Every 10 s the
+server's RSS and CPU are sampled, with its figures from /metrics (historian
+backlog and drops, late scans, the share of a core alarm evaluation took,
+standing alarms) and what the clients saw (the p99 of the push latency: the
+client's clock minus each value's timestamp, taken when the scan's answer
+arrived; the bytes of alarm messages). The verdict is whether RSS grew after
 the first minute.
 
     target/test-venv/bin/python scripts/bench-memory.py --seconds 600
@@ -133,19 +139,80 @@ def login(base, user, password):
     raise RuntimeError("login gave no session cookie")
 
 
-async def ws_client(k, port, cookie, prefix, counts, stop):
+class LiveStats:
+    """What the live clients saw: messages, and the push latency of each tag
+    value (the client's clock minus the value's timestamp, which the poller
+    stamps when the scan's answer arrives; server and clients share this
+    machine's clock)."""
+
+    def __init__(self, clients):
+        self.tag_messages = [0] * clients
+        self.alarm_messages = 0
+        self.alarm_bytes = 0
+        self.largest_alarm_message = 0
+        self.window = []            # latencies (ms) since the last report
+        self.histogram = {}         # all latencies, in 1 ms bins
+
+    def take_window(self):
+        w, self.window = self.window, []
+        return w
+
+
+def p99(values):
+    if not values:
+        return float("nan")
+    values = sorted(values)
+    return values[min(len(values) - 1, int(0.99 * len(values)))]
+
+
+def histogram_p99(hist):
+    total = sum(hist.values())
+    seen = 0
+    for ms in sorted(hist):
+        seen += hist[ms]
+        if seen >= 0.99 * total:
+            return ms
+    return float("nan")
+
+
+async def ws_client(k, port, cookie, prefix, alarms, changes, stats, stop):
     import websockets
     async with websockets.connect(f"ws://127.0.0.1:{port}/api/live",
                                   additional_headers={"Cookie": cookie,
                                                       "Origin": f"http://127.0.0.1:{port}"},
                                   max_size=None) as ws:
-        await ws.send(json.dumps({"subscribe": {"prefixes": [prefix]}}))
+        # The HMI's alarm footer is on every screen: its sockets ask for the
+        # alarm list beside the screen's tags.
+        await ws.send(json.dumps({"subscribe": {"prefixes": [prefix], "alarms": alarms,
+                                                "alarm_changes": alarms and changes}}))
         while not stop.is_set():
             try:
                 msg = await asyncio.wait_for(ws.recv(), 1.0)
             except asyncio.TimeoutError:
                 continue
-            counts[k] += 1 if isinstance(msg, str) and '"tags"' in msg else 0
+            if not isinstance(msg, str):
+                continue
+            if '"type":"tags"' in msg[:40]:
+                stats.tag_messages[k] += 1
+                m = json.loads(msg)
+                if m.get("snapshot"):
+                    continue
+                now_ms = time.time() * 1000
+                for v in m.get("values", ()):
+                    ts = v.get("timestamp")
+                    if isinstance(ts, (int, float)):
+                        lat = now_ms - ts
+                        stats.window.append(lat)
+                        b = int(lat)
+                        stats.histogram[b] = stats.histogram.get(b, 0) + 1
+            elif '"heartbeat"' in msg[:80] or '"hello"' in msg[:80]:
+                continue
+            else:
+                # The alarm list or its changes: counted, not parsed (the
+                # client's own parsing must not hold the socket back).
+                stats.alarm_messages += 1
+                stats.alarm_bytes += len(msg)
+                stats.largest_alarm_message = max(stats.largest_alarm_message, len(msg))
 
 
 def main():
@@ -155,6 +222,11 @@ def main():
     ap.add_argument("--clients", type=int, default=20)
     ap.add_argument("--seconds", type=int, default=600)
     ap.add_argument("--every", type=int, default=10)
+    ap.add_argument("--whole-alarm-lists", action="store_true",
+                    help="the clients ask for the whole alarm list each time it changes "
+                         "(as the HMI did before 2026-12-01), not for its changes")
+    ap.add_argument("--no-alarm-clients", action="store_true",
+                    help="the live clients watch tags only (as runs before 2026-12-01 did)")
     ap.add_argument("--peer", choices=["rust", "python"], default=None,
                     help="who serves the devices (default: rust when the walker is built)")
     ap.add_argument("--storage", default="sqlite://gridscada.db",
@@ -199,7 +271,10 @@ def main():
         print(f"devices served by the {peer_kind} peer (pid {peer.pid})", flush=True)
         procs.append(peer)
         password = "bench-memory-" + str(random.randrange(10**9))
-        subprocess.run([binary, "user", "add", "bench", "--role", "display", "--config", tmp],
+        # A supervisor opens the tag browser, so may read every tag (a
+        # display user reads only what its screens show: here the devices'
+        # Comm tags).
+        subprocess.run([binary, "user", "add", "bench", "--role", "supervisor", "--config", tmp],
                        input=password + "\n", text=True, check=True, capture_output=True)
         # Start-up: `check` of the generated configuration, then `serve` to
         # its first /healthz answer (any status: it is up and answering).
@@ -224,13 +299,15 @@ def main():
         print(f"start-up: serve answered /healthz {time.perf_counter() - t0:.1f} s after it started",
               flush=True)
         cookies = [login(base, "bench", password) for _ in range((args.clients + 7) // 8)]
-        counts = [0] * args.clients
+        stats = LiveStats(args.clients)
         loop = asyncio.new_event_loop()
         stop = asyncio.Event()
 
         async def clients():
             await asyncio.gather(*(ws_client(k, hport, cookies[k // 8],
-                                             f"D{k % args.devices:02d}.", counts, stop)
+                                             f"D{k % args.devices:02d}.",
+                                             not args.no_alarm_clients,
+                                             not args.whole_alarm_lists, stats, stop)
                                    for k in range(args.clients)))
 
         import threading
@@ -239,11 +316,15 @@ def main():
         started = time.monotonic()
         last_cpu, last_t = proc_sample(server.pid)[0], started
         last_peer_cpu = proc_sample(peer.pid)[0]
+        last_alarm_s = metrics(base).get("gridscada_alarm_evaluation_seconds_total", 0.0)
         series = []
         print(f"load average at the start: {open('/proc/loadavg').read().strip()}", flush=True)
         print("| t (s) | RSS (MiB) | CPU (% of one core) | tags | historian samples written | "
-              "historian dropped | late scans | live messages | peer CPU (%) | load 1 min |")
-        print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|", flush=True)
+              "historian backlog | historian dropped | late scans | alarm evaluation (% of one core) | "
+              "active alarms | live tag messages | push p99 (ms) | alarm messages (MiB) | "
+              "peer CPU (%) | load 1 min |")
+        print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+              flush=True)
         while time.monotonic() - started < args.seconds:
             time.sleep(args.every)
             now = time.monotonic()
@@ -253,21 +334,31 @@ def main():
             written = m.get("gridscada_historian_samples_written_total", float("nan"))
             dropped = m.get("gridscada_historian_dropped_total", 0.0)
             late = sum(v for k, v in m.items() if k.startswith("gridscada_poll_late_scans_total"))
+            backlog = m.get("gridscada_historian_buffered", float("nan"))
+            alarm_s = m.get("gridscada_alarm_evaluation_seconds_total", 0.0)
+            active = m.get('gridscada_alarms{which="active"}', float("nan"))
             peer_cpu = proc_sample(peer.pid)[0]
             pct = 100 * (cpu - last_cpu) / (now - last_t)
             peer_pct = 100 * (peer_cpu - last_peer_cpu) / (now - last_t)
-            last_cpu, last_t, last_peer_cpu = cpu, now, peer_cpu
-            row = (now - started, rss, pct, tags, written, dropped, late, sum(counts), peer_pct,
+            alarm_pct = 100 * (alarm_s - last_alarm_s) / (now - last_t)
+            last_cpu, last_t, last_peer_cpu, last_alarm_s = cpu, now, peer_cpu, alarm_s
+            row = (now - started, rss, pct, tags, written, backlog, dropped, late, alarm_pct,
+                   active, sum(stats.tag_messages), p99(stats.take_window()),
+                   stats.alarm_bytes / 2**20, peer_pct,
                    float(open("/proc/loadavg").read().split()[0]))
             series.append(row)
-            print("| %.0f | %.1f | %.1f | %.0f | %.0f | %.0f | %.0f | %d | %.1f | %.2f |" % row,
-                  flush=True)
+            print("| %.0f | %.1f | %.1f | %.0f | %.0f | %.0f | %.0f | %.0f | %.1f | %.0f | %d | %.0f "
+                  "| %.1f | %.1f | %.2f |" % row, flush=True)
         after = [r for r in series if r[0] >= 60]
         if after:
             first, peak, end = after[0][1], max(r[1] for r in after), after[-1][1]
             print(f"\nRSS after the first minute: {first:.1f} MiB at {after[0][0]:.0f} s, "
                   f"peak {peak:.1f} MiB, end {end:.1f} MiB (growth {end - first:+.1f} MiB); "
-                  f"mean CPU {sum(r[2] for r in after) / len(after):.1f} % of one core")
+                  f"mean CPU {sum(r[2] for r in after) / len(after):.1f} % of one core, "
+                  f"of which alarm evaluation {sum(r[8] for r in after) / len(after):.1f} %")
+        print(f"push latency over the run: p99 {histogram_p99(stats.histogram):.0f} ms of "
+              f"{sum(stats.histogram.values())} tag values; {stats.alarm_messages} alarm messages "
+              f"({stats.alarm_bytes / 2**20:.1f} MiB, the largest {stats.largest_alarm_message / 1024:.0f} KiB)")
         loop.call_soon_threadsafe(stop.set)
         t.join(10)
     finally:

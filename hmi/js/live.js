@@ -141,6 +141,16 @@ export class Live {
       this.alarms = msg.alarms;
       this.alarmVersion = msg.version;
       for (const f of this.alarmListeners) f(this.alarms);
+    } else if (msg.type === 'alarm_changes' && Array.isArray(msg.changed) && Array.isArray(msg.removed)) {
+      // What changed since the list we have; a list we do not have is asked for whole.
+      if (msg.since !== this.alarmVersion) { this.sendSubscription(); return; }
+      const byId = new Map(this.alarms.map((a) => [a.id, a]));
+      for (const id of msg.removed) byId.delete(id);
+      for (const a of msg.changed) byId.set(a.id, a);
+      // The server's order: newest change first, then higher priority.
+      this.alarms = [...byId.values()].sort((a, b) => (b.last_change - a.last_change) || (b.priority - a.priority) || (a.id - b.id));
+      this.alarmVersion = msg.version;
+      for (const f of this.alarmListeners) f(this.alarms);
     } else if (msg.type === 'error') {
       console.warn('live:', msg.detail);
     }
@@ -157,7 +167,8 @@ export class Live {
       (i.prefixes || []).forEach((p) => prefixes.add(p));
       alarms = alarms || !!i.alarms;
     }
-    this.ws.send(JSON.stringify({ subscribe: { tags: [...tags], prefixes: [...prefixes], alarms } }));
+    // The alarm list comes whole once, then as its changes (a flood of standing alarms is not resent whole).
+    this.ws.send(JSON.stringify({ subscribe: { tags: [...tags], prefixes: [...prefixes], alarms, alarm_changes: alarms } }));
   }
 
   /**

@@ -19,6 +19,8 @@ set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 root="$(cd "$here/../.." && pwd)"
 bin="${GRIDSCADA_BIN:-$root/target/debug/gridscada}"
+# A relative path is the caller's: the script changes directory below.
+case $bin in /*) ;; *) bin="$PWD/$bin" ;; esac
 artifacts="${GRIDSCADA_E2E_ARTIFACTS:-$here/artifacts}"
 
 if [ ! -x /usr/bin/chromium ]; then

@@ -16,7 +16,7 @@
 //! therefore never stalls alarm evaluation or an operator's acknowledgement;
 //! the queue length is reported in [`EngineStats`].
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeSet, VecDeque};
 use std::sync::atomic::{AtomicI64, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
@@ -79,9 +79,43 @@ pub struct EngineStats {
     /// Alarm condition evaluations since start (a counter: rate() gives
     /// evaluations per second).
     pub evaluations_total: u64,
+    /// Time spent evaluating changes and running the timers since start, in
+    /// nanoseconds (a counter: its rate is the share of a core the alarm
+    /// evaluation takes).
+    pub evaluation_nanos_total: u64,
     pub transitions_total: u64,
     /// Outputs waiting to be taken by the application channels.
     pub queued_outputs: u64,
+}
+
+/// Versions remembered with what they changed: a client further behind
+/// than this is sent the whole list.
+const CHANGE_LOG: usize = 512;
+
+/// What one version of the alarm list changed.
+#[derive(Debug)]
+enum VersionChange {
+    /// These alarms, and nothing else.
+    Alarms(Vec<AlarmId>),
+    /// Anything may have changed.
+    Any,
+}
+
+/// The alarm list for a client, whole or as the changes since its version.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub enum AlarmListUpdate {
+    Whole {
+        version: u64,
+        alarms: Vec<AlarmView>,
+    },
+    Changes {
+        version: u64,
+        since: u64,
+        /// The alarms changed since, as the list shows them now (not sorted).
+        changed: Vec<AlarmView>,
+        /// Alarms changed since that the list no longer shows.
+        removed: Vec<AlarmId>,
+    },
 }
 
 #[derive(Debug)]
@@ -108,7 +142,11 @@ pub struct AlarmEngine {
     channels: Mutex<Option<AlarmChannels>>,
     queued: AtomicI64,
     transitions_total: AtomicU64,
+    evaluation_nanos: AtomicU64,
     version: watch::Sender<u64>,
+    /// Which alarms each recent version changed, newest last, so a live list
+    /// can be kept up to date with the changes instead of the whole list.
+    changes: Mutex<VecDeque<(u64, VersionChange)>>,
     wake: Notify,
     max_tick: Duration,
 }
@@ -195,7 +233,9 @@ impl AlarmEngine {
             channels: Mutex::new(Some(channels)),
             queued: AtomicI64::new(0),
             transitions_total: AtomicU64::new(0),
+            evaluation_nanos: AtomicU64::new(0),
             version: watch::Sender::new(0),
+            changes: Mutex::new(VecDeque::new()),
             wake: Notify::new(),
             max_tick: max_tick.max(Duration::from_millis(10)),
         })
@@ -262,11 +302,22 @@ impl AlarmEngine {
             return;
         }
         let now = self.clock.now();
-        self.with_set_mut(|set, out| set.apply(&batch, now, out));
+        self.timed(|| self.with_set_mut(|set, out| set.apply(&batch, now, out)));
     }
 
     fn tick_at(&self, now: gridscada_tagdb::Timestamp) {
-        self.with_set_mut(|set, out| set.tick(now, out));
+        self.timed(|| self.with_set_mut(|set, out| set.tick(now, out)));
+    }
+
+    /// Runs `f`, adding its wall time to the evaluation counter.
+    fn timed<R>(&self, f: impl FnOnce() -> R) -> R {
+        let started = std::time::Instant::now();
+        let r = f();
+        self.evaluation_nanos.fetch_add(
+            u64::try_from(started.elapsed().as_nanos()).unwrap_or(u64::MAX),
+            Ordering::Relaxed,
+        );
+        r
     }
 
     /// Runs `f` on the set under the lock and queues what it produced.
@@ -289,7 +340,7 @@ impl AlarmEngine {
             n += 1;
             let _ = self.outbox.send(Output::Transition(t));
         }
-        for id in changed {
+        for &id in &changed {
             if let Some(r) = set.record(id) {
                 n += 1;
                 let _ = self.outbox.send(Output::State(r));
@@ -300,7 +351,13 @@ impl AlarmEngine {
             let _ = self.outbox.send(Output::Event(e));
         }
         self.queued.fetch_add(n, Ordering::Relaxed);
-        self.version.send_modify(|v| *v += 1);
+        // Shown without a transition (a comm alarm's error text, a message):
+        // no list of ids says what changed.
+        self.bump_version(if out.view_changed || changed.is_empty() {
+            VersionChange::Any
+        } else {
+            VersionChange::Alarms(changed.into_iter().collect())
+        });
         // A new timer (delay, shelving) may be earlier than the run loop's sleep.
         self.wake.notify_one();
     }
@@ -450,7 +507,7 @@ impl AlarmEngine {
         if !added.is_empty() {
             self.watched.lock().extend(new_tags);
             self.rewatch.notify_one();
-            self.version.send_modify(|v| *v += 1);
+            self.bump_version(VersionChange::Any);
         }
         match refused {
             Some(e) => Err(e),
@@ -487,7 +544,7 @@ impl AlarmEngine {
             skipped = report.skipped.len(),
             "alarm states taken over"
         );
-        self.version.send_modify(|v| *v += 1);
+        self.bump_version(VersionChange::Any);
         self.wake.notify_one();
     }
 
@@ -500,6 +557,70 @@ impl AlarmEngine {
         self.version.subscribe()
     }
 
+    /// Moves the version on, noting what changed.
+    fn bump_version(&self, change: VersionChange) {
+        let mut log = self.changes.lock();
+        let mut version = 0;
+        self.version.send_modify(|v| {
+            *v += 1;
+            version = *v;
+        });
+        log.push_back((version, change));
+        while log.len() > CHANGE_LOG {
+            log.pop_front();
+        }
+    }
+
+    /// The default alarm list (as [`AlarmEngine::summary`] with the default
+    /// filter) for a client that has the list of version `since`: nothing
+    /// if it is current; the changed alarms and the ids that left the list
+    /// if the versions since are still known and name their alarms; else
+    /// the whole list.
+    pub fn summary_since(&self, since: Option<u64>) -> Option<AlarmListUpdate> {
+        // Under the set's lock, the version and the set agree: a change
+        // publishes its version before the lock is released.
+        let set = self.set.lock();
+        let version = *self.version.borrow();
+        let filter = AlarmFilter::default();
+        let since = match since {
+            Some(s) if s == version => return None,
+            Some(s) if s < version => s,
+            _ => {
+                return Some(AlarmListUpdate::Whole {
+                    version,
+                    alarms: set.summary(&filter),
+                })
+            }
+        };
+        let log = self.changes.lock();
+        let mut ids = BTreeSet::new();
+        let complete = log.front().is_some_and(|(v, _)| *v <= since + 1)
+            && log
+                .iter()
+                .filter(|(v, _)| *v > since)
+                .all(|(_, c)| match c {
+                    VersionChange::Alarms(a) => {
+                        ids.extend(a.iter().copied());
+                        true
+                    }
+                    VersionChange::Any => false,
+                });
+        drop(log);
+        if !complete {
+            return Some(AlarmListUpdate::Whole {
+                version,
+                alarms: set.summary(&filter),
+            });
+        }
+        let (changed, removed) = set.summary_of(ids, &filter);
+        Some(AlarmListUpdate::Changes {
+            version,
+            since,
+            changed,
+            removed,
+        })
+    }
+
     pub fn evaluations_total(&self) -> u64 {
         self.set.lock().evaluations()
     }
@@ -510,6 +631,7 @@ impl AlarmEngine {
             alarms: set.len(),
             evaluations_total: set.evaluations(),
             transitions_total: self.transitions_total.load(Ordering::Relaxed),
+            evaluation_nanos_total: self.evaluation_nanos.load(Ordering::Relaxed),
             queued_outputs: self.queued.load(Ordering::Relaxed).max(0) as u64,
             ..EngineStats::default()
         };

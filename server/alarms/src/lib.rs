@@ -20,7 +20,7 @@ pub mod model;
 pub mod set;
 pub mod suppression;
 
-pub use engine::{AlarmChannels, AlarmEngine, EngineOptions, EngineStats};
+pub use engine::{AlarmChannels, AlarmEngine, AlarmListUpdate, EngineOptions, EngineStats};
 pub use events::{Event, EventType, UnknownEventType};
 pub use machine::{Alarm, AlarmDef, Condition};
 pub use metrics::{

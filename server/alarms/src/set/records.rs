@@ -30,6 +30,28 @@ impl AlarmSet {
         v
     }
 
+    /// What became of alarms `ids` for a list the filter shows: the views
+    /// of those it shows now, and the ids of those it no longer shows.
+    pub fn summary_of(
+        &self,
+        ids: impl IntoIterator<Item = AlarmId>,
+        filter: &AlarmFilter,
+    ) -> (Vec<AlarmView>, Vec<AlarmId>) {
+        let (mut shown, mut gone) = (vec![], vec![]);
+        for id in ids {
+            let Some(a) = self.alarm(id) else { continue };
+            // The same test as `summary`'s.
+            let v = (!filter.states.is_empty() || a.is_active() || !a.is_acked())
+                .then(|| a.view())
+                .filter(|v| filter.matches(v));
+            match v {
+                Some(v) => shown.push(v),
+                None => gone.push(id),
+            }
+        }
+        (shown, gone)
+    }
+
     /// Every alarm's view, in id order.
     pub fn all_views(&self) -> Vec<AlarmView> {
         self.alarms.iter().map(Alarm::view).collect()

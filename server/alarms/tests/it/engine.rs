@@ -374,3 +374,125 @@ async fn next_hi(rx: &mut mpsc::Receiver<AlarmTransition>) -> AlarmTransition {
         }
     }
 }
+
+/// A live alarm list kept by the changes since its version: the same alarms,
+/// in the same states, as the whole list at that version.
+#[tokio::test]
+async fn a_list_kept_by_changes_matches_the_whole_list() {
+    use gridscada_alarms::{AlarmId, AlarmListUpdate, AlarmView};
+    use std::collections::BTreeMap;
+
+    /// Brings `list` (at `version`) up to date; returns how many updates
+    /// came as changes.
+    fn follow(
+        engine: &AlarmEngine,
+        list: &mut BTreeMap<AlarmId, AlarmView>,
+        version: &mut u64,
+    ) -> usize {
+        let mut changes = 0;
+        while let Some(u) = engine.summary_since(Some(*version)) {
+            match u {
+                AlarmListUpdate::Whole { version: v, alarms } => {
+                    *list = alarms.into_iter().map(|a| (a.id, a)).collect();
+                    *version = v;
+                }
+                AlarmListUpdate::Changes {
+                    version: v,
+                    since,
+                    changed,
+                    removed,
+                } => {
+                    assert_eq!(since, *version);
+                    for id in removed {
+                        list.remove(&id);
+                    }
+                    list.extend(changed.into_iter().map(|a| (a.id, a)));
+                    *version = v;
+                    changes += 1;
+                }
+            }
+        }
+        changes
+    }
+    /// The list kept equals the whole list of the same version ("value now"
+    /// aside: a list kept by changes has each alarm's value at its own
+    /// latest change).
+    fn assert_same(
+        engine: &AlarmEngine,
+        list: &mut BTreeMap<AlarmId, AlarmView>,
+        version: &mut u64,
+    ) {
+        let strip = |mut a: AlarmView| {
+            a.value = None;
+            a.value_text = None;
+            a
+        };
+        loop {
+            follow(engine, list, version);
+            let Some(AlarmListUpdate::Whole { version: v, alarms }) = engine.summary_since(None)
+            else {
+                panic!("a client without a list gets the whole list");
+            };
+            if v != *version {
+                continue; // the engine moved on in between
+            }
+            let whole: BTreeMap<_, _> = alarms.into_iter().map(|a| (a.id, strip(a))).collect();
+            let kept: BTreeMap<_, _> = list
+                .clone()
+                .into_iter()
+                .map(|(k, a)| (k, strip(a)))
+                .collect();
+            assert_eq!(kept, whole, "the list kept by changes, at version {v}");
+            return;
+        }
+    }
+
+    let mut r = rig(&[]);
+    r.set("SS1.ELCB.Closed", true);
+    r.set_and_wait("SS1.PA.V_L1", 230.0).await;
+    let Some(AlarmListUpdate::Whole { version, alarms }) = r.engine.summary_since(None) else {
+        panic!("the first list is whole");
+    };
+    let mut version = version;
+    let mut list: BTreeMap<AlarmId, AlarmView> = alarms.into_iter().map(|a| (a.id, a)).collect();
+    assert!(
+        r.engine
+            .summary_since(Some(version + 1_000))
+            .is_some_and(|u| matches!(u, AlarmListUpdate::Whole { .. })),
+        "a version the engine never had: the whole list"
+    );
+
+    // A trip: the ELCB alarm enters the list, the panel analyser's alarms
+    // follow suppressed.
+    r.clock.set(1010.0);
+    r.set("SS1.ELCB.Closed", false);
+    let trip = r.next_transition("SS1.ELCB.Closed:discrete").await;
+    let changes = follow(&r.engine, &mut list, &mut version);
+    assert!(changes > 0, "the trip comes as changes");
+    assert!(list.contains_key(&trip.id));
+    assert_same(&r.engine, &mut list, &mut version);
+    assert!(
+        r.engine.summary_since(Some(version)).is_none(),
+        "nothing new"
+    );
+
+    // Acknowledged and back to normal: it leaves the list.
+    r.engine.ack_ids("op", &[trip.id]).unwrap();
+    r.clock.set(1020.0);
+    r.set("SS1.ELCB.Closed", true);
+    r.next_transition("SS1.ELCB.Closed:discrete").await;
+    follow(&r.engine, &mut list, &mut version);
+    assert_same(&r.engine, &mut list, &mut version);
+    assert!(
+        !list.contains_key(&trip.id),
+        "normal and acknowledged: off the list"
+    );
+
+    // Taking over another server's states may change any alarm: whole.
+    let records = r.engine.persisted_states();
+    r.engine.adopt(&records);
+    assert!(matches!(
+        r.engine.summary_since(Some(version)),
+        Some(AlarmListUpdate::Whole { .. })
+    ));
+}

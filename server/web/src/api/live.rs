@@ -7,8 +7,16 @@
 //! them falls behind the feed's ring and gets a fresh snapshot instead of an
 //! unbounded queue. When the session ends (logout, expiry, user blocked), the
 //! socket is closed.
+//!
+//! The alarm list (`"alarms": true` in the subscription) comes whole
+//! (`alarms`) each time it changes; with `"alarm_changes": true` as well,
+//! whole once and then as what changed (`alarm_changes`: the changed alarms'
+//! views and the ids that left the list), so a flood of standing alarms is
+//! not sent whole to every screen every time one of them changes. An
+//! alarm's "value now" in a list kept by changes is the value at its own
+//! latest change.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::sync::{Arc, Weak};
 use std::time::Duration;
 
@@ -17,6 +25,7 @@ use axum::extract::State;
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::Extension;
+use gridscada_alarms::AlarmListUpdate;
 use gridscada_tagdb::{Quality, Sample, TagDb, TagId, Timestamp, Update, Value};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
@@ -48,7 +57,13 @@ pub struct LiveFeeds {
     /// for them (the list does not depend on the user), not rebuilt and
     /// serialized per socket.
     alarm_summary: parking_lot::Mutex<Option<(u64, Utf8Bytes)>>,
+    /// The last few `alarm_changes` messages, by the version they start
+    /// from and the one they bring: sockets at the same version share one.
+    alarm_changes: parking_lot::Mutex<VecDeque<(u64, u64, Utf8Bytes)>>,
 }
+
+/// `alarm_changes` messages kept for sockets at different versions.
+const ALARM_CHANGES_KEPT: usize = 8;
 
 /// One feed: its task and the ring of serialized `tags` messages.
 struct Feed {
@@ -63,24 +78,63 @@ impl Drop for Feed {
 }
 
 impl LiveFeeds {
-    /// The `alarms` message for a socket that has seen `since`, if the
-    /// alarms changed since; made once per alarm version for all sockets.
-    fn alarm_message(&self, s: &WebState, since: Option<u64>) -> Option<(u64, Utf8Bytes)> {
+    /// The alarm list's message for a socket that has the list of version
+    /// `since`, if the alarms changed since: the whole list (`alarms`), or,
+    /// for a socket that asked for changes and has a list, what changed
+    /// (`alarm_changes`). Each is made once for all sockets at the same
+    /// versions.
+    fn alarm_message(
+        &self,
+        s: &WebState,
+        since: Option<u64>,
+        changes: bool,
+    ) -> Option<(u64, Utf8Bytes)> {
         let e = s.components.alarms.as_ref()?;
         let version = *e.subscribe_version().borrow();
         if since == Some(version) {
             return None;
         }
-        let mut cached = self.alarm_summary.lock();
-        if let Some((v, msg)) = cached.as_ref().filter(|(v, _)| *v == version) {
+        let since = since.filter(|_| changes);
+        if let Some(since) = since {
+            let kept = self.alarm_changes.lock();
+            if let Some((_, v, msg)) = kept.iter().find(|(s, v, _)| (*s, *v) == (since, version)) {
+                return Some((*v, msg.clone()));
+            }
+        } else if let Some((v, msg)) = self
+            .alarm_summary
+            .lock()
+            .as_ref()
+            .filter(|(v, _)| *v == version)
+        {
             return Some((*v, msg.clone()));
         }
-        let alarms = e.summary(&gridscada_alarms::AlarmFilter::default());
-        let msg: Utf8Bytes = json!({"type": "alarms", "version": version, "alarms": alarms})
-            .to_string()
-            .into();
-        *cached = Some((version, msg.clone()));
-        Some((version, msg))
+        match e.summary_since(since)? {
+            AlarmListUpdate::Whole { version, alarms } => {
+                let msg: Utf8Bytes =
+                    json!({"type": "alarms", "version": version, "alarms": alarms})
+                        .to_string()
+                        .into();
+                *self.alarm_summary.lock() = Some((version, msg.clone()));
+                Some((version, msg))
+            }
+            AlarmListUpdate::Changes {
+                version,
+                since,
+                changed,
+                removed,
+            } => {
+                let msg: Utf8Bytes = json!({"type": "alarm_changes", "version": version,
+                    "since": since, "changed": changed, "removed": removed})
+                .to_string()
+                .into();
+                let mut kept = self.alarm_changes.lock();
+                kept.push_back((since, version, msg.clone()));
+                while kept.len() > ALARM_CHANGES_KEPT {
+                    kept.pop_front();
+                }
+                Some((version, msg))
+            }
+        }
     }
 
     /// The feed of `ids` (sorted, unique), started if none runs, and a
@@ -227,6 +281,10 @@ struct Subscribe {
     prefixes: Vec<String>,
     #[serde(default)]
     alarms: bool,
+    /// With `alarms`: after the first whole list, send what changed
+    /// (`alarm_changes`) instead of the whole list each time.
+    #[serde(default)]
+    alarm_changes: bool,
 }
 
 /// One tag in a `tags` message. Serialized straight from borrowed data:
@@ -333,6 +391,7 @@ async fn run(
     let mut feed = None;
     let mut ended = s.auth.sessions.watch_ended();
     let mut alarms_wanted = false;
+    let mut alarm_changes_wanted = false;
     let mut alarm_version = None::<u64>;
     let mut tick = tokio::time::interval(TICK);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -372,6 +431,7 @@ async fn run(
                             let snap = snapshot_message(&s.db, &ids);
                             feed = Some(Joined { _feed: f, ids, rx });
                             alarms_wanted = sub_req.alarms;
+                            alarm_changes_wanted = sub_req.alarm_changes;
                             alarm_version = None;
                             socket.send(Message::Text(snap)).await?;
                         }
@@ -413,7 +473,7 @@ async fn run(
                     socket.send(Message::Text(beat.to_string().into())).await?;
                 }
                 if alarms_wanted {
-                    if let Some((version, msg)) = s.live.alarm_message(&s, alarm_version) {
+                    if let Some((version, msg)) = s.live.alarm_message(&s, alarm_version, alarm_changes_wanted) {
                         alarm_version = Some(version);
                         socket.send(Message::Text(msg)).await?;
                     }

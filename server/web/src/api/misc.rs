@@ -294,6 +294,12 @@ pub async fn metrics(
             st.evaluations_total as f64,
         );
         out.counter(
+            "gridscada_alarm_evaluation_seconds_total",
+            "Time spent evaluating alarm conditions and timers.",
+            &[],
+            st.evaluation_nanos_total as f64 / 1e9,
+        );
+        out.counter(
             "gridscada_alarm_transitions_total",
             "Alarm state transitions.",
             &[],

@@ -269,3 +269,81 @@ async fn a_slow_socket_gets_a_snapshot_instead_of_a_backlog() {
         "{messages} messages for {CHANGES} changes: the backlog was dropped"
     );
 }
+
+/// The alarm list on the socket: whole on every change for a client that
+/// asks for `alarms` alone; whole once and then as its changes for one that
+/// asks for `alarm_changes` too, so a flood of standing alarms is not sent
+/// whole to every screen each time one of them changes.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_alarm_list_comes_whole_or_as_its_changes() {
+    let h = Harness::new(Options::default()).await;
+    h.run_alarms();
+    let addr = h.serve().await;
+    let cookie = h.login("operator", PASSWORD).await;
+    let engine = h.state.components.alarms.clone().unwrap();
+    // Two standing alarms before the clients come.
+    engine.raise("test.a", 500, "Z1", "A stands").unwrap();
+    let b = engine.raise("test.b", 700, "Z1", "B stands").unwrap();
+
+    let mut whole = live_socket(addr, &cookie).await.unwrap();
+    let mut changes = live_socket(addr, &cookie).await.unwrap();
+    for (ws, sub) in [
+        (&mut whole, json!({"alarms": true})),
+        (&mut changes, json!({"alarms": true, "alarm_changes": true})),
+    ] {
+        assert_eq!(next_message(ws).await.unwrap()["type"], "hello");
+        ws.send(Message::Text(
+            json!({ "subscribe": sub }).to_string().into(),
+        ))
+        .await
+        .unwrap();
+        assert_eq!(next_message(ws).await.unwrap()["type"], "tags");
+        let first = next_message(ws).await.unwrap();
+        assert_eq!(first["type"], "alarms", "{first}");
+        assert_eq!(first["alarms"].as_array().unwrap().len(), 2);
+    }
+
+    // A third alarm: the whole list, or that alarm alone.
+    engine.raise("test.c", 300, "Z2", "C stands").unwrap();
+    let m = next_message(&mut whole).await.unwrap();
+    assert_eq!(m["type"], "alarms");
+    assert_eq!(m["alarms"].as_array().unwrap().len(), 3);
+    let m = next_message(&mut changes).await.unwrap();
+    assert_eq!(m["type"], "alarm_changes", "{m}");
+    assert_eq!(m["changed"].as_array().unwrap().len(), 1, "{m}");
+    assert_eq!(m["changed"][0]["key"], "test.c");
+    let mut version = m["version"].as_u64().unwrap();
+
+    // B cleared (still unacknowledged: it stays), then acknowledged (it
+    // leaves the list).
+    engine.clear("test.b").unwrap();
+    let m = next_message(&mut changes).await.unwrap();
+    assert_eq!(m["type"], "alarm_changes", "{m}");
+    assert_eq!(m["since"].as_u64(), Some(version));
+    assert_eq!(m["removed"], json!([]));
+    let changed = m["changed"].as_array().unwrap();
+    assert_eq!(changed.len(), 1, "{m}");
+    assert_eq!(changed[0]["key"], "test.b");
+    assert_eq!(changed[0]["active"], false);
+    version = m["version"].as_u64().unwrap();
+    engine.ack_ids("operator", &[b]).unwrap();
+    let m = next_message(&mut changes).await.unwrap();
+    assert_eq!(m["type"], "alarm_changes", "{m}");
+    assert_eq!(m["since"].as_u64(), Some(version));
+    assert_eq!(m["changed"], json!([]));
+    assert_eq!(m["removed"], json!([b.0]));
+
+    // The other client saw the same states, whole each time.
+    let mut last = json!(null);
+    while last["alarms"].as_array().map(Vec::len) != Some(2) {
+        last = next_message(&mut whole).await.unwrap();
+        assert_eq!(last["type"], "alarms", "{last}");
+    }
+    let keys: Vec<&str> = last["alarms"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a["key"].as_str().unwrap())
+        .collect();
+    assert_eq!(keys, ["test.c", "test.a"], "newest change first");
+}
