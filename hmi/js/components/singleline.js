@@ -99,7 +99,9 @@ export function singleLine(binder, { prefix, title, zones = 4, devices = [], onB
   // Busbar and zones.
   const left = 50;
   const right = W - 40;
-  const step = (right - left) / zones;
+  // The last zone's state is written right of its breaker: leave room for
+  // the widest, "? UNKNOWN" (a lost module), inside the card.
+  const step = (right - 20 - left) / zones;
   svg.append(s('line', { x1: left, y1: 180, x2: right, y2: 180, class: 'sl-bus' }),
     s('text', { x: right - 4, y: 172, class: 'sl-label sl-end' }, 'Busbar'));
   for (let z = 1; z <= zones; z++) {
