@@ -102,7 +102,7 @@ enum VersionChange {
 }
 
 /// The alarm list for a client, whole or as the changes since its version.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum AlarmListUpdate {
     Whole {
         version: u64,

@@ -7,19 +7,22 @@ use crate::model::{AlarmFilter, AlarmId, AlarmKind, AlarmStateRecord, AlarmView}
 use super::defs::system_def;
 use super::{AlarmSet, RestoreReport};
 
+/// The view of `a` if a list with `filter` shows it.
+fn shown(a: &Alarm, filter: &AlarmFilter) -> Option<AlarmView> {
+    // Cheap pre-check before building a view: Normal alarms are the vast
+    // majority and the default list never shows them.
+    (!filter.states.is_empty() || a.is_active() || !a.is_acked())
+        .then(|| a.view())
+        .filter(|v| filter.matches(v))
+}
+
 impl AlarmSet {
     /// The alarms the filter shows, newest change first (then higher priority).
     pub fn summary(&self, filter: &AlarmFilter) -> Vec<AlarmView> {
         let mut v: Vec<AlarmView> = self
             .alarms
             .iter()
-            .filter(|a| {
-                // Cheap pre-check before building a view: Normal alarms are
-                // the vast majority and the default list never shows them.
-                !filter.states.is_empty() || a.is_active() || !a.is_acked()
-            })
-            .map(Alarm::view)
-            .filter(|v| filter.matches(v))
+            .filter_map(|a| shown(a, filter))
             .collect();
         v.sort_by(|a, b| {
             b.last_change
@@ -40,11 +43,7 @@ impl AlarmSet {
         let (mut shown, mut gone) = (vec![], vec![]);
         for id in ids {
             let Some(a) = self.alarm(id) else { continue };
-            // The same test as `summary`'s.
-            let v = (!filter.states.is_empty() || a.is_active() || !a.is_acked())
-                .then(|| a.view())
-                .filter(|v| filter.matches(v));
-            match v {
+            match self::shown(a, filter) {
                 Some(v) => shown.push(v),
                 None => gone.push(id),
             }
