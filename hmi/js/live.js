@@ -76,6 +76,7 @@ export class Live {
     this.setConnected(false);
     this.values.clear();
     this.alarms = [];
+    this.alarmVersion = null;
   }
 
   connect() {
@@ -143,7 +144,7 @@ export class Live {
       for (const f of this.alarmListeners) f(this.alarms);
     } else if (msg.type === 'alarm_changes' && Array.isArray(msg.changed) && Array.isArray(msg.removed)) {
       // What changed since the list we have; a list we do not have is asked for whole.
-      if (msg.since !== this.alarmVersion) { this.sendSubscription(); return; }
+      if (msg.since !== this.alarmVersion) { this.alarmVersion = null; this.sendSubscription(); return; }
       const byId = new Map(this.alarms.map((a) => [a.id, a]));
       for (const id of msg.removed) byId.delete(id);
       for (const a of msg.changed) byId.set(a.id, a);
@@ -167,8 +168,10 @@ export class Live {
       (i.prefixes || []).forEach((p) => prefixes.add(p));
       alarms = alarms || !!i.alarms;
     }
-    // The alarm list comes whole once, then as its changes (a flood of standing alarms is not resent whole).
-    this.ws.send(JSON.stringify({ subscribe: { tags: [...tags], prefixes: [...prefixes], alarms, alarm_changes: alarms } }));
+    // The alarm list comes whole once, then as its changes (a flood of standing alarms is not resent whole);
+    // the version held lets a screen change go on with the changes (the server sends the list whole if it is not the one it sent).
+    const held = alarms && this.alarmVersion !== null ? this.alarmVersion : undefined;
+    this.ws.send(JSON.stringify({ subscribe: { tags: [...tags], prefixes: [...prefixes], alarms, alarm_changes: alarms, alarm_version: held } }));
   }
 
   /**

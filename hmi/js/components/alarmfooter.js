@@ -21,6 +21,13 @@ const COMPACT = '(max-width: 700px)';
 const DEFAULT_H = 150;
 const PHONE_H = 120;
 
+/**
+ * Rows the footer draws: the top of the list, in its order (unacknowledged,
+ * active, priority, newest). In a flood the rest are counted, and the
+ * Alarms screen pages through them.
+ */
+export const FOOTER_ROWS = 100;
+
 export const PRIORITY_LEVELS = [['', 'Any priority'], ['200', '≥ 200'], ['400', '≥ 400'], ['600', '≥ 600'], ['800', '≥ 800']];
 
 export class AlarmFooter {
@@ -192,7 +199,11 @@ export class AlarmFooter {
     this.count.textContent = `${shown.length} shown${shown.length !== list.length ? ` of ${list.length}` : ''}, ${unacked} unacked`;
     this.root.classList.toggle('has-unacked', list.some((a) => !a.acked));
     this.shown = shown;
-    drawAlarmRows(this.tbody, shown);
+    drawAlarmRows(this.tbody, shown, {
+      limit: FOOTER_ROWS,
+      more: (n) => [`${n} more alarm${n === 1 ? '' : 's'} below these ${FOOTER_ROWS}: `,
+        h('a', { href: '#/alarms', text: 'open the Alarms screen' }), ' to page through them.'],
+    });
     // The summary counts every standing alarm per area, whatever the filter.
     const summary = this.summaryShown();
     this.list.hidden = summary || this.barOnly();

@@ -184,10 +184,14 @@ function valueCell(a) {
 
 /**
  * Draws alarms into a <tbody>. `extra(a)` may return a cell with actions;
- * `selectable` adds a checkbox per row (named by alarm id).
+ * `selectable` adds a checkbox per row (named by alarm id). `limit` draws
+ * only the first rows (a flood of standing alarms would otherwise put tens
+ * of thousands of rows into the page at every change); `more(n)` then gives
+ * the content of a last row saying what was left out.
  */
-export function drawAlarmRows(tbody, alarms, { extra, selectable, selected } = {}) {
-  replace(tbody, alarms.map((a) => {
+export function drawAlarmRows(tbody, alarms, { extra, selectable, selected, limit = Infinity, more } = {}) {
+  const drawn = alarms.length > limit ? alarms.slice(0, limit) : alarms;
+  replace(tbody, drawn.map((a) => {
     const row = h('tr', {
       class: ['alarm-row', a.acked ? 'acked' : 'unacked', a.active ? 'active' : 'cleared', priorityClass(a.priority), `state-${a.state}`],
       dataset: { alarmId: String(a.id) },
@@ -213,6 +217,10 @@ export function drawAlarmRows(tbody, alarms, { extra, selectable, selected } = {
   }));
   if (alarms.length === 0) {
     tbody.append(h('tr', {}, h('td', { colspan: 10, class: 'empty', text: 'No alarms match.' })));
+  } else if (drawn.length < alarms.length) {
+    const left = alarms.length - drawn.length;
+    tbody.append(h('tr', { class: 'alarm-more' }, h('td', { colspan: 10, class: 'empty' },
+      more ? more(left) : `${left} more alarm${left === 1 ? '' : 's'} not drawn.`)));
   }
 }
 

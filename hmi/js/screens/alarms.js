@@ -15,6 +15,8 @@ import { attempt, formDialog, toast } from '../ui.js';
 import { ALARM_HEADERS, KIND_LABELS, STATE_LABELS, causeLabel, drawAlarmRows, stateChange, filterAlarms, priorityChip, sortAlarms, summarize, summaryTable } from '../components/alarmtable.js';
 import { PRIORITY_LEVELS } from '../components/alarmfooter.js';
 
+/** Rows of the online list drawn at a time ("Show more" adds a page). */
+const ALARM_PAGE = 500;
 const STATES = [['', 'Any state'], ...Object.entries(STATE_LABELS).filter(([k]) => k !== 'normal')];
 
 export default {
@@ -106,6 +108,8 @@ export default {
         return out;
       };
       let summaryKey = '';
+      // Rows drawn: a page at a time, so a flood of standing alarms stays a usable page.
+      let pageRows = ALARM_PAGE;
       const draw = () => {
         const list = live.alarms;
         replace(selList, [...new Set(list.map((a) => a.selection))].sort().map((s) => h('option', { value: s })));
@@ -120,16 +124,20 @@ export default {
           replace(summaryBox, summaryTable(list, { id: 'alarms-summary-table', current: selection.value.trim(),
             onPick: (sel) => { selection.value = sel; draw(); } }));
         }
-        drawAlarmRows(tbody, shown, { extra: actions, selectable: canAck, selected });
+        drawAlarmRows(tbody, shown, { extra: actions, selectable: canAck, selected, limit: pageRows,
+          more: (n) => [`${n} more alarm${n === 1 ? '' : 's'} below. `,
+            h('button', { type: 'button', class: 'btn btn-small', id: 'alarms-more', text: `Show ${Math.min(n, ALARM_PAGE)} more`,
+              onclick: () => { pageRows += ALARM_PAGE; draw(); } })] });
       };
+      const refilter = () => { pageRows = ALARM_PAGE; draw(); };
       tbody.addEventListener('change', (e) => {
         if (!e.target.classList.contains('alarm-select')) return;
         const id = Number(e.target.value);
         if (e.target.checked) selected.add(id); else selected.delete(id);
       });
       if (ackSel) ackSel.addEventListener('click', () => { if (selected.size) ack([...selected]); else toast('Select alarms to acknowledge first.', 'info'); });
-      for (const i of [selection, text]) i.addEventListener('input', draw);
-      for (const i of [prio, state]) i.addEventListener('change', draw);
+      for (const i of [selection, text]) i.addEventListener('input', refilter);
+      for (const i of [prio, state]) i.addEventListener('change', refilter);
 
       async function ack(ids) {
         const r = await attempt('Acknowledge', () => post('/api/alarms/ack', { ids }));

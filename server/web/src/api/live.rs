@@ -12,9 +12,11 @@
 //! (`alarms`) each time it changes; with `"alarm_changes": true` as well,
 //! whole once and then as what changed (`alarm_changes`: the changed alarms'
 //! views and the ids that left the list), so a flood of standing alarms is
-//! not sent whole to every screen every time one of them changes. An
-//! alarm's "value now" in a list kept by changes is the value at its own
-//! latest change.
+//! not sent whole to every screen every time one of them changes. A new
+//! subscription that names the version it holds (`alarm_version`, the one
+//! this socket last sent) goes on with the changes; otherwise the list comes
+//! whole again. An alarm's "value now" in a list kept by changes is the value
+//! at its own latest change.
 
 use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::sync::{Arc, Weak};
@@ -285,6 +287,11 @@ struct Subscribe {
     /// (`alarm_changes`) instead of the whole list each time.
     #[serde(default)]
     alarm_changes: bool,
+    /// With `alarm_changes`: the version of the list the client holds. When
+    /// it is the one this socket last sent, a new subscription (a screen
+    /// change) goes on with the changes instead of resending the whole list.
+    #[serde(default)]
+    alarm_version: Option<u64>,
 }
 
 /// One tag in a `tags` message. Serialized straight from borrowed data:
@@ -430,9 +437,19 @@ async fn run(
                             let (f, rx) = s.live.join(&s.db, ids.clone(), merge);
                             let snap = snapshot_message(&s.db, &ids);
                             feed = Some(Joined { _feed: f, ids, rx });
+                            // The client's list goes on only if it is the
+                            // one this socket sent and it still wants changes.
+                            let keeps_list = alarms_wanted
+                                && alarm_changes_wanted
+                                && sub_req.alarms
+                                && sub_req.alarm_changes
+                                && sub_req.alarm_version.is_some()
+                                && sub_req.alarm_version == alarm_version;
+                            if !keeps_list {
+                                alarm_version = None;
+                            }
                             alarms_wanted = sub_req.alarms;
                             alarm_changes_wanted = sub_req.alarm_changes;
-                            alarm_version = None;
                             socket.send(Message::Text(snap)).await?;
                         }
                         Ok(_) => {}

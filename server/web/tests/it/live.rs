@@ -332,10 +332,38 @@ async fn the_alarm_list_comes_whole_or_as_its_changes() {
     assert_eq!(m["since"].as_u64(), Some(version));
     assert_eq!(m["changed"], json!([]));
     assert_eq!(m["removed"], json!([b.0]));
+    version = m["version"].as_u64().unwrap();
+
+    // A screen change: a new subscription naming the list held goes on with
+    // the changes; one naming another version gets the list whole.
+    let resubscribe = |held: u64| {
+        Message::Text(
+            json!({"subscribe": {"alarms": true, "alarm_changes": true, "alarm_version": held}})
+                .to_string()
+                .into(),
+        )
+    };
+    changes.send(resubscribe(version)).await.unwrap();
+    assert_eq!(next_message(&mut changes).await.unwrap()["type"], "tags");
+    engine.raise("test.d", 400, "Z2", "D stands").unwrap();
+    let m = next_message(&mut changes).await.unwrap();
+    assert_eq!(m["type"], "alarm_changes", "not resent whole: {m}");
+    assert_eq!(m["since"].as_u64(), Some(version));
+    assert_eq!(m["changed"][0]["key"], "test.d");
+    version = m["version"].as_u64().unwrap();
+    changes.send(resubscribe(version + 1_000)).await.unwrap();
+    assert_eq!(next_message(&mut changes).await.unwrap()["type"], "tags");
+    let m = next_message(&mut changes).await.unwrap();
+    assert_eq!(
+        m["type"], "alarms",
+        "a list it did not send: whole again: {m}"
+    );
+    assert_eq!(m["alarms"].as_array().unwrap().len(), 3);
+    engine.clear("test.d").unwrap();
 
     // The other client saw the same states, whole each time.
     let mut last = json!(null);
-    while last["alarms"].as_array().map(Vec::len) != Some(2) {
+    while !(last["alarms"][0]["key"] == "test.d" && last["alarms"][0]["active"] == false) {
         last = next_message(&mut whole).await.unwrap();
         assert_eq!(last["type"], "alarms", "{last}");
     }
@@ -345,5 +373,5 @@ async fn the_alarm_list_comes_whole_or_as_its_changes() {
         .iter()
         .map(|a| a["key"].as_str().unwrap())
         .collect();
-    assert_eq!(keys, ["test.c", "test.a"], "newest change first");
+    assert_eq!(keys, ["test.d", "test.c", "test.a"], "newest change first");
 }

@@ -1,0 +1,101 @@
+#!/usr/bin/env python3
+"""The historian's SQLite layout at a million tags, in isolation (issue 34).
+
+Python's sqlite3 on the historian's three tables as the migrations make them
+(samples keyed by tag then time; the minute and hour roll-ups keyed by tag
+then bucket; all WITHOUT ROWID), WAL and synchronous=NORMAL as the store
+opens them. Each round logs one sample of every one of TAGS tags, in random
+order, BATCH samples a transaction sorted by tag as the writer sorts them,
+each with an upsert into both roll-up levels (or none: --samples-only).
+Prints samples written a second. What it answers: how much of SQLite's time
+at a million distinct tags goes to the roll-up trees, and what the page size
+and the transaction size change. It is not the writer (no Rust, no
+prepared statements of its own): compare its figures with each other.
+
+    # grow a database (5 rounds), then 2 rounds with roll-ups, 2 without
+    python3 scripts/bench-sqlite-layout.py --db /tmp/l4k.db --page-size 4096
+    python3 scripts/bench-sqlite-layout.py --db /tmp/l1k.db --page-size 1024
+    # one more round on a grown database, at another transaction size
+    python3 scripts/bench-sqlite-layout.py --db /tmp/l4k.db --reuse --first-round 20 \\
+        --rounds 1 --batch 5000 --rollups-only
+"""
+import argparse
+import os
+import random
+import sqlite3
+import time
+
+ROLLUP = ("CREATE TABLE {t} (tag_id INTEGER NOT NULL, bucket INTEGER NOT NULL, n INTEGER NOT NULL, "
+          "n_value INTEGER NOT NULL, min_value REAL, max_value REAL, sum_value REAL, "
+          "first_ts INTEGER NOT NULL, first_value REAL, last_ts INTEGER NOT NULL, last_value REAL, "
+          "last_quality INTEGER NOT NULL, bad_ms INTEGER NOT NULL, PRIMARY KEY (tag_id, bucket)) WITHOUT ROWID")
+LEVELS = (("samples_minute", 60_000), ("samples_hour", 3_600_000))
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--db", required=True)
+    ap.add_argument("--page-size", type=int, default=4096)
+    ap.add_argument("--tags", type=int, default=1_000_000)
+    ap.add_argument("--batch", type=int, default=47_000, help="samples a transaction")
+    ap.add_argument("--grow-rounds", type=int, default=5)
+    ap.add_argument("--rounds", type=int, default=2)
+    ap.add_argument("--reuse", action="store_true", help="go on with an existing database")
+    ap.add_argument("--first-round", type=int, default=0, help="with --reuse: the rounds' time goes on from here")
+    ap.add_argument("--rollups-only", action="store_true", help="measure with roll-ups only")
+    a = ap.parse_args()
+
+    if not a.reuse:
+        for suffix in ("", "-wal", "-shm"):
+            if os.path.exists(a.db + suffix):
+                os.remove(a.db + suffix)
+    c = sqlite3.connect(a.db, isolation_level=None)
+    if not a.reuse:
+        c.execute(f"PRAGMA page_size={a.page_size}")
+    c.execute("PRAGMA journal_mode=WAL")
+    c.execute("PRAGMA synchronous=NORMAL")
+    if not a.reuse:
+        c.execute("CREATE TABLE samples (tag_id INTEGER NOT NULL, ts INTEGER NOT NULL, value REAL, "
+                  "quality INTEGER NOT NULL, PRIMARY KEY (tag_id, ts)) WITHOUT ROWID")
+        for table, _ in LEVELS:
+            c.execute(ROLLUP.format(t=table))
+
+    ids = list(range(a.tags))
+
+    def run(first, last, rollups):
+        """Rounds first..last; samples a second. A tag's samples are 21 s apart."""
+        n = 0
+        started = time.time()
+        for r in range(first, last):
+            random.shuffle(ids)
+            for i in range(0, a.tags, a.batch):
+                batch = sorted(ids[i:i + a.batch])
+                ts = r * 21_000 + i // a.batch
+                c.execute("BEGIN")
+                c.executemany("INSERT INTO samples VALUES (?, ?, ?, 0)", [(t, ts, 1.5) for t in batch])
+                if rollups:
+                    for table, w in LEVELS:
+                        bucket = ts - ts % w
+                        c.executemany(
+                            f"INSERT INTO {table} VALUES (?, ?, 1, 1, ?, ?, ?, ?, ?, ?, ?, 0, 0) "
+                            "ON CONFLICT (tag_id, bucket) DO UPDATE SET n = n + 1, last_ts = excluded.last_ts",
+                            [(t, bucket, 1.5, 1.5, 1.5, ts, 1.5, ts, 1.5) for t in batch])
+                c.execute("COMMIT")
+                n += len(batch)
+        return n / (time.time() - started)
+
+    first = a.first_round
+    if not a.reuse:
+        run(0, a.grow_rounds, True)
+        first = a.grow_rounds
+    page = c.execute("PRAGMA page_size").fetchone()[0]
+    rate = run(first, first + a.rounds, True)
+    print(f"page size {page}, {a.batch} samples a transaction, with roll-ups: {rate:,.0f} samples/s", flush=True)
+    if not a.rollups_only:
+        rate = run(first + a.rounds, first + 2 * a.rounds, False)
+        print(f"page size {page}, {a.batch} samples a transaction, samples only: {rate:,.0f} samples/s", flush=True)
+    print(f"database {os.path.getsize(a.db) >> 20} MiB")
+
+
+if __name__ == "__main__":
+    main()
