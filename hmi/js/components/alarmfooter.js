@@ -35,6 +35,7 @@ export class AlarmFooter {
     this.root = root;
     this.session = session;
     this.known = null; // ids of unacknowledged alarms already heard
+    this.printing = false; // every row drawn, for the printout
     this.selection = '';
     this.minPriority = '';
     this.compact = window.matchMedia(COMPACT);
@@ -200,7 +201,8 @@ export class AlarmFooter {
     this.root.classList.toggle('has-unacked', list.some((a) => !a.acked));
     this.shown = shown;
     drawAlarmRows(this.tbody, shown, {
-      limit: FOOTER_ROWS,
+      // The printout is the whole list shown, not the top the footer draws.
+      limit: this.printing ? Infinity : FOOTER_ROWS,
       more: (n) => [`${n} more alarm${n === 1 ? '' : 's'} below these ${FOOTER_ROWS}: `,
         h('a', { href: '#/alarms', text: 'open the Alarms screen' }), ' to page through them.'],
     });
@@ -245,8 +247,16 @@ export class AlarmFooter {
   }
 
   print() {
+    this.printing = true;
+    this.draw(live.alarms);
     document.body.classList.add('print-alarms');
-    const done = () => { document.body.classList.remove('print-alarms'); window.removeEventListener('afterprint', done); };
+    const done = () => {
+      if (!this.printing) return;
+      this.printing = false;
+      document.body.classList.remove('print-alarms');
+      window.removeEventListener('afterprint', done);
+      this.draw(live.alarms);
+    };
     window.addEventListener('afterprint', done);
     window.print();
     setTimeout(done, 1000);
