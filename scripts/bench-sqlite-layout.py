@@ -15,6 +15,8 @@ prepared statements of its own): compare its figures with each other.
     # grow a database (5 rounds), then 2 rounds with roll-ups, 2 without
     python3 scripts/bench-sqlite-layout.py --db /tmp/l4k.db --page-size 4096
     python3 scripts/bench-sqlite-layout.py --db /tmp/l1k.db --page-size 1024
+    # the same, then the open-bucket design (minutes written as they close)
+    python3 scripts/bench-sqlite-layout.py --db /tmp/l4k.db --rounds 3 --closed-minutes
     # one more round on a grown database, at another transaction size
     python3 scripts/bench-sqlite-layout.py --db /tmp/l4k.db --reuse --first-round 20 \\
         --rounds 1 --batch 5000 --rollups-only
@@ -43,6 +45,9 @@ def main():
     ap.add_argument("--reuse", action="store_true", help="go on with an existing database")
     ap.add_argument("--first-round", type=int, default=0, help="with --reuse: the rounds' time goes on from here")
     ap.add_argument("--rollups-only", action="store_true", help="measure with roll-ups only")
+    ap.add_argument("--closed-minutes", action="store_true",
+                    help="also measure the open-bucket design: each tag's minute written once when "
+                         "the minute closes, and merged into its hour then (docs/research/million-tags.md, 13)")
     a = ap.parse_args()
 
     if not a.reuse:
@@ -63,9 +68,12 @@ def main():
     ids = list(range(a.tags))
 
     def run(first, last, rollups):
-        """Rounds first..last; samples a second. A tag's samples are 21 s apart."""
+        """Rounds first..last; samples a second. A tag's samples are 21 s apart.
+        rollups: True (each batch into both levels), False, or "closed" (the
+        tags of a minute written once when it closes, and merged into the hour)."""
         n = 0
         started = time.time()
+        open_minute, open_tags = None, set()
         for r in range(first, last):
             random.shuffle(ids)
             for i in range(0, a.tags, a.batch):
@@ -73,7 +81,21 @@ def main():
                 ts = r * 21_000 + i // a.batch
                 c.execute("BEGIN")
                 c.executemany("INSERT INTO samples VALUES (?, ?, ?, 0)", [(t, ts, 1.5) for t in batch])
-                if rollups:
+                if rollups == "closed":
+                    minute = ts - ts % 60_000
+                    if open_minute is not None and minute != open_minute:
+                        closed = sorted(open_tags)
+                        c.executemany("INSERT INTO samples_minute VALUES (?, ?, 3, 3, ?, ?, ?, ?, ?, ?, ?, 0, 0)",
+                                      [(t, open_minute, 1.5, 1.5, 4.5, open_minute, 1.5, open_minute, 1.5) for t in closed])
+                        hour = open_minute - open_minute % 3_600_000
+                        c.executemany(
+                            "INSERT INTO samples_hour VALUES (?, ?, 3, 3, ?, ?, ?, ?, ?, ?, ?, 0, 0) "
+                            "ON CONFLICT (tag_id, bucket) DO UPDATE SET n = n + 3, last_ts = excluded.last_ts",
+                            [(t, hour, 1.5, 1.5, 4.5, open_minute, 1.5, open_minute, 1.5) for t in closed])
+                        open_tags = set()
+                    open_minute = minute
+                    open_tags.update(batch)
+                elif rollups:
                     for table, w in LEVELS:
                         bucket = ts - ts % w
                         c.executemany(
@@ -94,6 +116,10 @@ def main():
     if not a.rollups_only:
         rate = run(first + a.rounds, first + 2 * a.rounds, False)
         print(f"page size {page}, {a.batch} samples a transaction, samples only: {rate:,.0f} samples/s", flush=True)
+    if a.closed_minutes:
+        rate = run(first + 2 * a.rounds, first + 3 * a.rounds, "closed")
+        print(f"page size {page}, {a.batch} samples a transaction, minutes written as they close: "
+              f"{rate:,.0f} samples/s", flush=True)
     print(f"database {os.path.getsize(a.db) >> 20} MiB")
 
 
