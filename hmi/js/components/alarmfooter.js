@@ -203,8 +203,7 @@ export class AlarmFooter {
     drawAlarmRows(this.tbody, shown, {
       // The printout is the whole list shown, not the top the footer draws.
       limit: this.printing ? Infinity : FOOTER_ROWS,
-      more: (n) => [`${n} more alarm${n === 1 ? '' : 's'} below these ${FOOTER_ROWS}: `,
-        h('a', { href: '#/alarms', text: 'open the Alarms screen' }), ' to page through them.'],
+      more: () => [` below these ${FOOTER_ROWS}: `, h('a', { href: '#/alarms', text: 'open the Alarms screen' }), ' to page through them.'],
     });
     // The summary counts every standing alarm per area, whatever the filter.
     const summary = this.summaryShown();

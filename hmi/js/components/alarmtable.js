@@ -186,8 +186,8 @@ function valueCell(a) {
  * Draws alarms into a <tbody>. `extra(a)` may return a cell with actions;
  * `selectable` adds a checkbox per row (named by alarm id). `limit` draws
  * only the first rows (a flood of standing alarms would otherwise put tens
- * of thousands of rows into the page at every change); `more(n)` then gives
- * the content of a last row saying what was left out.
+ * of thousands of rows into the page at every change); a last row then
+ * counts the rest, followed by what `more(count)` gives (a link, a button).
  */
 export function drawAlarmRows(tbody, alarms, { extra, selectable, selected, limit = Infinity, more } = {}) {
   const drawn = alarms.length > limit ? alarms.slice(0, limit) : alarms;
@@ -220,7 +220,7 @@ export function drawAlarmRows(tbody, alarms, { extra, selectable, selected, limi
   } else if (drawn.length < alarms.length) {
     const left = alarms.length - drawn.length;
     tbody.append(h('tr', { class: 'alarm-more' }, h('td', { colspan: 10, class: 'empty' },
-      more ? more(left) : `${left} more alarm${left === 1 ? '' : 's'} not drawn.`)));
+      `${left} more alarm${left === 1 ? '' : 's'}`, more ? more(left) : ' not drawn.')));
   }
 }
 

@@ -125,9 +125,8 @@ export default {
             onPick: (sel) => { selection.value = sel; draw(); } }));
         }
         drawAlarmRows(tbody, shown, { extra: actions, selectable: canAck, selected, limit: pageRows,
-          more: (n) => [`${n} more alarm${n === 1 ? '' : 's'} below. `,
-            h('button', { type: 'button', class: 'btn btn-small', id: 'alarms-more', text: `Show ${Math.min(n, ALARM_PAGE)} more`,
-              onclick: () => { pageRows += ALARM_PAGE; draw(); } })] });
+          more: (n) => [' below. ', h('button', { type: 'button', class: 'btn btn-small', id: 'alarms-more',
+            text: `Show ${Math.min(n, ALARM_PAGE)} more`, onclick: () => { pageRows += ALARM_PAGE; draw(); } })] });
       };
       const refilter = () => { pageRows = ALARM_PAGE; draw(); };
       tbody.addEventListener('change', (e) => {

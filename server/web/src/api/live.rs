@@ -287,7 +287,7 @@ struct Subscribe {
     /// (`alarm_changes`) instead of the whole list each time.
     #[serde(default)]
     alarm_changes: bool,
-    /// With `alarm_changes`: the version of the list the client holds. When
+    /// With `alarms`: the version of the list the client holds. When
     /// it is the one this socket last sent, a new subscription (a screen
     /// change) goes on with the changes instead of resending the whole list.
     #[serde(default)]
@@ -437,15 +437,9 @@ async fn run(
                             let (f, rx) = s.live.join(&s.db, ids.clone(), merge);
                             let snap = snapshot_message(&s.db, &ids);
                             feed = Some(Joined { _feed: f, ids, rx });
-                            // The client's list goes on only if it is the
-                            // one this socket sent and it still wants changes.
-                            let keeps_list = alarms_wanted
-                                && alarm_changes_wanted
-                                && sub_req.alarms
-                                && sub_req.alarm_changes
-                                && sub_req.alarm_version.is_some()
-                                && sub_req.alarm_version == alarm_version;
-                            if !keeps_list {
+                            // The client's list goes on if it is the one this
+                            // socket last sent (None until one was sent).
+                            if !sub_req.alarms || sub_req.alarm_version != alarm_version {
                                 alarm_version = None;
                             }
                             alarms_wanted = sub_req.alarms;
