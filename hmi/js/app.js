@@ -205,6 +205,10 @@ function mount(id) {
 }
 
 async function logout() {
+  // The live socket closes first: closed by the server when the session
+  // ends, it could reconnect, and be refused, before the session reloads.
+  // (loadSession starts it again if the log out failed.)
+  live.stop();
   await attempt('Log out', () => del('/api/session'));
   history.replaceState(null, '', '#/login');
   await loadSession();
