@@ -13,6 +13,7 @@ use sqlx::QueryBuilder;
 use tokio::io::{AsyncWrite, AsyncWriteExt};
 
 use crate::error::db;
+use crate::open_minutes;
 use crate::rollup::{self, Level};
 use crate::{Result, Store, StoreError};
 
@@ -171,7 +172,7 @@ type BucketRow = (
 
 /// From a roll-up: tag id, bucket, count, min, max, sum, values, last_ts,
 /// last value, last quality, Bad ms.
-type MultiLevelRow = (
+pub(crate) type MultiLevelRow = (
     i64,
     i64,
     i64,
@@ -203,7 +204,11 @@ struct Row {
 pub(crate) struct PreparedSamples {
     rows: Vec<Row>,
     copy: Option<Vec<u8>>,
+    /// PostgreSQL: both levels; SQLite: the minutes, which join the open
+    /// minutes (`open_minutes.rs`) and make the hours.
     buckets: Vec<(Level, Vec<rollup::Agg>)>,
+    /// SQLite: the median timestamp, the open minutes' clock.
+    median_ts: Option<i64>,
 }
 
 impl Row {
@@ -269,19 +274,28 @@ impl Store {
                 _ => deduped.push(r),
             }
         }
-        let copy = matches!(self.inner.backend, crate::store::Backend::Postgres(_))
-            .then(|| copy_text(&deduped));
-        let buckets = Level::ALL
-            .into_iter()
-            .map(|level| {
+        let postgres = matches!(self.inner.backend, crate::store::Backend::Postgres(_));
+        let copy = postgres.then(|| copy_text(&deduped));
+        let levels: &[Level] = if postgres {
+            &Level::ALL
+        } else {
+            &[Level::Minute]
+        };
+        let buckets = levels
+            .iter()
+            .map(|&level| {
                 let keys = deduped.iter().map(|r| (r.tag_id, r.ts, r.value, r.quality));
                 (level, rollup::roll_up(keys, level.width()))
             })
             .collect();
+        let median_ts = (!postgres)
+            .then(|| open_minutes::median(deduped.iter().map(|r| r.ts).collect()))
+            .flatten();
         PreparedSamples {
             rows: deduped,
             copy,
             buckets,
+            median_ts,
         }
     }
 
@@ -294,6 +308,8 @@ impl Store {
         }
         match &self.inner.backend {
             crate::store::Backend::Sqlite(s) => {
+                // One change of the open minutes at a time, from plan to apply.
+                let _gate = self.inner.open_gate.lock().await;
                 let mut tx = s
                     .writer()
                     .begin()
@@ -327,10 +343,17 @@ impl Store {
                         .await
                         .map_err(db("inserting historian samples"))?;
                 }
-                rollup::maintain_sqlite(&mut tx, &batch.buckets).await?;
-                tx.commit()
-                    .await
-                    .map_err(db("inserting historian samples"))?;
+                let minutes = batch
+                    .buckets
+                    .iter()
+                    .find(|(l, _)| *l == Level::Minute)
+                    .map_or(&[][..], |(_, b)| b.as_slice());
+                let (plan, first) = {
+                    let open = self.inner.open_minutes.lock();
+                    (open.plan(minutes, batch.median_ts), !open.marked_open)
+                };
+                self.write_open_minutes(tx, plan, first.then_some(false))
+                    .await?;
             }
             crate::store::Backend::Postgres(p) => {
                 let text = match &batch.copy {
@@ -397,6 +420,76 @@ impl Store {
             }
         }
         Ok(n)
+    }
+
+    /// Writes a plan of the open minutes in `tx` (the batch's samples are
+    /// in it already), commits, then applies the plan: the caller holds the
+    /// open minutes' gate. `clean`: the state's flag to write with it.
+    async fn write_open_minutes(
+        &self,
+        mut tx: sqlx::Transaction<'_, sqlx::Sqlite>,
+        plan: open_minutes::Plan,
+        clean: Option<bool>,
+    ) -> Result<()> {
+        rollup::maintain_sqlite(
+            &mut tx,
+            &[(Level::Minute, &plan.minutes), (Level::Hour, &plan.hours)],
+        )
+        .await?;
+        open_minutes::write_state(&mut tx, plan.watermark, clean).await?;
+        // From the commit until the plan is applied, the database and the
+        // open minutes disagree: a trend reading then tries again.
+        self.inner.open_minutes.lock().committing = true;
+        let committed = tx.commit().await;
+        let mut open = self.inner.open_minutes.lock();
+        open.committing = false;
+        committed.map_err(db("writing historian roll-ups"))?;
+        if let Some(clean) = clean {
+            open.marked_open = !clean;
+        }
+        open.apply(plan);
+        Ok(())
+    }
+
+    /// SQLite keeps each tag's open minute roll-up in memory until the
+    /// minute is over: this writes them all (in transactions of 50,000), so
+    /// a restart has nothing to rebuild. The historian's writer calls it when
+    /// it stops; nothing to do on PostgreSQL. Returns the minutes written.
+    pub async fn close_open_minutes(&self) -> Result<u64> {
+        let crate::store::Backend::Sqlite(s) = &self.inner.backend else {
+            return Ok(0);
+        };
+        if self.view {
+            return Ok(0);
+        }
+        let _gate = self.inner.open_gate.lock().await;
+        {
+            let open = self.inner.open_minutes.lock();
+            if !open.marked_open && open.count() == 0 {
+                return Ok(0);
+            }
+        }
+        let mut written = 0;
+        loop {
+            let tx = s
+                .writer()
+                .begin()
+                .await
+                .map_err(db("writing historian roll-ups"))?;
+            let plan = self.inner.open_minutes.lock().plan_close(50_000);
+            written += plan.minutes.len() as u64;
+            let last = plan.all;
+            self.write_open_minutes(tx, plan, last.then_some(true))
+                .await?;
+            if last {
+                return Ok(written);
+            }
+        }
+    }
+
+    /// How many minute roll-ups are open in memory (SQLite).
+    pub fn open_minutes(&self) -> usize {
+        self.inner.open_minutes.lock().count()
     }
 
     /// Downsamples `from..to` into `buckets` buckets, for each tag, computed
@@ -562,16 +655,11 @@ impl Store {
                 );
                 let mut rows = Vec::new();
                 for &id in ids {
-                    let mut one: Vec<MultiLevelRow> = sqlx::query_as(&sql)
-                        .bind(id)
-                        .bind(f)
-                        .bind(t)
-                        .bind(n)
-                        .bind(first)
-                        .fetch_all(s.reader())
-                        .await
-                        .map_err(db("querying a historian trend"))?;
-                    rows.append(&mut one);
+                    rows.append(
+                        &mut self
+                            .trend_of_tag_sqlite(s, &sql, level, id, (f, t, n), first)
+                            .await?,
+                    );
                 }
                 rows
             }
@@ -617,6 +705,77 @@ impl Store {
             });
         }
         Ok(out)
+    }
+
+    /// One tag's trend rows from a roll-up level on SQLite, with its open
+    /// minute folded in. The stored rows and the open minute must be of the
+    /// same moment: if the open minute changed while the rows were read (a
+    /// batch closed it, or one is committing), it reads again.
+    async fn trend_of_tag_sqlite(
+        &self,
+        s: &crate::store::SqliteBackend,
+        sql: &str,
+        level: Level,
+        id: i64,
+        (f, t, n): (i64, i64, i64),
+        first: i64,
+    ) -> Result<Vec<MultiLevelRow>> {
+        let snapshot = || {
+            let open = self.inner.open_minutes.lock();
+            (open.committing, open.open_of(id))
+        };
+        let mut tries = 0;
+        loop {
+            let before = snapshot();
+            // One read transaction: the grouped rows and the stored bucket
+            // of the open minute come from one snapshot.
+            let mut tx = s
+                .reader()
+                .begin()
+                .await
+                .map_err(db("querying a historian trend"))?;
+            let mut rows: Vec<MultiLevelRow> = sqlx::query_as(sql)
+                .bind(id)
+                .bind(f)
+                .bind(t)
+                .bind(n)
+                .bind(first)
+                .fetch_all(&mut *tx)
+                .await
+                .map_err(db("querying a historian trend"))?;
+            if let Some(open) = &before.1 {
+                let w = level.width();
+                let stored =
+                    rollup::stored_sqlite(&mut tx, level, id, rollup::bucket_of(open.bucket, w))
+                        .await?;
+                // A stored bucket recomputed from raw rows may hold the first
+                // samples of the open minute: fold in only those after it.
+                let part = match &stored {
+                    Some(r) if r.last_ts >= open.first_ts => {
+                        let raw: Vec<(i64, i64, Option<f64>, i32)> =
+                            sqlx::query_as(rollup::BUCKET_RAW)
+                                .bind(id)
+                                .bind(r.last_ts + 1)
+                                .bind(open.bucket + Level::Minute.width())
+                                .fetch_all(&mut *tx)
+                                .await
+                                .map_err(db("querying a historian trend"))?;
+                        rollup::roll_up(raw, Level::Minute.width()).pop()
+                    }
+                    _ => Some(open.clone()),
+                };
+                if let Some(part) = part {
+                    open_minutes::fold_open(&mut rows, level, (f, t, n), stored.as_ref(), &part);
+                }
+            }
+            drop(tx);
+            let after = snapshot();
+            tries += 1;
+            if (!before.0 && !after.0 && before.1 == after.1) || tries >= 50 {
+                return Ok(rows);
+            }
+            tokio::time::sleep(std::time::Duration::from_millis(1)).await;
+        }
     }
 
     /// Raw samples of `tags` in `from..to`, oldest first, at most `limit` rows.

@@ -65,6 +65,7 @@ mod exports;
 mod historian;
 mod lease;
 mod notifications;
+mod open_minutes;
 mod panels;
 mod programmes;
 mod recorder;

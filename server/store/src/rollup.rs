@@ -67,7 +67,7 @@ fn is_bad(code: i32) -> bool {
 }
 
 /// The columns of a roll-up row, in table order.
-const COLUMNS: &str = "tag_id, bucket, n, n_value, min_value, max_value, sum_value, \
+pub(crate) const COLUMNS: &str = "tag_id, bucket, n, n_value, min_value, max_value, sum_value, \
                        first_ts, first_value, last_ts, last_value, last_quality, bad_ms";
 
 /// One roll-up bucket of one tag.
@@ -132,10 +132,10 @@ impl Agg {
         self.last_quality = q;
     }
 
-    /// `self` followed by `later`, whose samples all come after `self`'s:
-    /// the reference for the merge the database does (`merge_sql`).
-    #[cfg(test)]
-    fn append(&mut self, w: i64, later: &Agg) {
+    /// `self` followed by `later` (same bucket of width `w`), whose samples
+    /// all come after `self`'s: what the database's merge does
+    /// (`merge_sql`), and how open minutes join their hour.
+    pub(crate) fn append(&mut self, w: i64, later: &Agg) {
         let end = self.bucket + w;
         if is_bad(self.last_quality) {
             self.bad_ms -= end - later.first_ts;
@@ -150,9 +150,20 @@ impl Agg {
         self.last_value = later.last_value;
         self.last_quality = later.last_quality;
     }
+
+    /// This bucket of width `from` as a part of the wider bucket of width
+    /// `to` holding it: its last sample is then held to the wider end.
+    pub(crate) fn widened(&self, from: i64, to: i64) -> Agg {
+        let bucket = bucket_of(self.bucket, to);
+        let mut a = self.clone();
+        if is_bad(a.last_quality) {
+            a.bad_ms += (bucket + to) - (self.bucket + from);
+        }
+        a.bucket = bucket;
+        a
+    }
 }
 
-#[cfg(test)]
 fn opt(a: Option<f64>, b: Option<f64>, f: impl Fn(f64, f64) -> f64) -> Option<f64> {
     match (a, b) {
         (Some(a), Some(b)) => Some(f(a, b)),
@@ -178,7 +189,7 @@ pub(crate) fn roll_up(
 }
 
 /// Raw rows of SQLite per roll-up statement: 13 parameters each.
-const SQLITE_ROWS: usize = 500;
+pub(crate) const SQLITE_ROWS: usize = 500;
 
 /// `items` in multi-row statements of `max` rows, the rest in chunks of
 /// descending powers of two: a statement's text depends on its row count,
@@ -253,8 +264,56 @@ macro_rules! recompute {
     }};
 }
 
+/// The stored bucket of `level` of one tag, if any (SQLite).
+pub(crate) async fn stored_sqlite(
+    conn: &mut SqliteConnection,
+    level: Level,
+    tag_id: i64,
+    bucket: i64,
+) -> Result<Option<Agg>> {
+    type Stored = (
+        i64,
+        i64,
+        i64,
+        i64,
+        Option<f64>,
+        Option<f64>,
+        Option<f64>,
+        i64,
+        Option<f64>,
+        i64,
+        Option<f64>,
+        i32,
+        i64,
+    );
+    let row: Option<Stored> = sqlx::query_as(&format!(
+        "SELECT {COLUMNS} FROM {} WHERE tag_id = $1 AND bucket = $2",
+        level.table()
+    ))
+    .bind(tag_id)
+    .bind(bucket)
+    .fetch_optional(conn)
+    .await
+    .map_err(db("querying a historian trend"))?;
+    Ok(row.map(|r| Agg {
+        tag_id: r.0,
+        bucket: r.1,
+        n: r.2,
+        n_value: r.3,
+        min: r.4,
+        max: r.5,
+        sum: r.6,
+        first_ts: r.7,
+        first_value: r.8,
+        last_ts: r.9,
+        last_value: r.10,
+        last_quality: r.11,
+        bad_ms: r.12,
+    }))
+}
+
 /// The statement re-reading one bucket's raw rows (`$1` tag, `$2..$3`).
-const BUCKET_RAW: &str = "SELECT tag_id, ts, value, quality FROM samples \
+pub(crate) const BUCKET_RAW: &str = "SELECT tag_id, ts, value, quality FROM samples \
      WHERE tag_id = $1 AND ts >= $2 AND ts < $3 ORDER BY ts";
 
 /// Brings both levels up to date with a batch already inserted in the raw
@@ -262,10 +321,10 @@ const BUCKET_RAW: &str = "SELECT tag_id, ts, value, quality FROM samples \
 /// ([`roll_up`] of its rows, sorted by tag then time, one per key).
 pub(crate) async fn maintain_sqlite(
     conn: &mut SqliteConnection,
-    levels: &[(Level, Vec<Agg>)],
+    levels: &[(Level, &[Agg])],
 ) -> Result<()> {
-    for (level, batch) in levels {
-        let (level, w) = (*level, level.width());
+    for &(level, batch) in levels {
+        let w = level.width();
         let mut written = HashSet::with_capacity(batch.len());
         for chunk in statement_chunks(batch, SQLITE_ROWS) {
             let mut qb =
@@ -300,7 +359,7 @@ pub(crate) async fn maintain_sqlite(
     Ok(())
 }
 
-fn push_sqlite_values(qb: &mut QueryBuilder<'_, sqlx::Sqlite>, chunk: &[Agg]) {
+pub(crate) fn push_sqlite_values(qb: &mut QueryBuilder<'_, sqlx::Sqlite>, chunk: &[Agg]) {
     qb.push_values(chunk, |mut b, a| {
         b.push_bind(a.tag_id)
             .push_bind(a.bucket)

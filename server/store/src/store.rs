@@ -108,6 +108,10 @@ pub(crate) struct Inner {
     /// historian first wrote (loaded once, in one query: asking per batch
     /// would make a restarted server with a million tags ask for them all).
     pub(crate) tag_ids_loaded: tokio::sync::OnceCell<()>,
+    /// SQLite: each tag's open minute roll-up (`open_minutes.rs`).
+    pub(crate) open_minutes: Mutex<crate::open_minutes::OpenMinutes>,
+    /// Held by whatever changes the open minutes, across its transaction.
+    pub(crate) open_gate: tokio::sync::Mutex<()>,
     description: String,
 }
 
@@ -201,6 +205,11 @@ const SQLITE_MIGRATIONS: &[(i64, &str, &str)] = &[
         "switching programmes",
         include_str!("../migrations/sqlite/0014_switching_programmes.sql"),
     ),
+    (
+        15,
+        "open minute roll-ups",
+        include_str!("../migrations/sqlite/0015_open_minutes.sql"),
+    ),
 ];
 const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
     (
@@ -272,6 +281,11 @@ const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
         14,
         "switching programmes",
         include_str!("../migrations/postgres/0014_switching_programmes.sql"),
+    ),
+    (
+        15,
+        "open minute roll-ups",
+        include_str!("../migrations/postgres/0015_open_minutes.sql"),
     ),
 ];
 
@@ -435,6 +449,26 @@ impl Store {
             .map_err(open_err(format!("SQLite database {shown} (readers)")))?;
         tracing::info!(path = %shown, sync = ?options.sqlite_sync, "opened SQLite store");
         check_site(&options.site)?;
+        // The minute roll-ups a crash left open are rebuilt before anything
+        // reads or writes them.
+        let mut open_minutes = crate::open_minutes::OpenMinutes::default();
+        let (closed_through, rebuilt) = {
+            let mut tx = write.begin().await.map_err(open_err(format!(
+                "historian roll-ups of SQLite database {shown}"
+            )))?;
+            let done = crate::open_minutes::recover(&mut tx).await?;
+            tx.commit().await.map_err(open_err(format!(
+                "historian roll-ups of SQLite database {shown}"
+            )))?;
+            done
+        };
+        if rebuilt > 0 {
+            tracing::warn!(
+                minutes = rebuilt,
+                "historian: rebuilt the minute roll-ups left open by an unclean stop"
+            );
+        }
+        open_minutes.start_at(closed_through);
         Ok(Store {
             site: options.site.as_str().into(),
             view: false,
@@ -442,6 +476,8 @@ impl Store {
                 backend: Backend::Sqlite(SqliteBackend { write, read }),
                 tag_ids: Mutex::new(HashMap::new()),
                 tag_ids_loaded: tokio::sync::OnceCell::new(),
+                open_minutes: Mutex::new(open_minutes),
+                open_gate: tokio::sync::Mutex::new(()),
                 description: format!("sqlite {shown}"),
             }),
         })
@@ -497,6 +533,8 @@ impl Store {
                 backend: Backend::Postgres(pool),
                 tag_ids: Mutex::new(HashMap::new()),
                 tag_ids_loaded: tokio::sync::OnceCell::new(),
+                open_minutes: Mutex::new(Default::default()),
+                open_gate: tokio::sync::Mutex::new(()),
                 description: format!(
                     "postgres {shown}{}",
                     options
@@ -655,8 +693,13 @@ impl Store {
     }
 
     /// Closes the pools, waiting for queries in flight. In SQLite this also
-    /// checkpoints the WAL into the main file.
+    /// writes the open minute roll-ups and checkpoints the WAL into the
+    /// main file.
     pub async fn close(&self) {
+        if let Err(e) = self.close_open_minutes().await {
+            tracing::warn!(error = %e,
+                "historian: could not write the open minute roll-ups; the next start rebuilds them");
+        }
         match &self.inner.backend {
             Backend::Sqlite(s) => {
                 s.read.close().await;

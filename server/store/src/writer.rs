@@ -383,6 +383,13 @@ async fn run(
     if let Err(e) = writer.await {
         tracing::error!(error = %e, "historian writer task failed");
     }
+    // The open minute roll-ups (SQLite) are written, so the next start has
+    // nothing to rebuild.
+    match store.close_open_minutes().await {
+        Ok(minutes) => tracing::debug!(minutes, "historian: open minute roll-ups written"),
+        Err(e) => tracing::warn!(error = %e,
+            "historian: could not write the open minute roll-ups; the next start rebuilds them"),
+    }
 }
 
 /// The database's side of the writer: each batch in order, retried until

@@ -61,8 +61,16 @@ fn series(rng: &mut StdRng, tag: &Arc<str>, start: i64, n: usize) -> Vec<History
 
 /// Writes the samples in random batches; 1 % of them are held back and sent
 /// late, 1 % are sent again later with another value (which replaces the
-/// first, as a repeated sample does).
+/// first, as a repeated sample does). The newest 10 of each tag come last,
+/// after the late ones, so the last minutes are left open (SQLite keeps them
+/// open in memory).
 async fn write(store: &Store, rng: &mut StdRng, mut all: Vec<HistorySample>) {
+    all.sort_by_key(|s| (s.tag.clone(), s.ts.as_millis()));
+    let mut newest = Vec::new();
+    for tag in all.chunk_by(|a, b| a.tag == b.tag) {
+        newest.extend_from_slice(&tag[tag.len().saturating_sub(10)..]);
+    }
+    all.retain(|s| !newest.iter().any(|n| n.tag == s.tag && n.ts == s.ts));
     all.sort_by_key(|s| s.ts.as_millis());
     let mut late: Vec<HistorySample> = Vec::new();
     let mut i = 0;
@@ -88,6 +96,7 @@ async fn write(store: &Store, rng: &mut StdRng, mut all: Vec<HistorySample>) {
         i += len;
     }
     store.insert_samples(&late).await.unwrap();
+    store.insert_samples(&newest).await.unwrap();
 }
 
 /// What the trend bucket must hold, from the raw samples in `start..end`.
@@ -138,6 +147,59 @@ fn check(engine: Engine, what: &str, b: &TrendBucket, raw: &[RawSample], width: 
     assert_eq!(b.bad_ms, bad as u64, "{ctx}: Bad time");
 }
 
+/// Checks every trend of `queries` read from a roll-up level against the raw
+/// samples of its tags; returns how many queries read raw, minute and hour.
+async fn check_trends(
+    engine: Engine,
+    store: &Store,
+    tags: &[&str],
+    raw: &[Vec<RawSample>],
+    queries: &[(i64, i64, u32)],
+    what: &str,
+) -> [usize; 3] {
+    let mut levels = [0; 3];
+    for &(f, t, n) in queries {
+        let width = if HOUR * n as i64 <= t - f {
+            HOUR
+        } else if MINUTE * n as i64 <= t - f {
+            MINUTE
+        } else {
+            levels[0] += 1;
+            continue; // raw: covered by the store tests
+        };
+        levels[if width == HOUR { 2 } else { 1 }] += 1;
+        let trends = store.trend(tags, ts(f), ts(t), n).await.unwrap();
+        for (trend, raw) in trends.iter().zip(raw) {
+            let what = format!("{what}, {} {f}..{t}/{n}", trend.tag);
+            let mut prev_end = None;
+            let mut total = 0;
+            for b in &trend.buckets {
+                assert!(b.index < n, "{what}: index");
+                assert_eq!(b.start.as_millis().rem_euclid(width), 0, "{what}: on grid");
+                assert_eq!(b.end.as_millis().rem_euclid(width), 0, "{what}: on grid");
+                assert!(b.start.as_millis() > f - width && b.end.as_millis() < t + width);
+                if let Some(p) = prev_end {
+                    assert!(b.start >= p, "{what}: buckets in order, not overlapping");
+                }
+                prev_end = Some(b.end);
+                check(engine, &what, b, raw, width);
+                total += b.count;
+            }
+            // No sample between the first and the last edge is left out.
+            let (lo, hi) = (
+                f - f.rem_euclid(width),
+                (t - 1) - (t - 1).rem_euclid(width) + width,
+            );
+            let expected = raw
+                .iter()
+                .filter(|r| (lo..hi).contains(&r.ts.as_millis()))
+                .count() as u64;
+            assert_eq!(total, expected, "{what}: every sample in some bucket");
+        }
+    }
+    levels
+}
+
 async fn trends_from_rollups_equal_raw(db: TestDb) {
     let engine = db.engine;
     let store = &db.store;
@@ -185,76 +247,196 @@ async fn trends_from_rollups_equal_raw(db: TestDb) {
         let n = rng.random_range(1..300);
         queries.push((f, t, n));
     }
-    let mut levels = [0; 3];
-    for (f, t, n) in queries {
-        let width = if HOUR * n as i64 <= t - f {
-            HOUR
-        } else if MINUTE * n as i64 <= t - f {
-            MINUTE
-        } else {
-            levels[0] += 1;
-            continue; // raw: covered by the store tests
-        };
-        levels[if width == HOUR { 2 } else { 1 }] += 1;
-        let trends = store.trend(&tags, ts(f), ts(t), n).await.unwrap();
-        for (trend, raw) in trends.iter().zip(&raw) {
-            let what = format!("seed {seed}, {} {f}..{t}/{n}", trend.tag);
-            let mut prev_end = None;
-            let mut total = 0;
-            for b in &trend.buckets {
-                assert!(b.index < n, "{what}: index");
-                assert_eq!(b.start.as_millis().rem_euclid(width), 0, "{what}: on grid");
-                assert_eq!(b.end.as_millis().rem_euclid(width), 0, "{what}: on grid");
-                assert!(b.start.as_millis() > f - width && b.end.as_millis() < t + width);
-                if let Some(p) = prev_end {
-                    assert!(b.start >= p, "{what}: buckets in order, not overlapping");
-                }
-                prev_end = Some(b.end);
-                check(engine, &what, b, raw, width);
-                total += b.count;
-            }
-            // No sample between the first and the last edge is left out.
-            let (lo, hi) = (
-                f - f.rem_euclid(width),
-                (t - 1) - (t - 1).rem_euclid(width) + width,
-            );
-            let expected = raw
-                .iter()
-                .filter(|r| (lo..hi).contains(&r.ts.as_millis()))
-                .count() as u64;
-            assert_eq!(total, expected, "{what}: every sample in some bucket");
-        }
-    }
+    let levels = check_trends(
+        engine,
+        store,
+        &tags,
+        &raw,
+        &queries,
+        &format!("seed {seed}"),
+    )
+    .await;
     assert!(
         levels[1] > 3 && levels[2] > 3,
         "both levels were queried: {levels:?}"
     );
 
-    // The upgrade's one-time roll-up gives the same trends.
-    let queries = [(T0, last + 1, 50u32), (T0 + HOUR, T0 + 30 * HOUR, 400)];
-    let mut before = Vec::new();
-    for (f, t, n) in queries {
-        before.push(store.trend(&tags, ts(f), ts(t), n).await.unwrap());
+    // The upgrade's one-time roll-up gives the same trends (with the open
+    // minutes written first: it rebuilds every roll-up from raw rows).
+    if engine == Engine::Sqlite {
+        assert!(store.open_minutes() > 0, "the last minutes were open");
     }
+    store.close_open_minutes().await.unwrap();
+    assert_eq!(store.open_minutes(), 0);
+    let queries = [(T0, last + 1, 50u32), (T0 + HOUR, T0 + 30 * HOUR, 400)];
+    let before = trends(store, &tags, &queries).await;
     rebuild_from_migration(&db).await;
-    for ((f, t, n), before) in queries.into_iter().zip(before) {
-        let after = store.trend(&tags, ts(f), ts(t), n).await.unwrap();
+    let after = trends(store, &tags, &queries).await;
+    same_trends(
+        &format!("{engine:?} rebuilt by the migration"),
+        &after,
+        &before,
+    );
+    db.cleanup().await;
+}
+both_backends!(trends_from_rollups, trends_from_rollups_equal_raw);
+
+async fn trends(store: &Store, tags: &[&str], queries: &[(i64, i64, u32)]) -> Vec<Vec<TagTrend>> {
+    let mut out = Vec::new();
+    for &(f, t, n) in queries {
+        out.push(store.trend(tags, ts(f), ts(t), n).await.unwrap());
+    }
+    out
+}
+
+/// The same buckets (the average to rounding: sums are added in another order).
+fn same_trends(what: &str, after: &[Vec<TagTrend>], before: &[Vec<TagTrend>]) {
+    assert_eq!(after.len(), before.len());
+    for (after, before) in after.iter().zip(before) {
         assert_eq!(after.len(), before.len());
-        for (a, b) in after.iter().zip(&before) {
-            assert_eq!(a.buckets.len(), b.buckets.len());
+        for (a, b) in after.iter().zip(before) {
+            assert_eq!(a.buckets.len(), b.buckets.len(), "{what}: {}", a.tag);
             for (x, y) in a.buckets.iter().zip(&b.buckets) {
                 let (xa, ya) = (x.avg, y.avg);
                 let mut x = x.clone();
                 x.avg = y.avg;
-                assert_eq!(&x, y, "{engine:?} {}: rebuilt by the migration", a.tag);
+                assert_eq!(&x, y, "{what}: {}", a.tag);
                 let (xa, ya) = (xa.unwrap_or(0.0), ya.unwrap_or(0.0));
-                assert!((xa - ya).abs() <= 1e-9 * ya.abs().max(1.0));
+                assert!(
+                    (xa - ya).abs() <= 1e-9 * ya.abs().max(1.0),
+                    "{what}: {}",
+                    a.tag
+                );
             }
         }
     }
+}
+
+/// SQLite keeps each tag's open minute roll-up in memory until the minute is
+/// over. A process that dies with minutes open loses none: the next open
+/// rebuilds them from the raw rows, and the roll-ups then equal the
+/// upgrade's rebuild of every roll-up from raw rows, before and after more
+/// samples (late ones among them) are written.
+async fn open_minutes_survive_a_crash(mut db: TestDb) {
+    let engine = db.engine;
+    let mut rng = StdRng::seed_from_u64(0x0c4a_5401);
+    let names: Vec<Arc<str>> = ["A", "B", "C", "D"].into_iter().map(Arc::from).collect();
+    let tags: Vec<&str> = names.iter().map(|n| &**n).collect();
+    let mut all = Vec::new();
+    for (k, name) in names.iter().enumerate() {
+        all.extend(series(&mut rng, name, T0 + k as i64 * 777, 3_000));
+    }
+    let last = all.iter().map(|s| s.ts.as_millis()).max().unwrap();
+    write(&db.store, &mut rng, all).await;
+    if engine == Engine::Sqlite {
+        assert!(db.store.open_minutes() > 0, "minutes are open at the crash");
+    }
+    let queries = [
+        (T0, last + 1, 40u32),
+        (T0 + HOUR, T0 + 30 * HOUR, 400),
+        (last - 3 * HOUR, last + HOUR, 200),
+    ];
+    let before = trends(&db.store, &tags, &queries).await;
+    // The crash: a new process opens the database; the old one never
+    // writes again (its open minutes die with it).
+    let reopened = Store::open(&db.url, &db.options).await.unwrap();
+    let crashed = std::mem::replace(&mut db.store, reopened);
+    drop(crashed);
+    assert_eq!(db.store.open_minutes(), 0);
+    let after = trends(&db.store, &tags, &queries).await;
+    same_trends(&format!("{engine:?} after the crash"), &after, &before);
+
+    // Writing goes on, some samples in the minutes rebuilt.
+    let mut more = Vec::new();
+    for (k, name) in names.iter().enumerate() {
+        more.extend(series(&mut rng, name, last - MINUTE + k as i64 * 333, 500));
+    }
+    let newest = more.iter().map(|s| s.ts.as_millis()).max().unwrap();
+    write(&db.store, &mut rng, more).await;
+    let queries = [
+        (T0, newest + 1, 60u32),
+        (last - 3 * HOUR, newest + HOUR, 300),
+    ];
+    let open = trends(&db.store, &tags, &queries).await;
+    db.store.close_open_minutes().await.unwrap();
+    rebuild_from_migration(&db).await;
+    let rebuilt = trends(&db.store, &tags, &queries).await;
+    same_trends(
+        &format!("{engine:?} rebuilt by the migration"),
+        &open,
+        &rebuilt,
+    );
     db.cleanup().await;
 }
-both_backends!(trends_from_rollups, trends_from_rollups_equal_raw);
+both_backends!(open_minutes_crash, open_minutes_survive_a_crash);
+
+/// Fifty tags logging side by side, as a plant does: their last minutes are
+/// open when the trends are read (SQLite keeps them in memory), late samples
+/// among them make the database recompute hours holding open minutes, and
+/// every trend at both levels still equals the raw samples; after the open
+/// minutes are written, the tables equal the upgrade's rebuild from raw rows.
+async fn trends_fold_in_open_minutes(db: TestDb) {
+    let engine = db.engine;
+    let store = &db.store;
+    let mut rng = StdRng::seed_from_u64(0x0be7_0050);
+    let names: Vec<Arc<str>> = (0..50).map(|k| Arc::from(format!("T{k:02}"))).collect();
+    let tags: Vec<&str> = names.iter().map(|n| &**n).collect();
+    let start = T0 - T0.rem_euclid(HOUR) + 17 * MINUTE;
+    let mut all = Vec::new();
+    for name in &names {
+        let (mut t, mut v) = (start + rng.random_range(0..5_000), 0.0f64);
+        while t < start + 3 * HOUR {
+            t += rng.random_range(2_000..15_000);
+            v += rng.random_range(-1.0..1.0);
+            let quality = match rng.random_range(0..40) {
+                0 => QualityCode::Bad,
+                1 => QualityCode::Uncertain,
+                _ => QualityCode::Good,
+            };
+            all.push(HistorySample {
+                tag: name.clone(),
+                ts: ts(t),
+                value: Some(v),
+                exact: None,
+                quality,
+            });
+        }
+    }
+    let last = all.iter().map(|s| s.ts.as_millis()).max().unwrap();
+    write(store, &mut rng, all).await;
+    if engine == Engine::Sqlite {
+        assert!(store.open_minutes() >= 25, "{} open", store.open_minutes());
+    }
+    let mut raw = Vec::new();
+    for t in &tags {
+        raw.push(
+            store
+                .raw_samples(&[t], ts(0), ts(last + 1), u32::MAX)
+                .await
+                .unwrap(),
+        );
+    }
+    let queries = [
+        (start, last + 1, 3u32),
+        (start - HOUR, last + HOUR, 4),
+        (last - 2 * HOUR, last + 1, 100),
+        (last - 40 * MINUTE, last + 30 * MINUTE, 35),
+        (last - 7 * MINUTE, last + 1, 7),
+    ];
+    let levels = check_trends(engine, store, &tags, &raw, &queries, "open minutes").await;
+    assert!(levels[1] >= 3 && levels[2] >= 2, "{levels:?}");
+    let open = trends(store, &tags, &queries).await;
+    store.close_open_minutes().await.unwrap();
+    rebuild_from_migration(&db).await;
+    let rebuilt = trends(store, &tags, &queries).await;
+    same_trends(
+        &format!("{engine:?} rebuilt by the migration"),
+        &open,
+        &rebuilt,
+    );
+    db.cleanup().await;
+}
+both_backends!(open_minute_trends, trends_fold_in_open_minutes);
 
 /// Empties the roll-up tables and runs migration 0009 again, as on a
 /// database upgraded with samples already in it.
