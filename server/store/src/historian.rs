@@ -439,15 +439,18 @@ impl Store {
         open_minutes::write_state(&mut tx, plan.watermark, clean).await?;
         // From the commit until the plan is applied, the database and the
         // open minutes disagree: a trend reading then tries again.
-        self.inner.open_minutes.lock().committing = true;
-        let committed = tx.commit().await;
-        let mut open = self.inner.open_minutes.lock();
-        open.committing = false;
-        committed.map_err(db("writing historian roll-ups"))?;
-        if let Some(clean) = clean {
-            open.marked_open = !clean;
+        let committing = open_minutes::Committing::start(&self.inner.open_minutes);
+        tx.commit()
+            .await
+            .map_err(db("writing historian roll-ups"))?;
+        {
+            let mut open = self.inner.open_minutes.lock();
+            if let Some(clean) = clean {
+                open.marked_open = !clean;
+            }
+            open.apply(plan);
         }
-        open.apply(plan);
+        drop(committing);
         Ok(())
     }
 

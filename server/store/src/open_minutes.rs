@@ -172,6 +172,23 @@ pub(crate) struct OpenMinutes {
     pub(crate) committing: bool,
 }
 
+/// Marks a commit of the open minutes under way until dropped, however the
+/// commit ends (an error, or its future dropped).
+pub(crate) struct Committing<'a>(&'a parking_lot::Mutex<OpenMinutes>);
+
+impl<'a> Committing<'a> {
+    pub(crate) fn start(open: &'a parking_lot::Mutex<OpenMinutes>) -> Self {
+        open.lock().committing = true;
+        Committing(open)
+    }
+}
+
+impl Drop for Committing<'_> {
+    fn drop(&mut self) {
+        self.0.lock().committing = false;
+    }
+}
+
 /// What a batch does to the roll-ups: the minutes to write now and their
 /// hours, and the open minutes once it is committed.
 pub(crate) struct Plan {
