@@ -46,7 +46,7 @@ pub(crate) const GRACE_MS: i64 = 60_000;
 
 /// Tag ids from here on keep no open minute (their roll-ups are written with
 /// their samples): bounds the table, which is indexed by tag id.
-const MAX_SLOTS: i64 = 1 << 24;
+const MAX_SLOTS: i64 = 1 << 22;
 
 /// Open minutes the clock's sweep writes with one batch, at most: a
 /// million quiet tags are written over a few batches, not in one.
@@ -150,10 +150,51 @@ impl Slot {
     }
 }
 
+/// Tags' slots in a chunk of the table.
+const CHUNK: usize = 4096;
+
+/// The slots by tag id, in chunks: growing never copies the table (88 MiB
+/// at a million tags, which the first rows of a new plant register a few
+/// thousand at a time).
+#[derive(Default)]
+struct Slots(Vec<Box<[Slot]>>);
+
+impl Slots {
+    fn get(&self, i: usize) -> Option<&Slot> {
+        self.0.get(i / CHUNK).map(|c| &c[i % CHUNK])
+    }
+
+    fn get_mut(&mut self, i: usize) -> &mut Slot {
+        while self.0.len() <= i / CHUNK {
+            self.0.push(vec![Slot::EMPTY; CHUNK].into_boxed_slice());
+        }
+        &mut self.0[i / CHUNK][i % CHUNK]
+    }
+
+    /// The slots from tag id `from` on, with their ids.
+    fn from(&self, from: usize) -> impl Iterator<Item = (usize, &Slot)> {
+        self.0
+            .iter()
+            .enumerate()
+            .skip(from / CHUNK)
+            .flat_map(|(c, chunk)| {
+                chunk
+                    .iter()
+                    .enumerate()
+                    .map(move |(k, s)| (c * CHUNK + k, s))
+            })
+            .skip(from % CHUNK)
+    }
+
+    fn len(&self) -> usize {
+        self.0.len() * CHUNK
+    }
+}
+
 /// The open minutes of one database, with the roll-up clock.
 pub(crate) struct OpenMinutes {
     /// By tag id.
-    slots: Vec<Slot>,
+    slots: Slots,
     /// Minutes before this are written, or written at the latest by the
     /// sweep under way, for every tag: samples before it are written at once.
     cutoff: i64,
@@ -213,7 +254,7 @@ pub(crate) struct Plan {
 impl Default for OpenMinutes {
     fn default() -> Self {
         OpenMinutes {
-            slots: Vec::new(),
+            slots: Slots::default(),
             cutoff: i64::MIN,
             closed_through: i64::MIN,
             sweep: None,
@@ -235,7 +276,7 @@ impl OpenMinutes {
 
     /// How many minutes are open.
     pub(crate) fn count(&self) -> usize {
-        self.slots.iter().filter(|s| s.n > 0).count()
+        self.slots.from(0).filter(|(_, s)| s.n > 0).count()
     }
 
     /// What a batch does: `batch`, its samples rolled up by minute (sorted
@@ -304,7 +345,7 @@ impl OpenMinutes {
             let mut done: Vec<usize> = slots.iter().map(|(i, _)| *i).collect();
             done.sort_unstable();
             let mut next = self.slots.len();
-            for (i, s) in self.slots.iter().enumerate().skip(from) {
+            for (i, s) in self.slots.from(from) {
                 if swept.len() == SWEEP_PER_BATCH {
                     next = i;
                     break;
@@ -344,7 +385,7 @@ impl OpenMinutes {
         let mut swept = Vec::new();
         let mut cutoff = self.cutoff;
         let mut all = true;
-        for (i, s) in self.slots.iter().enumerate() {
+        for (i, s) in self.slots.from(0) {
             if s.n > 0 {
                 if swept.len() == limit {
                     all = false;
@@ -355,7 +396,7 @@ impl OpenMinutes {
             }
         }
         if all {
-            for s in &self.slots {
+            for (_, s) in self.slots.from(0) {
                 let mut s = *s;
                 s.close();
                 cutoff = cutoff.max(s.closed_next);
@@ -378,21 +419,14 @@ impl OpenMinutes {
 
     /// The plan's transaction is committed.
     pub(crate) fn apply(&mut self, plan: Plan) {
-        if let Some(top) = plan.slots.iter().map(|(i, _)| *i).max() {
-            if top >= self.slots.len() {
-                // Exactly: at a million tags a doubled table is 90 MiB.
-                self.slots.reserve_exact(top + 1 - self.slots.len());
-                self.slots.resize(top + 1, Slot::EMPTY);
-            }
-        }
         for (i, s) in plan.slots {
-            self.slots[i] = s;
+            *self.slots.get_mut(i) = s;
         }
         for i in plan.swept {
-            self.slots[i].close();
+            self.slots.get_mut(i).close();
         }
         if plan.all {
-            self.slots = Vec::new();
+            self.slots = Slots::default();
         }
         if let Some(w) = plan.watermark {
             self.closed_through = w;
