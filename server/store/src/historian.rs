@@ -310,6 +310,7 @@ impl Store {
             crate::store::Backend::Sqlite(s) => {
                 // One change of the open minutes at a time, from plan to apply.
                 let _gate = self.inner.open_gate.lock().await;
+                self.recover_locked(s).await?;
                 let mut tx = s
                     .writer()
                     .begin()
@@ -436,7 +437,7 @@ impl Store {
             &[(Level::Minute, &plan.minutes), (Level::Hour, &plan.hours)],
         )
         .await?;
-        open_minutes::write_state(&mut tx, plan.watermark, clean).await?;
+        open_minutes::write_state(&mut tx, &self.site, plan.watermark, clean).await?;
         // From the commit until the plan is applied, the database and the
         // open minutes disagree: a trend reading then tries again.
         let committing = open_minutes::Committing::start(&self.inner.open_minutes);
@@ -488,6 +489,45 @@ impl Store {
                 return Ok(written);
             }
         }
+    }
+
+    /// SQLite: rebuilds the minute roll-ups an unclean stop left open (from
+    /// the raw rows at or after the site's watermark). The historian's writer
+    /// calls it when it starts; the first write does it otherwise. Returns
+    /// the minutes rebuilt.
+    pub async fn recover_open_minutes(&self) -> Result<u64> {
+        let crate::store::Backend::Sqlite(s) = &self.inner.backend else {
+            return Ok(0);
+        };
+        if self.view {
+            return Ok(0);
+        }
+        let _gate = self.inner.open_gate.lock().await;
+        self.recover_locked(s).await
+    }
+
+    /// [`Self::recover_open_minutes`] with the open minutes' gate held.
+    async fn recover_locked(&self, s: &crate::store::SqliteBackend) -> Result<u64> {
+        if self.inner.open_minutes.lock().recovered {
+            return Ok(0);
+        }
+        let mut tx = s
+            .writer()
+            .begin()
+            .await
+            .map_err(db("rebuilding the historian's open minutes"))?;
+        let (closed_through, rebuilt) = open_minutes::recover(&mut tx, &self.site).await?;
+        tx.commit()
+            .await
+            .map_err(db("rebuilding the historian's open minutes"))?;
+        self.inner.open_minutes.lock().start_at(closed_through);
+        if rebuilt > 0 {
+            tracing::warn!(
+                minutes = rebuilt,
+                "historian: rebuilt the minute roll-ups an unclean stop left open"
+            );
+        }
+        Ok(rebuilt)
     }
 
     /// How many minute roll-ups are open in memory (SQLite).
@@ -728,7 +768,13 @@ impl Store {
             (open.committing, open.open_of(id))
         };
         let mut tries = 0;
+        // After a few reads out of step with the writer, the last one holds
+        // the open minutes' gate: no batch can change them meanwhile.
+        let mut gate = None;
         loop {
+            if tries == 20 {
+                gate = Some(self.inner.open_gate.lock().await);
+            }
             let before = snapshot();
             // One read transaction: the grouped rows and the stored bucket
             // of the open minute come from one snapshot.
@@ -773,10 +819,10 @@ impl Store {
             }
             drop(tx);
             let after = snapshot();
-            tries += 1;
-            if (!before.0 && !after.0 && before.1 == after.1) || tries >= 50 {
+            if (!before.0 && !after.0 && before.1 == after.1) || gate.is_some() {
                 return Ok(rows);
             }
+            tries += 1;
             tokio::time::sleep(std::time::Duration::from_millis(1)).await;
         }
     }

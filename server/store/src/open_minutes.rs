@@ -24,8 +24,11 @@
 //!
 //! A trend folds the open minutes of its tags into what it reads
 //! ([`fold_open`]). After a crash, the minutes at or after the watermark
-//! are rebuilt from the raw rows when the store opens ([`recover`]); a clean
+//! are rebuilt from the raw rows before the historian's first write
+//! ([`recover`]: the historian's writer does it when it starts; a process
+//! that only reads, such as a command, leaves it to the server); a clean
 //! stop writes every open minute first ([`crate::Store::close_open_minutes`]).
+//! The state is per site: one server writes a site's history.
 //!
 //! **Owns:** the open minutes, the roll-up clock and the watermark row.
 //! **Must not touch:** the raw samples (read only, to rebuild) and the
@@ -43,6 +46,15 @@ const HOUR: i64 = 3_600_000;
 /// How long after a minute's end (by the roll-up clock) its stragglers may
 /// still join it; later ones are written to the roll-ups at once.
 pub(crate) const GRACE_MS: i64 = 60_000;
+
+/// A minute starting this far after the roll-up clock is written at once
+/// and moves no floor: a device stamping samples in the future (a wrong
+/// clock) must not close every tag's minutes for good.
+const HORIZON_MS: i64 = 3_600_000;
+
+/// The roll-up clock stays within this many ms of 1970 (±285,000 years),
+/// so no bucket arithmetic on it can overflow.
+const CLOCK_BOUND: i64 = 1 << 53;
 
 /// Tag ids from here on keep no open minute (their roll-ups are written with
 /// their samples): bounds the table, which is indexed by tag id.
@@ -144,7 +156,7 @@ impl Slot {
     /// samples before its end are written at once.
     fn close(&mut self) {
         if self.n > 0 {
-            self.closed_next = self.closed_next.max(self.bucket + MINUTE);
+            self.closed_next = self.closed_next.max(self.bucket.saturating_add(MINUTE));
             self.n = 0;
         }
     }
@@ -205,6 +217,9 @@ pub(crate) struct OpenMinutes {
     sweep: Option<(i64, usize)>,
     /// The newest batch median timestamp.
     clock: i64,
+    /// What a crash left open is rebuilt, and the watermark read
+    /// ([`recover`], before the first write).
+    pub(crate) recovered: bool,
     /// The watermark row says a minute may be open (set once per start).
     pub(crate) marked_open: bool,
     /// A transaction that changes the open minutes is committing: what the
@@ -259,6 +274,7 @@ impl Default for OpenMinutes {
             closed_through: i64::MIN,
             sweep: None,
             clock: i64::MIN,
+            recovered: false,
             marked_open: false,
             committing: false,
         }
@@ -283,16 +299,27 @@ impl OpenMinutes {
     /// by tag then time, see [`rollup::roll_up`]); `median_ts`, the median
     /// timestamp of its samples. Changes nothing until [`Self::apply`].
     pub(crate) fn plan(&self, batch: &[Agg], median_ts: Option<i64>) -> Plan {
-        let clock = self.clock.max(median_ts.unwrap_or(i64::MIN));
-        let cutoff = self
-            .cutoff
-            .max(bucket_of(clock.saturating_sub(GRACE_MS), MINUTE));
+        let clock = match median_ts {
+            Some(m) => self.clock.max(m.clamp(-CLOCK_BOUND, CLOCK_BOUND)),
+            None => self.clock,
+        };
+        let cutoff = match clock {
+            i64::MIN => self.cutoff,
+            c => self.cutoff.max(bucket_of(c - GRACE_MS, MINUTE)),
+        };
+        let horizon = clock.saturating_add(HORIZON_MS);
         let mut minutes: Vec<Agg> = Vec::new();
         let mut slots: Vec<(usize, Slot)> = Vec::new();
         for group in batch.chunk_by(|a, b| a.tag_id == b.tag_id) {
             let id = group[0].tag_id;
             if !(0..MAX_SLOTS).contains(&id) {
                 minutes.extend_from_slice(group);
+                continue;
+            }
+            // Minutes past the horizon are written at once (see HORIZON_MS).
+            let (group, future) = group.split_at(group.partition_point(|a| a.bucket < horizon));
+            minutes.extend_from_slice(future);
+            if group.is_empty() {
                 continue;
             }
             let mut slot = self.slots.get(id as usize).copied().unwrap_or(Slot::EMPTY);
@@ -320,7 +347,8 @@ impl OpenMinutes {
                     Some(o) if o.bucket == a.bucket => o.append(MINUTE, a),
                     Some(o) => {
                         let closed = std::mem::replace(o, a.clone());
-                        slot.closed_next = slot.closed_next.max(closed.bucket + MINUTE);
+                        slot.closed_next =
+                            slot.closed_next.max(closed.bucket.saturating_add(MINUTE));
                         minutes.push(closed);
                     }
                     None => open = Some(a.clone()),
@@ -436,10 +464,11 @@ impl OpenMinutes {
         self.clock = plan.clock;
     }
 
-    /// The watermark read when the store opens (after [`recover`]).
+    /// The watermark read before the first write (after [`recover`]).
     pub(crate) fn start_at(&mut self, closed_through: i64) {
         self.cutoff = closed_through;
         self.closed_through = closed_through;
+        self.recovered = true;
     }
 }
 
@@ -470,10 +499,11 @@ pub(crate) fn median(mut ts: Vec<i64>) -> Option<i64> {
     Some(*ts.select_nth_unstable(mid).1)
 }
 
-/// Writes the watermark, and whether a minute may be open, in the
+/// Writes the site's watermark, and whether a minute may be open, in the
 /// transaction on `conn`.
 pub(crate) async fn write_state(
     conn: &mut SqliteConnection,
+    site: &str,
     closed_through: Option<i64>,
     clean: Option<bool>,
 ) -> Result<()> {
@@ -481,9 +511,9 @@ pub(crate) async fn write_state(
         return Ok(());
     }
     sqlx::query(
-        "UPDATE historian_rollup_state SET closed_through = COALESCE($1, closed_through), \
-         clean = COALESCE($2, clean) WHERE id = 1",
+        "INSERT INTO historian_rollup_state (site, closed_through, clean)          VALUES ($1, COALESCE($2, -9223372036854775807), COALESCE($3, 1))          ON CONFLICT (site) DO UPDATE SET          closed_through = COALESCE($2, historian_rollup_state.closed_through),          clean = COALESCE($3, historian_rollup_state.clean)",
     )
+    .bind(site)
     .bind(closed_through)
     .bind(clean.map(i32::from))
     .execute(conn)
@@ -492,14 +522,17 @@ pub(crate) async fn write_state(
     Ok(())
 }
 
-/// At open, on the writer connection in a transaction: after a crash (the
-/// state says a minute may have been open), the minute roll-ups of the raw
-/// samples at or after the watermark that have no row are written and
-/// merged into their hours, and the watermark moves past the newest
-/// sample. Returns the watermark, and the minutes rebuilt.
-pub(crate) async fn recover(conn: &mut SqliteConnection) -> Result<(i64, u64)> {
+/// Before the historian's first write, on the writer connection in a
+/// transaction: after a crash (the site's state says a minute may have
+/// been open), the minute roll-ups of the site's raw samples at or after
+/// the watermark that have no row are written and merged into their hours,
+/// and the watermark moves past the minutes seen (those not beyond the
+/// horizon of their median). Returns the watermark, and the minutes
+/// rebuilt.
+pub(crate) async fn recover(conn: &mut SqliteConnection, site: &str) -> Result<(i64, u64)> {
     let (closed_through, clean): (i64, i32) =
-        sqlx::query_as("SELECT closed_through, clean FROM historian_rollup_state WHERE id = 1")
+        sqlx::query_as("SELECT closed_through, clean FROM historian_rollup_state WHERE site = $1")
+            .bind(site)
             .fetch_optional(&mut *conn)
             .await
             .map_err(db("reading the historian's roll-up watermark"))?
@@ -507,11 +540,12 @@ pub(crate) async fn recover(conn: &mut SqliteConnection) -> Result<(i64, u64)> {
     if clean != 0 {
         return Ok((closed_through, 0));
     }
-    let top: Option<i64> = sqlx::query_scalar("SELECT max(id) FROM tags")
+    let top: Option<i64> = sqlx::query_scalar("SELECT max(id) FROM tags WHERE site = $1")
+        .bind(site)
         .fetch_one(&mut *conn)
         .await
         .map_err(db("rebuilding the historian's open minutes"))?;
-    let mut watermark = closed_through;
+    let mut seen: Vec<i64> = Vec::new();
     let mut rebuilt = 0u64;
     let mut from = 0i64;
     while from <= top.unwrap_or(-1) {
@@ -519,20 +553,18 @@ pub(crate) async fn recover(conn: &mut SqliteConnection) -> Result<(i64, u64)> {
         let raw: Vec<(i64, i64, Option<f64>, i32)> = sqlx::query_as(
             "SELECT s.tag_id, s.ts, s.value, s.quality FROM tags t \
              JOIN samples s ON s.tag_id = t.id AND s.ts >= $1 \
-             WHERE t.id >= $2 AND t.id < $3 ORDER BY s.tag_id, s.ts",
+             WHERE t.site = $2 AND t.id >= $3 AND t.id < $4 ORDER BY s.tag_id, s.ts",
         )
         .bind(closed_through)
+        .bind(site)
         .bind(from)
-        .bind(from + RECOVER_TAGS)
+        .bind(from.saturating_add(RECOVER_TAGS))
         .fetch_all(&mut *conn)
         .await
         .map_err(db("rebuilding the historian's open minutes"))?;
-        from += RECOVER_TAGS;
+        from = from.saturating_add(RECOVER_TAGS);
         let minutes = rollup::roll_up(raw, MINUTE);
-        let Some(newest) = minutes.iter().map(|a| a.bucket).max() else {
-            continue;
-        };
-        watermark = watermark.max(newest + MINUTE);
+        seen.extend(minutes.iter().map(|a| a.bucket));
         // A minute with a row was written when it closed, whole; one
         // without was open when the process stopped.
         let mut missing: Vec<Agg> = Vec::new();
@@ -560,7 +592,16 @@ pub(crate) async fn recover(conn: &mut SqliteConnection) -> Result<(i64, u64)> {
         rebuilt += missing.len() as u64;
         rollup::maintain_sqlite(conn, &[(Level::Hour, &hours_of(&missing))]).await?;
     }
-    write_state(conn, Some(watermark), Some(true)).await?;
+    // Past every minute seen, but not past a device's wrong clock: a minute
+    // beyond the horizon of the minutes' median is written at once anyway.
+    let mut watermark = closed_through;
+    if let Some(mid) = median(seen.clone()) {
+        let horizon = mid.saturating_add(HORIZON_MS);
+        if let Some(newest) = seen.into_iter().filter(|&m| m < horizon).max() {
+            watermark = watermark.max(newest.saturating_add(MINUTE));
+        }
+    }
+    write_state(conn, site, Some(watermark), Some(true)).await?;
     Ok((watermark, rebuilt))
 }
 
@@ -741,6 +782,45 @@ mod tests {
         open.apply(plan);
         assert!(open.open_of(3).is_none());
         assert!(open.open_of(4).is_some());
+    }
+
+    /// A device stamping a sample a day ahead: written at once, and the
+    /// tag's later minutes still open (no floor, no cutoff moved by it).
+    #[test]
+    fn a_sample_from_the_future_moves_nothing() {
+        let t0 = 1_700_000_040_000;
+        let mut open = OpenMinutes::default();
+        let plan = open.plan(&rollup::roll_up(samples(5, t0, 3, 1_000), MINUTE), Some(t0));
+        open.apply(plan);
+        let ahead = rollup::roll_up(samples(5, t0 + 86_400_000, 1, 1), MINUTE);
+        let plan = open.plan(&ahead, Some(t0 + 5_000));
+        assert_eq!(plan.minutes.len(), 1, "written at once");
+        assert_eq!(plan.minutes[0].bucket, t0 + 86_400_000);
+        open.apply(plan);
+        assert_eq!(open.open_of(5).unwrap().n, 3, "the open minute stays");
+        let next = rollup::roll_up(samples(5, t0 + MINUTE, 1, 1), MINUTE);
+        let plan = open.plan(&next, Some(t0 + MINUTE));
+        assert_eq!(plan.minutes.len(), 1, "the minute before closes");
+        open.apply(plan);
+        assert_eq!(open.open_of(5).unwrap().bucket, t0 + MINUTE);
+        let close = open.plan_close(usize::MAX);
+        assert!(close.watermark.unwrap() <= t0 + 2 * MINUTE);
+    }
+
+    /// Timestamps far apart and far from now (a device's clock gone wrong
+    /// by ±285,000 years): no overflow, nothing lost.
+    #[test]
+    fn extreme_timestamps_do_not_overflow() {
+        let mut open = OpenMinutes::default();
+        for ts in [-CLOCK_BOUND * 2, -1, 0, CLOCK_BOUND * 2, 5] {
+            let batch = rollup::roll_up(vec![(1, ts, Some(1.0), 2)], MINUTE);
+            let plan = open.plan(&batch, Some(ts));
+            let n: i64 = plan.minutes.iter().map(|a| a.n).sum();
+            open.apply(plan);
+            assert!(n + open.open_of(1).map_or(0, |o| o.n) >= 1);
+        }
+        open.apply(open.plan_close(usize::MAX));
+        assert_eq!(open.count(), 0);
     }
 
     #[test]

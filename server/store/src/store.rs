@@ -449,26 +449,6 @@ impl Store {
             .map_err(open_err(format!("SQLite database {shown} (readers)")))?;
         tracing::info!(path = %shown, sync = ?options.sqlite_sync, "opened SQLite store");
         check_site(&options.site)?;
-        // The minute roll-ups a crash left open are rebuilt before anything
-        // reads or writes them.
-        let mut open_minutes = crate::open_minutes::OpenMinutes::default();
-        let (closed_through, rebuilt) = {
-            let mut tx = write.begin().await.map_err(open_err(format!(
-                "historian roll-ups of SQLite database {shown}"
-            )))?;
-            let done = crate::open_minutes::recover(&mut tx).await?;
-            tx.commit().await.map_err(open_err(format!(
-                "historian roll-ups of SQLite database {shown}"
-            )))?;
-            done
-        };
-        if rebuilt > 0 {
-            tracing::warn!(
-                minutes = rebuilt,
-                "historian: rebuilt the minute roll-ups left open by an unclean stop"
-            );
-        }
-        open_minutes.start_at(closed_through);
         Ok(Store {
             site: options.site.as_str().into(),
             view: false,
@@ -476,7 +456,7 @@ impl Store {
                 backend: Backend::Sqlite(SqliteBackend { write, read }),
                 tag_ids: Mutex::new(HashMap::new()),
                 tag_ids_loaded: tokio::sync::OnceCell::new(),
-                open_minutes: Mutex::new(open_minutes),
+                open_minutes: Mutex::new(Default::default()),
                 open_gate: tokio::sync::Mutex::new(()),
                 description: format!("sqlite {shown}"),
             }),

@@ -293,6 +293,11 @@ async fn run(
     mut stop: watch::Receiver<bool>,
     mut pause: watch::Receiver<bool>,
 ) {
+    // What an unclean stop left open is rebuilt before the first batch (a
+    // failure here is retried by the first write).
+    if let Err(e) = store.recover_open_minutes().await {
+        tracing::warn!(error = %e, "historian: the open minute roll-ups could not be rebuilt yet");
+    }
     let batch_max = config.batch_max.max(1);
     let (ready_tx, ready_rx) = mpsc::channel::<(Batch, usize)>(1);
     let writer = tokio::spawn(write_batches(
