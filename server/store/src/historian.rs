@@ -6,6 +6,7 @@
 
 use std::collections::HashMap;
 use std::sync::Arc;
+use std::time::Duration;
 
 use gridscada_tagdb::{QualityCode, Timestamp};
 use serde::Serialize;
@@ -456,16 +457,26 @@ impl Store {
     }
 
     /// SQLite keeps each tag's open minute roll-up in memory until the
-    /// minute is over: this writes them all (in transactions of 50,000), so
-    /// a restart has nothing to rebuild. The historian's writer calls it when
-    /// it stops; nothing to do on PostgreSQL. Returns the minutes written.
+    /// minute is over: this writes them all (in transactions of 20,000), so
+    /// a restart has nothing to rebuild. Nothing to do on PostgreSQL.
+    /// Returns the minutes written.
     pub async fn close_open_minutes(&self) -> Result<u64> {
+        self.close_open_minutes_within(None).await
+    }
+
+    /// [`Self::close_open_minutes`] for at most about `budget` (a stop: at a
+    /// million tags the open minutes take a minute or more to write, and a
+    /// service manager kills a stop that lasts). What is left stays open in
+    /// the database's state, and the next start rebuilds it from the raw
+    /// rows, which is faster than writing it now.
+    pub async fn close_open_minutes_within(&self, budget: Option<Duration>) -> Result<u64> {
         let crate::store::Backend::Sqlite(s) = &self.inner.backend else {
             return Ok(0);
         };
         if self.view {
             return Ok(0);
         }
+        let started = std::time::Instant::now();
         let _gate = self.inner.open_gate.lock().await;
         {
             let open = self.inner.open_minutes.lock();
@@ -475,12 +486,21 @@ impl Store {
         }
         let mut written = 0;
         loop {
+            if budget.is_some_and(|b| started.elapsed() >= b) {
+                let left = self.inner.open_minutes.lock().count();
+                tracing::info!(
+                    written,
+                    left,
+                    "historian: open minute roll-ups left for the next start to rebuild"
+                );
+                return Ok(written);
+            }
             let tx = s
                 .writer()
                 .begin()
                 .await
                 .map_err(db("writing historian roll-ups"))?;
-            let plan = self.inner.open_minutes.lock().plan_close(50_000);
+            let plan = self.inner.open_minutes.lock().plan_close(20_000);
             written += plan.minutes.len() as u64;
             let last = plan.all;
             self.write_open_minutes(tx, plan, last.then_some(true))

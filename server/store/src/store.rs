@@ -673,10 +673,14 @@ impl Store {
     }
 
     /// Closes the pools, waiting for queries in flight. In SQLite this also
-    /// writes the open minute roll-ups and checkpoints the WAL into the
+    /// writes the open minute roll-ups (for at most 10 s; the next start
+    /// rebuilds the rest) and checkpoints the WAL into the
     /// main file.
     pub async fn close(&self) {
-        if let Err(e) = self.close_open_minutes().await {
+        if let Err(e) = self
+            .close_open_minutes_within(Some(crate::writer::STOP_BUDGET))
+            .await
+        {
             tracing::warn!(error = %e,
                 "historian: could not write the open minute roll-ups; the next start rebuilds them");
         }

@@ -30,6 +30,10 @@ use tokio::task::JoinHandle;
 use crate::historian::PreparedSamples;
 use crate::{HistorySample, Store};
 
+/// How long a stop spends writing the open minute roll-ups (SQLite); the
+/// next start rebuilds the rest. The packaged service gives a stop 30 s.
+pub(crate) const STOP_BUDGET: Duration = Duration::from_secs(10);
+
 /// Sizes and pacing of the writer.
 #[derive(Debug, Clone)]
 pub struct HistorianConfig {
@@ -390,7 +394,7 @@ async fn run(
     }
     // The open minute roll-ups (SQLite) are written, so the next start has
     // nothing to rebuild.
-    match store.close_open_minutes().await {
+    match store.close_open_minutes_within(Some(STOP_BUDGET)).await {
         Ok(minutes) => tracing::debug!(minutes, "historian: open minute roll-ups written"),
         Err(e) => tracing::warn!(error = %e,
             "historian: could not write the open minute roll-ups; the next start rebuilds them"),
