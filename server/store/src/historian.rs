@@ -470,12 +470,9 @@ impl Store {
     /// the database's state, and the next start rebuilds it from the raw
     /// rows, which is faster than writing it now.
     pub async fn close_open_minutes_within(&self, budget: Option<Duration>) -> Result<u64> {
-        let crate::store::Backend::Sqlite(s) = &self.inner.backend else {
+        let Some(s) = self.open_minutes_backend() else {
             return Ok(0);
         };
-        if self.view {
-            return Ok(0);
-        }
         let started = std::time::Instant::now();
         let _gate = self.inner.open_gate.lock().await;
         {
@@ -516,14 +513,20 @@ impl Store {
     /// calls it when it starts; the first write does it otherwise. Returns
     /// the minutes rebuilt.
     pub async fn recover_open_minutes(&self) -> Result<u64> {
-        let crate::store::Backend::Sqlite(s) = &self.inner.backend else {
+        let Some(s) = self.open_minutes_backend() else {
             return Ok(0);
         };
-        if self.view {
-            return Ok(0);
-        }
         let _gate = self.inner.open_gate.lock().await;
         self.recover_locked(s).await
+    }
+
+    /// The SQLite backend whose open minutes this store keeps: none on
+    /// PostgreSQL, nor for another site's view.
+    fn open_minutes_backend(&self) -> Option<&crate::store::SqliteBackend> {
+        match &self.inner.backend {
+            crate::store::Backend::Sqlite(s) if !self.view => Some(s),
+            _ => None,
+        }
     }
 
     /// [`Self::recover_open_minutes`] with the open minutes' gate held.

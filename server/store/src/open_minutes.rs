@@ -634,16 +634,12 @@ pub(crate) fn fold_open(
     };
     // As the SQL does: truncating division (a bucket before `f` gives 0).
     let idx = (b - f) * n / (t - f);
-    let pick = |a: Option<f64>, b: Option<f64>, g: fn(f64, f64) -> f64| match (a, b) {
-        (Some(a), Some(b)) => Some(g(a, b)),
-        (a, b) => a.or(b),
-    };
     match rows.iter_mut().find(|r| r.1 == idx) {
         Some(r) => {
             r.2 += part.n;
-            r.3 = pick(r.3, part.min, f64::min);
-            r.4 = pick(r.4, part.max, f64::max);
-            r.5 = pick(r.5, part.sum, |a, b| a + b);
+            r.3 = rollup::opt(r.3, part.min, f64::min);
+            r.4 = rollup::opt(r.4, part.max, f64::max);
+            r.5 = rollup::opt(r.5, part.sum, |a, b| a + b);
             r.6 += part.n_value;
             if part.last_ts > r.7 {
                 (r.7, r.8, r.9) = (part.last_ts, part.last_value, part.last_quality);
